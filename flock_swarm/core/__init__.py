@@ -1,0 +1,5 @@
+"""The numerical core: flocking laws, leader models, integrators, graphs and metrics.
+
+Pure NumPy/SciPy functions and frozen parameter dataclasses; nothing here imports rclpy,
+plotting or does I/O, so the same code serves the simulator and the ROS nodes.
+"""

@@ -1,0 +1,109 @@
+"""Flocking metrics: one definition, used by the simulator, the world node and ``analyze``.
+
+``eta`` is the fraction of agents moving with the desired velocity ([Su09] Section V.A):
+``||p_i - p_gamma|| <= eta_tolerance``.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from flock_swarm.core import potentials as pot
+from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.graphs import components, disk_graph
+
+#: The names of the per-step metrics, in the order of :func:`step_metrics`.
+STEP_METRICS = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
+                'min_pair_distance', 'components')
+
+
+def step_metrics(q: np.ndarray, p: np.ndarray, leader: LeaderState, eta_tolerance: float,
+                 radius: float, strict: bool = True) -> dict[str, float]:
+    """Return the metrics of one instant.
+
+    :param q: positions, shape ``(n, dim)``.
+    :param p: velocities, shape ``(n, dim)``.
+    :param leader: the virtual leader.
+    :param eta_tolerance: velocity tolerance of ``eta``.
+    :param radius: radius of the r-disk graph whose components are counted.
+    :param strict: ``< r`` (``True``) or ``<= r`` neighbourhoods.
+    :return: a dict with the keys of :data:`STEP_METRICS`.
+    """
+    mismatch = np.linalg.norm(p - leader.p, axis=1)
+    count, _ = components(disk_graph(q, radius, strict))
+    return {
+        'eta': float(np.mean(mismatch <= eta_tolerance)),
+        'velocity_mismatch_max': float(mismatch.max()),
+        'com_position_error': float(np.linalg.norm(q.mean(axis=0) - leader.q)),
+        'com_velocity_error': float(np.linalg.norm(p.mean(axis=0) - leader.p)),
+        'min_pair_distance': min_pair_distance(q),
+        'components': float(count),
+    }
+
+
+def min_pair_distance(q: np.ndarray) -> float:
+    """Return the smallest distance between two agents (``inf`` for fewer than two).
+
+    :param q: positions, shape ``(n, dim)``.
+    :return: the distance.
+    """
+    if q.shape[0] < 2:
+        return float('inf')
+    dist, _ = cKDTree(q).query(q, k=2)
+    return float(dist[:, 1].min())
+
+
+def close_pairs(q: np.ndarray, distance: float) -> set[tuple[int, int]]:
+    """Return the pairs ``(i, j)``, ``i < j``, closer than ``distance``.
+
+    :param q: positions, shape ``(n, dim)``.
+    :param distance: the collision distance.
+    :return: the set of pairs.
+    """
+    edges = disk_graph(q, distance, strict=True)
+    return set(zip(edges.i.tolist(), edges.j.tolist()))
+
+
+@dataclass
+class RunMetrics:
+    """Whole-run metrics, accumulated step by step.
+
+    :ivar collision_distance: pairs closer than this count as colliding.
+    """
+
+    collision_distance: float
+    min_pair_distance: float = float('inf')
+    collision_pairs: set = field(default_factory=set)
+
+    def update(self, q: np.ndarray, step_min_distance: float) -> None:
+        """Fold in one instant."""
+        self.min_pair_distance = min(self.min_pair_distance, step_min_distance)
+        if step_min_distance < self.collision_distance:
+            self.collision_pairs |= close_pairs(q, self.collision_distance)
+
+
+def su_energy(q: np.ndarray, p: np.ndarray, leader: LeaderState, law, informed: np.ndarray,
+              c1: float) -> float:
+    """Return the energy ``Q`` of [Su09] eq. (12)-(13) (eq. (34)-(35) when all are informed).
+
+    ``Q = 1/2 sum_i [sum_{j != i} psi_alpha(||q_ij||_sigma) + h_i c1 ||q_i - q_gamma||^2
+    + ||p_i - p_gamma||^2]``, over all pairs (``O(n^2)``: for tests and small swarms).
+
+    :param q: positions, shape ``(n, dim)``.
+    :param p: velocities, shape ``(n, dim)``.
+    :param leader: the virtual leader.
+    :param law: a :class:`~flock_swarm.core.protocols.SuParams` law.
+    :param informed: ``h_i`` as booleans.
+    :param c1: the position gain.
+    :return: ``Q``.
+    """
+    n = q.shape[0]
+    i, j = np.triu_indices(n, k=1)
+    z = pot.sigma_norm(q[j] - q[i], law.eps)
+    pair_energy = pot.psi_alpha(z, law.r_alpha, law.d_alpha, law.h, law.a, law.b).sum()
+    dq = q - leader.q
+    dp = p - leader.p
+    nav = c1 * np.einsum('nk,nk->n', dq, dq) * informed
+    # Each unordered pair appears twice in sum_i sum_{j != i}; the 1/2 of Q cancels that.
+    return float(pair_energy + 0.5 * nav.sum() + 0.5 * np.einsum('nk,nk->', dp, dp))

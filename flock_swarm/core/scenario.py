@@ -1,0 +1,601 @@
+"""Scenario files: schema, validation, overrides, and the realisation of a run.
+
+A scenario is a plain mapping (read from YAML by :mod:`flock_swarm.scenarios`) describing a
+whole run. :func:`parse_scenario` validates every value and returns a frozen
+:class:`Scenario`; the first invalid value raises :class:`ScenarioError` naming its dotted
+key. :func:`realize` turns a scenario and its seed into initial states, the informed set and
+the interaction graph, deterministically, so every node of a ROS run and the simulator agree.
+
+Agent ids are 0-based everywhere (``agent_0`` is the papers' agent 1).
+"""
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flock_swarm.core.dynamics import FieldSpec
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
+from flock_swarm.core.protocols import PROTOCOLS, AgentData, Protocol
+from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
+
+TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
+            'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
+            'intrinsic', 'metrics')
+LEADER_MODELS = ('constant_velocity', 'constant_acceleration', 'lorenz', 'lu', 'linear', 'sink')
+INTRINSIC_MODELS = ('none', 'same_as_leader', 'lorenz', 'lu', 'linear')
+GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
+INFORMED_SELECT = ('all', 'random', 'first', 'ids', 'pseudo_leaders')
+
+
+# --------------------------------------------------------------------------------------------
+# Low-level checks
+
+
+def _number(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(key, f'expected a number, got {value!r}')
+    if not math.isfinite(value):
+        raise ScenarioError(key, f'must be finite, got {value!r}')
+    return float(value)
+
+
+def _integer(value: Any, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        raise ScenarioError(key, f'expected an integer, got {value!r}')
+    return int(value)
+
+
+def _positive(value: Any, key: str) -> float:
+    x = _number(value, key)
+    if x <= 0.0:
+        raise ScenarioError(key, f'must be > 0, got {value!r}')
+    return x
+
+
+def _vector(value: Any, key: str, length: int) -> np.ndarray:
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(key, f'expected a list of {length} numbers, got {value!r}')
+    if len(value) != length:
+        raise ScenarioError(key, f'expected {length} values (dim = {length}), got {len(value)}')
+    return np.array([_number(v, f'{key}[{k}]') for k, v in enumerate(value)])
+
+
+def _matrix(value: Any, key: str, rows: int, cols: int) -> np.ndarray:
+    if not isinstance(value, (list, tuple)) or len(value) != rows:
+        raise ScenarioError(key, f'expected a {rows} x {cols} matrix (list of {rows} rows)')
+    return np.array([_vector(row, f'{key}[{k}]', cols) for k, row in enumerate(value)])
+
+
+def _mapping(value: Any, key: str) -> dict:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ScenarioError(key, f'expected a mapping, got {value!r}')
+    return value
+
+
+def _only(section: dict, allowed, prefix: str) -> None:
+    for name in section:
+        if name not in allowed:
+            raise ScenarioError(f'{prefix}{name}',
+                                f'unknown key (expected one of: {", ".join(allowed)})')
+
+
+def _choice(value: Any, key: str, options) -> str:
+    if value not in options:
+        raise ScenarioError(key, f'unknown value {value!r} '
+                            f'(expected one of: {", ".join(options)})')
+    return value
+
+
+def _box(value: Any, key: str, dim: int) -> np.ndarray:
+    box = _matrix(value, key, dim, 2)
+    for k in range(dim):
+        if box[k, 0] > box[k, 1]:
+            raise ScenarioError(f'{key}[{k}]',
+                                f'lower bound {box[k, 0]} > upper bound {box[k, 1]}')
+    return box
+
+
+# --------------------------------------------------------------------------------------------
+# The parsed scenario
+
+
+@dataclass(frozen=True)
+class LeaderSpec:
+    """The virtual leader: velocity field and initial state."""
+
+    model: str
+    field: FieldSpec
+    position: np.ndarray
+    velocity: np.ndarray
+
+
+@dataclass(frozen=True)
+class InformedSpec:
+    """How the informed agents (pseudo-leaders) are chosen."""
+
+    select: str
+    count: int | None = None
+    fraction: float | None = None
+    ids: tuple[int, ...] = ()
+    reselect: bool = False
+
+
+@dataclass(frozen=True)
+class ObserverSpec:
+    """One group of pinned observers of [Yu10] eq. (6)-(7): agents sharing ``H``, ``D``."""
+
+    ids: tuple[int, ...]
+    pos_gain: np.ndarray
+    vel_gain: np.ndarray
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario (see ``docs/scenarios.md`` for every key)."""
+
+    name: str
+    description: str
+    reference: str
+    dim: int
+    n_agents: int
+    dt: float
+    duration: float
+    seed: int
+    record_every: int
+    law: Protocol
+    graph_type: str
+    graph: dict
+    informed: InformedSpec
+    observers: tuple[ObserverSpec, ...]
+    position_box: np.ndarray | None
+    velocity_box: np.ndarray | None
+    positions: np.ndarray | None
+    velocities: np.ndarray | None
+    leader: LeaderSpec
+    intrinsic: FieldSpec | None
+    eta_tolerance: float
+    collision_distance: float
+    raw: dict
+
+    @property
+    def steps(self) -> int:
+        """Return the number of steps, ``round(duration / dt)``."""
+        return int(round(self.duration / self.dt))
+
+
+def parse_scenario(data: Any) -> Scenario:
+    """Validate a scenario mapping and return the :class:`Scenario`.
+
+    :param data: the mapping, as read from YAML.
+    :return: the scenario.
+    :raises ScenarioError: on the first invalid value.
+    """
+    data = _mapping(data, '<scenario>')
+    _only(data, TOP_KEYS, '')
+    for key in ('dim', 'n_agents', 'dt', 'duration', 'protocol', 'leader'):
+        if key not in data:
+            raise ScenarioError(key, 'missing required key')
+    name = str(data.get('name', 'unnamed'))
+    dim = _integer(data['dim'], 'dim')
+    if dim not in (2, 3):
+        raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
+    n = _integer(data['n_agents'], 'n_agents')
+    if n < 1:
+        raise ScenarioError('n_agents', f'must be >= 1, got {n}')
+    dt = _positive(data['dt'], 'dt')
+    duration = _positive(data['duration'], 'duration')
+    if duration < dt:
+        raise ScenarioError('duration', f'must be >= dt ({dt}), got {duration}')
+    seed = _integer(data.get('seed', 0), 'seed')
+    if seed < 0:
+        raise ScenarioError('seed', f'must be >= 0, got {seed}')
+    record_every = _integer(data.get('record_every', 1), 'record_every')
+    if record_every < 1:
+        raise ScenarioError('record_every', f'must be >= 1, got {record_every}')
+
+    law = _parse_law(_mapping(data['protocol'], 'protocol'), dim)
+    graph_type, graph = _parse_graph(_mapping(data.get('graph'), 'graph'), n)
+    if law.name == 'jadbabaie_leader' and graph_type != 'disk':
+        raise ScenarioError('graph.type', 'jadbabaie_leader supports only the disk graph')
+    informed = _parse_informed(_mapping(data.get('informed'), 'informed'), n, law)
+    observers = _parse_observers(data.get('observers'), n, dim, law)
+    init = _mapping(data.get('initial'), 'initial')
+    _only(init, ('position_box', 'velocity_box', 'positions', 'velocities'), 'initial.')
+    positions = (_matrix(init['positions'], 'initial.positions', n, dim)
+                 if 'positions' in init else None)
+    velocities = (_matrix(init['velocities'], 'initial.velocities', n, dim)
+                  if 'velocities' in init else None)
+    position_box = _box(init['position_box'], 'initial.position_box', dim) \
+        if 'position_box' in init else None
+    velocity_box = _box(init['velocity_box'], 'initial.velocity_box', dim) \
+        if 'velocity_box' in init else None
+    if positions is None and position_box is None:
+        raise ScenarioError('initial.position_box', 'missing (or give initial.positions)')
+    if velocities is None and velocity_box is None:
+        raise ScenarioError('initial.velocity_box', 'missing (or give initial.velocities)')
+    leader = _parse_leader(_mapping(data['leader'], 'leader'), dim)
+    intrinsic = _parse_intrinsic(_mapping(data.get('intrinsic'), 'intrinsic'), dim, leader)
+    metrics = _mapping(data.get('metrics'), 'metrics')
+    _only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
+    eta_tol = _positive(metrics.get('eta_tolerance', 0.1), 'metrics.eta_tolerance')
+    coll = _positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
+    return Scenario(name, str(data.get('description', '')), str(data.get('reference', '')),
+                    dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
+                    observers, position_box, velocity_box, positions, velocities, leader,
+                    intrinsic, eta_tol, coll, data)
+
+
+def _parse_law(section: dict, dim: int) -> Protocol:
+    if 'name' not in section:
+        raise ScenarioError('protocol.name', f'missing (expected one of: {", ".join(PROTOCOLS)})')
+    cls = PROTOCOLS.get(section['name'])
+    if cls is None:
+        raise ScenarioError('protocol.name', f'unknown protocol {section["name"]!r} '
+                            f'(expected one of: {", ".join(PROTOCOLS)})')
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    _only(section, ('name', *fields), 'protocol.')
+    values = {}
+    for key, value in section.items():
+        if key == 'name':
+            continue
+        if fields[key].type in (int, 'int'):
+            values[key] = _integer(value, f'protocol.{key}')
+        else:
+            values[key] = _number(value, f'protocol.{key}')
+    law = cls(**values)
+    _check_law(law, dim)
+    return law
+
+
+def _require(cond: bool, key: str, reason: str) -> None:
+    if not cond:
+        raise ScenarioError(key, reason)
+
+
+def _check_law(law: Protocol, dim: int) -> None:
+    """Raise :class:`ScenarioError` for law parameters outside their papers' domain."""
+    v = dataclasses.asdict(law)
+    k = 'protocol.'
+    if law.name in ('olfati_saber_2006', 'su_informed', 'su_accel', 'su_informed_accel'):
+        _require(v['r'] > 0, k + 'r', f'must be > 0, got {v["r"]}')
+        _require(0 < v['d'] < v['r'], k + 'd', f'must satisfy 0 < d < r = {v["r"]}, got {v["d"]}')
+        _require(v['eps'] > 0, k + 'eps', f'must be > 0, got {v["eps"]}')
+        _require(0 < v['h'] < 1, k + 'h', f'must be in (0, 1), got {v["h"]}')
+        _require(v['a'] > 0, k + 'a', f'must be > 0, got {v["a"]}')
+        _require(v['b'] >= v['a'], k + 'b', f'must be >= a = {v["a"]}, got {v["b"]}')
+        _require(v['c1'] > 0, k + 'c1', f'must be > 0, got {v["c1"]}')
+        _require(v['c2'] > 0, k + 'c2', f'must be > 0, got {v["c2"]}')
+    elif law.name == 'os2003_sink':
+        _require(v['d'] > 0, k + 'd', f'must be > 0, got {v["d"]}')
+        _require(v['r'] > v['d'], k + 'r', f'must be > d = {v["d"]}, got {v["r"]}')
+        _require(v['a'] > 0, k + 'a', f'must be > 0, got {v["a"]}')
+        _require(v['b'] > v['a'], k + 'b', f'must be > a = {v["a"]} (eq. (20)), got {v["b"]}')
+        _require(0 < v['delta'] < 1, k + 'delta', f'must be in (0, 1), got {v["delta"]}')
+        _require(v['k'] >= 1, k + 'k', f'must be a positive integer, got {v["k"]}')
+        for name in ('c_d', 'c1', 'c2'):
+            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
+    elif law.name == 'zhou_pseudo_leader':
+        for name in ('sigma', 'c1', 'c2', 'w', 'k', 'r'):
+            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
+        _require(v['h0'] >= 0, k + 'h0', f'must be >= 0, got {v["h0"]}')
+        _require(v['alpha'] >= 0, k + 'alpha', f'must be >= 0, got {v["alpha"]}')
+    elif law.name == 'yu_pinning_observer':
+        for name in ('a', 'c_bar', 'r_s'):
+            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
+        _require(v['b'] > v['a'], k + 'b', f'must be > a = {v["a"]}, got {v["b"]}')
+        _require(v['c'] >= 0, k + 'c', f'must be >= 0, got {v["c"]}')
+    elif law.name == 'jadbabaie_leader':
+        _require(dim == 2, 'dim', 'jadbabaie_leader is a planar (dim = 2) heading model')
+        _require(v['r'] > 0, k + 'r', f'must be > 0, got {v["r"]}')
+        _require(v['speed'] > 0, k + 'speed', f'must be > 0, got {v["speed"]}')
+
+
+def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
+    kind = _choice(section.get('type', 'disk'), 'graph.type', GRAPH_TYPES)
+    if kind == 'disk':
+        _only(section, ('type',), 'graph.')
+        return kind, {}
+    if kind == 'fixed':
+        _only(section, ('type', 'adjacency'), 'graph.')
+        if 'adjacency' not in section:
+            raise ScenarioError('graph.adjacency', 'missing (required for a fixed graph)')
+        adj = _matrix(section['adjacency'], 'graph.adjacency', n, n)
+        if not np.allclose(adj, adj.T):
+            raise ScenarioError('graph.adjacency', 'must be symmetric')
+        off = adj - np.diag(np.diag(adj))
+        if (off < 0).any():
+            raise ScenarioError('graph.adjacency', 'off-diagonal weights must be >= 0')
+        return kind, {'adjacency': off}
+    _only(section, ('type', 'm0', 'm'), 'graph.')
+    m0 = _integer(section.get('m0', 5), 'graph.m0')
+    m = _integer(section.get('m', 5), 'graph.m')
+    if not 1 <= m0 <= n:
+        raise ScenarioError('graph.m0', f'must be in [1, n_agents = {n}], got {m0}')
+    if not 1 <= m <= m0:
+        raise ScenarioError('graph.m', f'must be in [1, m0 = {m0}], got {m}')
+    return kind, {'m0': m0, 'm': m}
+
+
+def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
+    _only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
+    select = _choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
+    count = fraction = None
+    ids: tuple[int, ...] = ()
+    if select in ('random', 'first'):
+        if ('count' in section) == ('fraction' in section):
+            raise ScenarioError('informed.count', f'give exactly one of count or fraction '
+                                f'for select: {select}')
+        if 'count' in section:
+            count = _integer(section['count'], 'informed.count')
+            if not 0 <= count <= n:
+                raise ScenarioError('informed.count', f'must be in [0, {n}], got {count}')
+        else:
+            fraction = _number(section['fraction'], 'informed.fraction')
+            if not 0.0 <= fraction <= 1.0:
+                raise ScenarioError('informed.fraction', f'must be in [0, 1], got {fraction}')
+    elif select == 'ids':
+        raw = section.get('ids')
+        if not isinstance(raw, (list, tuple)):
+            raise ScenarioError('informed.ids', f'expected a list of agent ids, got {raw!r}')
+        ids = tuple(_integer(v, f'informed.ids[{k}]') for k, v in enumerate(raw))
+        for k, v in enumerate(ids):
+            if not 0 <= v < n:
+                raise ScenarioError(f'informed.ids[{k}]', f'agent id must be in [0, {n - 1}], '
+                                    f'got {v}')
+        if len(set(ids)) != len(ids):
+            raise ScenarioError('informed.ids', 'duplicate agent ids')
+    elif select == 'pseudo_leaders' and law.name != 'zhou_pseudo_leader':
+        raise ScenarioError('informed.select', 'pseudo_leaders needs protocol '
+                            'zhou_pseudo_leader (it uses w and alpha)')
+    reselect = section.get('reselect', False)
+    if not isinstance(reselect, bool):
+        raise ScenarioError('informed.reselect', f'expected true or false, got {reselect!r}')
+    if reselect and select != 'pseudo_leaders':
+        raise ScenarioError('informed.reselect', 'only with select: pseudo_leaders')
+    return InformedSpec(select, count, fraction, ids, reselect)
+
+
+def _parse_observers(value: Any, n: int, dim: int, law: Protocol) -> tuple[ObserverSpec, ...]:
+    if value is None:
+        return ()
+    if law.name != 'yu_pinning_observer':
+        raise ScenarioError('observers', 'only used by protocol yu_pinning_observer')
+    if not isinstance(value, list):
+        raise ScenarioError('observers', 'expected a list of observer groups')
+    groups = []
+    seen: set[int] = set()
+    for g, raw in enumerate(value):
+        key = f'observers[{g}]'
+        section = _mapping(raw, key)
+        _only(section, ('ids', 'H', 'H_tilde', 'D', 'D_tilde'), key + '.')
+        for name in ('ids', 'H', 'H_tilde', 'D', 'D_tilde'):
+            if name not in section:
+                raise ScenarioError(f'{key}.{name}', 'missing')
+        ids_raw = section['ids']
+        if not isinstance(ids_raw, list) or not ids_raw:
+            raise ScenarioError(f'{key}.ids', 'expected a non-empty list of agent ids')
+        ids = tuple(_integer(v, f'{key}.ids[{k}]') for k, v in enumerate(ids_raw))
+        for k, v in enumerate(ids):
+            if not 0 <= v < n:
+                raise ScenarioError(f'{key}.ids[{k}]', f'agent id must be in [0, {n - 1}]')
+            if v in seen:
+                raise ScenarioError(f'{key}.ids[{k}]', f'agent {v} is in two observer groups')
+            seen.add(v)
+        h = section['H']
+        m = len(h) if isinstance(h, list) else 0
+        if m < 1:
+            raise ScenarioError(f'{key}.H', 'expected an m x dim matrix with m >= 1')
+        mats = {'H': _matrix(h, f'{key}.H', m, dim),
+                'H_tilde': _matrix(section['H_tilde'], f'{key}.H_tilde', m, dim),
+                'D': _matrix(section['D'], f'{key}.D', dim, m),
+                'D_tilde': _matrix(section['D_tilde'], f'{key}.D_tilde', dim, m)}
+        groups.append(ObserverSpec(ids, mats['D'] @ mats['H'], mats['D_tilde'] @ mats['H_tilde']))
+    return tuple(groups)
+
+
+def _parse_field(section: dict, model: str, prefix: str, dim: int) -> FieldSpec:
+    if model in ('lorenz', 'lu'):
+        _require(dim == 3, 'dim', f'the {model} model needs dim = 3, got {dim}')
+        params = _mapping(section.get('params'), prefix + 'params')
+        allowed = ('sigma', 'rho', 'beta') if model == 'lorenz' else ('a', 'b', 'c')
+        _only(params, allowed, prefix + 'params.')
+        return FieldSpec(model, {k: _number(v, f'{prefix}params.{k}') for k, v in params.items()})
+    if model == 'linear':
+        if 'A' not in section:
+            raise ScenarioError(prefix + 'A', 'missing (required for the linear model)')
+        return FieldSpec('linear', {'A': _matrix(section['A'], prefix + 'A', dim, dim).tolist()})
+    raise AssertionError(model)
+
+
+def _parse_leader(section: dict, dim: int) -> LeaderSpec:
+    model = _choice(section.get('model'), 'leader.model', LEADER_MODELS)
+    allowed = {'constant_velocity': ('model', 'position', 'velocity'),
+               'constant_acceleration': ('model', 'position', 'velocity', 'acceleration'),
+               'lorenz': ('model', 'position', 'velocity', 'params'),
+               'lu': ('model', 'position', 'velocity', 'params'),
+               'linear': ('model', 'position', 'velocity', 'A'),
+               'sink': ('model', 'position')}[model]
+    _only(section, allowed, 'leader.')
+    if 'position' not in section:
+        raise ScenarioError('leader.position', 'missing')
+    position = _vector(section['position'], 'leader.position', dim)
+    if model == 'sink':
+        return LeaderSpec(model, FieldSpec('zero'), position, np.zeros(dim))
+    if 'velocity' not in section:
+        raise ScenarioError('leader.velocity', 'missing')
+    velocity = _vector(section['velocity'], 'leader.velocity', dim)
+    if model == 'constant_velocity':
+        spec = FieldSpec('zero')
+    elif model == 'constant_acceleration':
+        if 'acceleration' not in section:
+            raise ScenarioError('leader.acceleration', 'missing')
+        acc = _vector(section['acceleration'], 'leader.acceleration', dim)
+        spec = FieldSpec('constant', {'acceleration': acc.tolist()})
+    else:
+        spec = _parse_field(section, model, 'leader.', dim)
+    return LeaderSpec(model, spec, position, velocity)
+
+
+def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> FieldSpec | None:
+    model = _choice(section.get('model', 'none'), 'intrinsic.model', INTRINSIC_MODELS)
+    allowed = {'none': ('model',), 'same_as_leader': ('model',),
+               'lorenz': ('model', 'params'), 'lu': ('model', 'params'),
+               'linear': ('model', 'A')}[model]
+    _only(section, allowed, 'intrinsic.')
+    if model == 'none':
+        return None
+    if model == 'same_as_leader':
+        return None if leader.field.kind == 'zero' else leader.field
+    return _parse_field(section, model, 'intrinsic.', dim)
+
+
+# --------------------------------------------------------------------------------------------
+# Overrides
+
+
+def parse_value(text: str) -> Any:
+    """Parse the value of a ``--set key=value`` override as YAML (``0.5``, ``[1, 2]``, ``true``).
+
+    :param text: the value text.
+    :return: the parsed value.
+    """
+    import yaml
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ScenarioError('--set', f'cannot parse value {text!r}: {exc.problem}') from None
+
+
+def apply_override(data: dict, assignment: str) -> dict:
+    """Return a copy of ``data`` with one ``dotted.key=value`` assignment applied.
+
+    :param data: the scenario mapping.
+    :param assignment: ``key=value``, e.g. ``protocol.c1=0.8`` or ``n_agents=20``.
+    :return: the new mapping (the input is not modified).
+    """
+    import copy
+    if '=' not in assignment:
+        raise ScenarioError('--set', f'expected key=value, got {assignment!r}')
+    key, text = assignment.split('=', 1)
+    key = key.strip()
+    parts = key.split('.')
+    if not all(parts):
+        raise ScenarioError('--set', f'malformed key {key!r}')
+    out = copy.deepcopy(data)
+    node = out
+    for depth, part in enumerate(parts[:-1]):
+        child = node.get(part)
+        if child is None:
+            child = node[part] = {}
+        if not isinstance(child, dict):
+            raise ScenarioError('.'.join(parts[:depth + 1]), 'is not a section')
+        node = child
+    node[parts[-1]] = parse_value(text)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Realisation
+
+
+@dataclass
+class Realization:
+    """Everything a run starts from, derived deterministically from a scenario and its seed.
+
+    :ivar q0: initial positions ``(n, dim)``.
+    :ivar p0: initial velocities ``(n, dim)``.
+    :ivar agents: per-agent law data (informed flags, gains, adaptive state).
+    :ivar adjacency: the fixed weight matrix ``W`` (already scaled) or ``None`` (disk graph).
+    :ivar selection: the pseudo-leader certificate when chosen by Theorem 1.
+    """
+
+    q0: np.ndarray
+    p0: np.ndarray
+    agents: AgentData
+    adjacency: np.ndarray | None
+    selection: PseudoLeaderSelection | None
+
+    @property
+    def informed_ids(self) -> list[int]:
+        """Return the ids of the informed agents."""
+        return [int(k) for k in np.flatnonzero(self.agents.informed)]
+
+
+def realize(sc: Scenario) -> Realization:
+    """Draw the initial state, graph and informed set of a scenario from its seed.
+
+    The generator ``numpy.random.default_rng(seed)`` is used in a fixed order: positions,
+    velocities, graph, informed set.
+
+    :param sc: the scenario.
+    :return: the realisation.
+    """
+    rng = np.random.default_rng(sc.seed)
+    n, dim = sc.n_agents, sc.dim
+    q0 = sc.positions.copy() if sc.positions is not None else rng.uniform(
+        sc.position_box[:, 0], sc.position_box[:, 1], size=(n, dim))
+    p0 = sc.velocities.copy() if sc.velocities is not None else rng.uniform(
+        sc.velocity_box[:, 0], sc.velocity_box[:, 1], size=(n, dim))
+    unit_adj = None
+    if sc.graph_type == 'fixed':
+        unit_adj = sc.graph['adjacency']
+    elif sc.graph_type == 'barabasi_albert':
+        unit_adj = barabasi_albert(n, sc.graph['m0'], sc.graph['m'], rng)
+    informed = np.zeros(n, dtype=bool)
+    selection = None
+    spec = sc.informed
+    if spec.select == 'all':
+        informed[:] = True
+    elif spec.select in ('random', 'first'):
+        count = spec.count if spec.count is not None else int(round(spec.fraction * n))
+        chosen = rng.choice(n, size=count, replace=False) if spec.select == 'random' \
+            else np.arange(count)
+        informed[chosen] = True
+    elif spec.select == 'ids':
+        informed[list(spec.ids)] = True
+    else:
+        adj = unit_adj if unit_adj is not None else _disk_adjacency(q0, sc.law)
+        selection = select_pseudo_leaders(adj, sc.law.w, sc.law.alpha)
+        informed[list(selection.ids)] = True
+    nav_gains = None
+    if sc.observers:
+        nav_gains = np.zeros((n, 2, dim, dim))
+        for group in sc.observers:
+            for i in group.ids:
+                nav_gains[i, 0] = group.pos_gain
+                nav_gains[i, 1] = group.vel_gain
+                informed[i] = True
+    adaptive = np.full(n, sc.law.h0) if sc.law.name == 'zhou_pseudo_leader' else None
+    weights = None
+    if unit_adj is not None:
+        weights = unit_adj * (sc.law.w if sc.law.name == 'zhou_pseudo_leader' else 1.0)
+    return Realization(q0, p0, AgentData(informed, nav_gains, adaptive), weights, selection)
+
+
+def _disk_adjacency(q: np.ndarray, law: Protocol) -> np.ndarray:
+    edges = disk_graph(q, law.radius, law.strict_radius)
+    adj = np.zeros((q.shape[0], q.shape[0]))
+    adj[edges.i, edges.j] = adj[edges.j, edges.i] = 1.0
+    return adj
+
+
+def all_pairs_weights(n: int, weights: np.ndarray | None, q: np.ndarray, law: Protocol):
+    """Return the complete graph with coupling weights (for laws acting on all pairs).
+
+    :param n: number of agents.
+    :param weights: the fixed weight matrix, or ``None`` for the r-disk graph scaled by ``w``.
+    :param q: positions (for the r-disk graph).
+    :param law: the law.
+    :return: the edge list.
+    """
+    full = complete_graph(n)
+    mat = weights if weights is not None else law.w * _disk_adjacency(q, law)
+    return dataclasses.replace(full, weight=mat[full.i, full.j])
