@@ -1,0 +1,107 @@
+"""Finding and reading scenario files: preset names or paths, YAML, ``--set`` overrides."""
+
+import os
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.scenario import Scenario, apply_override, parse_scenario
+
+PACKAGE = 'flock_swarm'
+
+
+def config_dirs() -> list[Path]:
+    """Return the directories searched for presets, in order.
+
+    The installed share directory (found through the ament index, as ``ros2 run`` users and
+    ``colcon build`` installs have it), then the ``config/`` folder next to the package
+    sources (a checkout or an editable install).
+    """
+    dirs = []
+    try:
+        from ament_index_python.packages import (PackageNotFoundError,
+                                                 get_package_share_directory)
+        try:
+            dirs.append(Path(get_package_share_directory(PACKAGE)) / 'config')
+        except (PackageNotFoundError, LookupError, ValueError, OSError):
+            pass
+    except ImportError:
+        pass
+    dirs.append(Path(__file__).resolve().parent.parent / 'config')
+    seen, out = set(), []
+    for d in dirs:
+        if d.is_dir() and d.resolve() not in seen:
+            seen.add(d.resolve())
+            out.append(d)
+    return out
+
+
+def preset_names() -> list[str]:
+    """Return the names of the available presets."""
+    names = set()
+    for d in config_dirs():
+        names.update(p.stem for p in d.glob('*.yaml') if not p.stem.endswith('_params'))
+    return sorted(names)
+
+
+def resolve(name_or_path: str) -> Path:
+    """Return the file of a preset name or a path.
+
+    :param name_or_path: ``su2009_fig2`` or ``path/to/file.yaml``.
+    :return: an existing path.
+    :raises ScenarioError: when nothing matches.
+    """
+    candidate = Path(name_or_path)
+    if candidate.suffix in ('.yaml', '.yml') or os.sep in name_or_path:
+        if not candidate.is_file():
+            raise ScenarioError('scenario', f'no such file: {name_or_path}')
+        return candidate
+    for d in config_dirs():
+        path = d / f'{name_or_path}.yaml'
+        if path.is_file():
+            return path
+    raise ScenarioError('scenario', f'unknown preset {name_or_path!r} '
+                        f'(presets: {", ".join(preset_names()) or "none found"})')
+
+
+def load_mapping(name_or_path: str) -> dict:
+    """Read a scenario file into a mapping (no validation yet).
+
+    :param name_or_path: preset name or path.
+    :return: the mapping.
+    """
+    path = resolve(name_or_path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}' if mark is not None else ''
+        raise ScenarioError('scenario', f'{path}: invalid YAML{where}') from None
+    except OSError as exc:
+        raise ScenarioError('scenario', f'{path}: {exc.strerror}') from None
+    if not isinstance(data, dict):
+        raise ScenarioError('scenario', f'{path}: expected a mapping at the top level')
+    data.setdefault('name', path.stem)
+    return data
+
+
+def load(name_or_path: str, overrides: Iterable[str] = (), seed: int | None = None,
+         extra: dict[str, Any] | None = None) -> Scenario:
+    """Read, override and validate a scenario.
+
+    :param name_or_path: preset name or path.
+    :param overrides: ``key=value`` assignments (dotted keys), applied in order.
+    :param seed: replaces the scenario's seed when given.
+    :param extra: further ``{dotted.key: value}`` overrides (already parsed values).
+    :return: the validated scenario.
+    """
+    data = load_mapping(name_or_path)
+    for assignment in overrides:
+        data = apply_override(data, assignment)
+    for key, value in (extra or {}).items():
+        data = apply_override(data, f'{key}={yaml.safe_dump(value, default_flow_style=True)}')
+    if seed is not None:
+        data['seed'] = seed
+    return parse_scenario(data)

@@ -1,0 +1,335 @@
+"""The reference simulator: a whole swarm, vectorised over agents, from one scenario.
+
+``sim SCENARIO [--set key=value ...] [--seed N] [--out DIR]`` runs a preset (or a YAML file)
+and writes ``DIR/summary.json`` and ``DIR/timeseries.npz`` (see ``docs/outputs.md``).
+The step uses the same law functions as the agent node (:mod:`flock_swarm.core.protocols`).
+"""
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from flock_swarm import __version__
+from flock_swarm.core.dynamics import VirtualLeader, step_agents
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.graphs import EdgeList, disk_graph, fixed_graph
+from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
+from flock_swarm.core.protocols import advance_adaptive, swarm_control
+from flock_swarm.core.pseudo_leaders import select_for_graph
+from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
+from flock_swarm.core.stability import check_step
+
+#: Exit status for invalid input (as argparse uses).
+EXIT_USAGE = 2
+#: Exit status when the state stopped being finite.
+EXIT_DIVERGED = 1
+
+
+@dataclass
+class SimResult:
+    """What a run produced: the summary (``summary.json``) and the recorded time series."""
+
+    summary: dict
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class Recorder:
+    """Collects subsampled states and metrics into growing lists, then stacks them."""
+
+    def __init__(self) -> None:
+        """Create an empty recorder."""
+        self.rows: dict[str, list] = {}
+
+    def add(self, **values) -> None:
+        """Append one recorded instant."""
+        for key, value in values.items():
+            self.rows.setdefault(key, []).append(np.array(value, copy=True))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Return the recorded columns as arrays (first axis: time)."""
+        return {key: np.stack(rows) for key, rows in self.rows.items()}
+
+
+def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
+                      static: EdgeList | None) -> EdgeList:
+    """Return the interaction edges at positions ``q`` (the fixed graph when there is one).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param q: positions.
+    :param static: the precomputed fixed graph, or ``None``.
+    :return: the edge list.
+    """
+    if static is not None:
+        return static
+    if sc.law.all_pairs:
+        return all_pairs_weights(sc.n_agents, None, q, sc.law)
+    return disk_graph(q, sc.law.radius, sc.law.strict_radius)
+
+
+def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
+    """Return the time-invariant edge list of a fixed-graph scenario, or ``None``."""
+    if real.adjacency is None:
+        return None
+    if sc.law.all_pairs:
+        return all_pairs_weights(sc.n_agents, real.adjacency, np.zeros((sc.n_agents, sc.dim)),
+                                 sc.law)
+    return fixed_graph(real.adjacency)
+
+
+def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
+             progress_every: float = 2.0) -> SimResult:
+    """Run a scenario to its end and return the summary and the recorded time series.
+
+    :param sc: the validated scenario.
+    :param progress: called with a one-line status roughly every ``progress_every`` seconds.
+    :param progress_every: wall-clock seconds between progress lines.
+    :return: the result; ``summary['status']`` is ``completed``, ``interrupted`` or
+        ``diverged``.
+    """
+    real = realize(sc)
+    q, p = real.q0.copy(), real.p0.copy()
+    agents = real.agents
+    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
+    intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+    static = static_graph(sc, real)
+    run = RunMetrics(sc.collision_distance)
+    rec = Recorder()
+    started = time.monotonic()
+    # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
+    with np.errstate(over='ignore', invalid='ignore'):
+        status, step, reselections = _run_loop(
+            sc, real, q, p, agents, leader, intrinsic, static, run, rec, progress,
+            progress_every)
+    series = rec.arrays()
+    summary = build_summary(sc, real, series, run, step, status)
+    summary['pseudo_leader_reselections'] = reselections
+    summary['wall_time_s'] = round(time.monotonic() - started, 3)
+    return SimResult(summary, series)
+
+
+def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progress,
+              progress_every):
+    """Advance the swarm to the end (or divergence, or Ctrl-C); return how it ended."""
+    law, dt, steps = sc.law, sc.dt, sc.steps
+    status, step = 'completed', 0
+    started = last = time.monotonic()
+    prev_edges: tuple | None = None
+    reselections = 0
+    metrics_now: dict = {}
+    try:
+        for step in range(steps + 1):
+            state = leader.state
+            edges = interaction_graph(sc, real, q, static)
+            if sc.informed.reselect and static is None:
+                coupled = edges.weight > 0
+                signature = (edges.i[coupled].tobytes(), edges.j[coupled].tobytes())
+                if prev_edges is not None and signature != prev_edges:
+                    reselect_pseudo_leaders(sc, agents, edges)
+                    reselections += 1
+                prev_edges = signature
+            u = swarm_control(law, q, p, edges, state, agents, dt)
+            if not (np.isfinite(u).all() and np.isfinite(q).all() and np.isfinite(p).all()):
+                status = 'diverged'
+                break
+            run.update(q, edge_min_distance(q, edges))
+            if step % sc.record_every == 0 or step == steps:
+                metrics_now = step_metrics(q, p, state, sc.eta_tolerance, law.radius,
+                                           law.strict_radius)
+                run.update(q, metrics_now['min_pair_distance'])
+                rec.add(t=step * dt, q=q, p=p, u=u, leader_q=state.q, leader_p=state.p,
+                        leader_a=state.a, informed=agents.informed,
+                        **({'h': agents.adaptive} if agents.adaptive is not None else {}),
+                        **{f'metric_{k}': metrics_now[k] for k in STEP_METRICS})
+            if step == steps:
+                break
+            advance_adaptive(law, q, p, state, agents, dt)
+            q, p = step_agents(q, p, u, dt, intrinsic)
+            leader.step(dt)
+            now = time.monotonic()
+            if progress is not None and now - last >= progress_every:
+                last = now
+                rate = (step + 1) / max(now - started, 1e-9)
+                progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
+                         f'step {step + 1}/{steps}  eta = {metrics_now.get("eta", 0):.2f}  '
+                         f'mismatch = {metrics_now.get("velocity_mismatch_max", 0):.3g}  '
+                         f'({rate:.0f} steps/s)')
+    except KeyboardInterrupt:
+        status = 'interrupted'
+    return status, step, reselections
+
+
+def reselect_pseudo_leaders(sc: Scenario, agents, edges: EdgeList) -> None:
+    """Re-apply Theorem 1 to the current graph ([Zhou12] Section 4.4), keeping kept gains."""
+    law = sc.law
+    coupled = EdgeList(edges.n, edges.i[edges.weight > 0], edges.j[edges.weight > 0],
+                       edges.weight[edges.weight > 0])
+    chosen = select_for_graph(coupled, law.w, law.alpha)
+    new = np.zeros_like(agents.informed)
+    new[list(chosen.ids)] = True
+    joined = new & ~agents.informed
+    agents.adaptive[joined] = law.h0
+    agents.informed[:] = new
+
+
+def edge_min_distance(q: np.ndarray, edges: EdgeList) -> float:
+    """Return the smallest distance along the given edges (``inf`` without edges)."""
+    if edges.size == 0:
+        return float('inf')
+    d = q[edges.j] - q[edges.i]
+    return float(np.sqrt(np.einsum('ek,ek->e', d, d).min()))
+
+
+def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics,
+                  step: int, status: str) -> dict:
+    """Return the ``summary.json`` mapping from the last recorded instant and the run totals.
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param series: the recorded time series.
+    :param run: the whole-run metrics.
+    :param step: the last step reached.
+    :param status: ``completed``, ``interrupted`` or ``diverged``.
+    :return: the summary (keys of DESIGN.md plus provenance).
+    """
+    last = {k: float(series[f'metric_{k}'][-1]) for k in STEP_METRICS}
+    summary = {
+        'n_agents': sc.n_agents,
+        't_final': float(series['t'][-1]),
+        'steps': int(step),
+        'eta': last['eta'],
+        'eta_tolerance': sc.eta_tolerance,
+        'velocity_mismatch_max': last['velocity_mismatch_max'],
+        'com_position_error': last['com_position_error'],
+        'com_velocity_error': last['com_velocity_error'],
+        'min_pair_distance': run.min_pair_distance,
+        'collisions': len(run.collision_pairs),
+        'collision_distance': sc.collision_distance,
+        'components_final': int(last['components']),
+        'informed': [int(i) for i in np.flatnonzero(series['informed'][0])],
+        'scenario': sc.name,
+        'seed': sc.seed,
+        'protocol': sc.law.name,
+        'dt': sc.dt,
+        'status': status,
+        'flock_swarm_version': __version__,
+    }
+    if real.selection is not None:
+        summary['pseudo_leader_certificate'] = {
+            'lambda_max': real.selection.lambda_max, 'alpha': real.selection.alpha,
+            'satisfied': real.selection.satisfied, 'components': real.selection.components}
+    if 'h' in series:
+        summary['adaptive_gain_final'] = [float(x) for x in series['h'][-1]]
+    return summary
+
+
+def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
+    """Write ``summary.json``, ``timeseries.npz`` and the scenario used, into ``out``.
+
+    :param result: the run.
+    :param out: the output directory (created).
+    :param sc: the scenario (its mapping is written as ``scenario.json`` for provenance).
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(out / 'timeseries.npz', **result.series)
+    (out / 'scenario.json').write_text(json.dumps(sc.raw, indent=2, default=_jsonable) + '\n')
+    # summary.json last: its presence means the other files are complete.
+    tmp = out / 'summary.json.tmp'
+    tmp.write_text(json.dumps(result.summary, indent=2, default=_jsonable) + '\n')
+    tmp.replace(out / 'summary.json')
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if value == float('inf'):
+        return None
+    raise TypeError(f'not JSON serialisable: {type(value).__name__}')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser of ``sim``."""
+    parser = argparse.ArgumentParser(
+        prog='sim', description='Run a flocking scenario with the reference simulator.')
+    parser.add_argument('scenario', help='preset name (see --list) or path to a YAML file')
+    parser.add_argument('--set', dest='overrides', action='append', default=[],
+                        metavar='KEY=VALUE',
+                        help='override one value, e.g. --set protocol.c1=0.8 (repeatable)')
+    parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
+    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO)')
+    parser.add_argument('--plots', action='store_true', help='also write PNG figures')
+    parser.add_argument('--quiet', action='store_true', help='no progress output')
+    parser.add_argument('--allow-unstable', action='store_true',
+                        help='run even when dt violates a stability bound')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``sim`` from the command line; return the exit status."""
+    parser = build_parser()
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv and argv[0] == '--list':
+        from flock_swarm.scenarios import preset_names
+        print('\n'.join(preset_names()))
+        return 0
+    args = parser.parse_args(argv)
+    from flock_swarm.scenarios import load
+    try:
+        sc = load(args.scenario, args.overrides, args.seed)
+        if args.seed is not None and args.seed < 0:
+            raise ScenarioError('--seed', f'must be >= 0, got {args.seed}')
+        violations = check_step(sc, realize(sc))
+        if violations and not args.allow_unstable:
+            raise ScenarioError('dt', violations[0].message(sc.dt).split(': ', 1)[1])
+    except ScenarioError as exc:
+        print(f'sim: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    out = args.out if args.out is not None else Path('out') / sc.name
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / '.write_test'
+        probe.write_text('')
+        probe.unlink()
+    except OSError as exc:
+        print(f'sim: error: --out: cannot write to {out}: {exc.strerror}', file=sys.stderr)
+        return EXIT_USAGE
+    say = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+    if say:
+        say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
+            f'of {sc.dt:g} s, seed {sc.seed}')
+    result = simulate(sc, progress=say)
+    try:
+        write_outputs(result, out, sc)
+        if args.plots:
+            from flock_swarm.plots import plot_timeseries
+            for path in plot_timeseries(result.series, out, sc.name):
+                if say:
+                    say(f'[sim] wrote {path}')
+    except OSError as exc:
+        print(f'sim: error: --out: writing {out} failed: {exc.strerror}', file=sys.stderr)
+        return EXIT_USAGE
+    s = result.summary
+    if say:
+        say(f'[sim] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
+            f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
+            f'collisions = {s["collisions"]}, components = {s["components_final"]} '
+            f'({s["wall_time_s"]:.1f} s wall)')
+        say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
+    if s['status'] == 'diverged':
+        print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
+              'reduce dt', file=sys.stderr)
+        return EXIT_DIVERGED
+    return 130 if s['status'] == 'interrupted' else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
