@@ -1,0 +1,268 @@
+"""Bad scenario input: one-line errors naming the key, exit status 2, no traceback."""
+
+import copy
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.scenario import apply_override, parse_scenario, realize
+from flock_swarm.core.stability import check_step, packing_degree, pd_dt_max, pd_stable
+from flock_swarm.scenarios import load, load_mapping, preset_names
+
+BASE = {
+    'name': 'base', 'dim': 2, 'n_agents': 5, 'dt': 0.01, 'duration': 1.0, 'seed': 3,
+    'protocol': {'name': 'su_informed', 'r': 4.0, 'd': 3.3, 'eps': 0.1, 'h': 0.9,
+                 'a': 5.0, 'b': 5.0, 'c1': 0.5, 'c2': 0.5},
+    'informed': {'select': 'random', 'count': 2},
+    'initial': {'position_box': [[0, 5], [0, 5]], 'velocity_box': [[0, 1], [0, 1]]},
+    'leader': {'model': 'constant_velocity', 'position': [0, 0], 'velocity': [1, 1]},
+}
+
+
+def with_value(path: str, value):
+    """Return a copy of BASE with one dotted key set (``None`` deletes it)."""
+    data = copy.deepcopy(BASE)
+    node = data
+    parts = path.split('.')
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+    if value is None:
+        node.pop(parts[-1], None)
+    else:
+        node[parts[-1]] = value
+    return data
+
+
+def test_base_is_valid():
+    sc = parse_scenario(BASE)
+    assert sc.steps == 100
+    assert sc.law.name == 'su_informed'
+
+
+@pytest.mark.parametrize('path, value, key', [
+    ('protocol.r', -1.0, 'protocol.r'),
+    ('protocol.r', 0.0, 'protocol.r'),
+    ('protocol.d', 4.0, 'protocol.d'),                  # d >= r
+    ('protocol.d', 5.0, 'protocol.d'),
+    ('protocol.h', 0.0, 'protocol.h'),                  # h outside (0, 1)
+    ('protocol.h', 1.0, 'protocol.h'),
+    ('protocol.eps', 0.0, 'protocol.eps'),              # eps <= 0
+    ('protocol.eps', -0.1, 'protocol.eps'),
+    ('protocol.c1', float('nan'), 'protocol.c1'),       # NaN
+    ('protocol.c2', float('inf'), 'protocol.c2'),       # infinite
+    ('protocol.a', 'five', 'protocol.a'),               # not a number
+    ('protocol.b', 1.0, 'protocol.b'),                  # b < a
+    ('protocol.name', 'boids', 'protocol.name'),        # unknown protocol
+    ('protocol.name', None, 'protocol.name'),
+    ('protocol.gain', 1.0, 'protocol.gain'),            # unknown key
+    ('n_agents', 0, 'n_agents'),                        # N < 1
+    ('n_agents', 2.5, 'n_agents'),
+    ('dim', 4, 'dim'),
+    ('dt', 0.0, 'dt'),
+    ('dt', float('nan'), 'dt'),
+    ('duration', -1.0, 'duration'),
+    ('seed', -1, 'seed'),
+    ('record_every', 0, 'record_every'),
+    ('colour', 'red', 'colour'),                        # unknown top-level key
+    ('informed.count', None, 'informed.count'),
+    ('informed.fraction', 1.5, 'informed.fraction'),    # fraction outside [0, 1]
+    ('informed.select', 'clever', 'informed.select'),
+    ('leader.model', 'spiral', 'leader.model'),         # unknown leader model
+    ('leader.position', [0, 0, 0], 'leader.position'),  # wrong vector length
+    ('leader.velocity', [1], 'leader.velocity'),
+    ('leader.velocity', [1, float('nan')], 'leader.velocity[1]'),
+    ('initial.position_box', [[0, 5]], 'initial.position_box'),
+    ('initial.position_box', [[5, 0], [0, 5]], 'initial.position_box[0]'),
+    ('initial.velocity_box', None, 'initial.velocity_box'),
+    ('graph.type', 'ring', 'graph.type'),
+    ('metrics.eta_tolerance', 0.0, 'metrics.eta_tolerance'),
+])
+def test_invalid_value_names_the_key(path, value, key):
+    data = with_value(path, value)
+    if path == 'informed.fraction':
+        del data['informed']['count']
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == key
+    assert '\n' not in str(err.value)
+
+
+@pytest.mark.parametrize('section, key', [
+    ({'name': 'zhou_pseudo_leader', 'w': -1.0}, 'protocol.w'),
+    ({'name': 'yu_pinning_observer', 'b': 0.5}, 'protocol.b'),
+    ({'name': 'os2003_sink', 'delta': 1.5}, 'protocol.delta'),
+    ({'name': 'os2003_sink', 'k': 1.5}, 'protocol.k'),
+    ({'name': 'jadbabaie_leader', 'speed': 0.0}, 'protocol.speed'),
+])
+def test_invalid_law_parameters(section, key):
+    data = with_value('protocol', section)
+    data['informed'] = {'select': 'all'}
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == key
+
+
+def test_lorenz_needs_three_dimensions():
+    data = with_value('leader', {'model': 'lorenz', 'position': [0, 0], 'velocity': [1, 1]})
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == 'dim'
+
+
+def test_jadbabaie_is_planar():
+    data = with_value('dim', 3)
+    data['protocol'] = {'name': 'jadbabaie_leader'}
+    data['initial'] = {'position_box': [[0, 1]] * 3, 'velocity_box': [[0, 1]] * 3}
+    data['leader'] = {'model': 'constant_velocity', 'position': [0, 0, 0],
+                      'velocity': [1, 0, 0]}
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == 'dim'
+
+
+def test_informed_ids_out_of_range_and_duplicates():
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('informed', {'select': 'ids', 'ids': [0, 7]}))
+    assert err.value.key == 'informed.ids[1]'
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('informed', {'select': 'ids', 'ids': [1, 1]}))
+    assert err.value.key == 'informed.ids'
+
+
+def test_fixed_graph_must_be_symmetric():
+    adj = [[0, 1, 0, 0, 0]] + [[0] * 5 for _ in range(4)]
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('graph', {'type': 'fixed', 'adjacency': adj}))
+    assert err.value.key == 'graph.adjacency'
+
+
+def test_observers_only_for_yu():
+    data = with_value('observers', [{'ids': [0], 'H': [[1, 0]], 'H_tilde': [[1, 0]],
+                                     'D': [[1], [0]], 'D_tilde': [[1], [0]]}])
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == 'observers'
+
+
+def test_override_sets_nested_values_and_is_validated():
+    data = apply_override(BASE, 'protocol.c1=0.8')
+    assert parse_scenario(data).law.c1 == 0.8
+    assert BASE['protocol']['c1'] == 0.5  # the input is not modified
+    data = apply_override(BASE, 'initial.position_box=[[0, 1], [0, 1]]')
+    assert parse_scenario(data).position_box.tolist() == [[0, 1], [0, 1]]
+    with pytest.raises(ScenarioError) as err:
+        apply_override(BASE, 'protocol.c1')
+    assert err.value.key == '--set'
+    with pytest.raises(ScenarioError) as err:
+        apply_override(BASE, 'dim.x=1')
+    assert err.value.key == 'dim'
+
+
+def test_realize_is_deterministic_per_seed():
+    a, b = realize(parse_scenario(BASE)), realize(parse_scenario(BASE))
+    assert (a.q0 == b.q0).all() and (a.p0 == b.p0).all()
+    assert a.informed_ids == b.informed_ids and len(a.informed_ids) == 2
+    other = realize(parse_scenario(with_value('seed', 4)))
+    assert not (other.q0 == a.q0).all()
+
+
+@pytest.mark.parametrize('name', preset_names())
+def test_every_preset_is_valid_and_stable(name):
+    sc = load(name)
+    assert sc.name == name
+    assert check_step(sc, realize(sc)) == []
+    assert load_mapping(name).get('reference'), 'every preset cites its source'
+
+
+def test_presets_cover_every_paper_experiment():
+    expected = {'demo', 'su2009_fig2', 'su2009_fig3', 'su2009_fig5', 'su2009_fig6',
+                'su2009_fig7', 'os2003_sink', 'zhou2012_sec51', 'zhou2012_sec52',
+                'yu2010_sec41', 'jadbabaie2003_leader'}
+    assert expected <= set(preset_names())
+
+
+def test_zhou_step_too_large_is_flagged_with_the_bound():
+    sc = load('zhou2012_sec51', ['dt=0.01'])
+    violations = check_step(sc, realize(sc))
+    assert violations and violations[0].part == 'velocity coupling'
+    # |lambda_min(70 B)| bounds the explicit coupling: dt < 2 / |lambda_min|.
+    assert 0.001 < violations[0].dt_max < 0.01
+    assert 'exceeds the stability bound' in violations[0].message(0.01)
+
+
+@pytest.mark.parametrize('kp, kv', [(0.5, 0.5), (1.0, 2.0), (0.1, 5.0), (4.0, 1.0)])
+def test_pd_bound_matches_jury_criterion(kp, kv):
+    # The zero-order-hold map has det = 1 - kv dt + kp dt^2 / 2 and
+    # trace = 2 - kv dt - kp dt^2 / 2; Jury: det < 1 <=> dt < 2 kv / kp, and
+    # 1 + det + trace > 0 <=> dt < 2 / kv (1 + det > |trace| holds for every dt > 0).
+    bound = min(2.0 * kv / kp, 2.0 / kv)
+    assert pd_dt_max(kp, kv) == pytest.approx(bound, rel=1e-6)
+    assert pd_stable(kp, kv, 0.99 * bound)
+    assert not pd_stable(kp, kv, 1.01 * bound)
+
+
+def test_undamped_zero_order_hold_is_never_stable():
+    # det = 1 + kp dt^2 / 2 > 1 for kv = 0.
+    assert not pd_stable(1.0, 0.0, 1e-3)
+
+
+def test_packing_degree():
+    # Agents at least 2 apart within radius 2 of a point in the plane: the area bound
+    # ((2 + 1) / 1)^2 - 1 = 8 >= 6, the hexagonal kissing number.
+    assert packing_degree(2.0, 2.0, 2) == 8
+    assert packing_degree(2.0, 2.0, 3) == 26
+
+
+def run_sim(*args, cwd=None):
+    return subprocess.run([sys.executable, '-m', 'flock_swarm.sim', *args],
+                          capture_output=True, text=True, timeout=120, cwd=cwd)
+
+
+@pytest.mark.parametrize('args, key', [
+    (['demo', '--set', 'protocol.r=-1'], 'protocol.r'),
+    (['demo', '--set', 'protocol.h=1.5'], 'protocol.h'),
+    (['demo', '--set', 'informed.count=99'], 'informed.count'),
+    (['demo', '--set', 'n_agents=0'], 'n_agents'),
+    (['demo', '--set', 'leader.model=warp'], 'leader.model'),
+    (['demo', '--set', 'protocol.c1=.nan'], 'protocol.c1'),
+    (['demo', '--set', 'nonsense'], '--set'),
+    (['no_such_preset'], 'scenario'),
+    (['zhou2012_sec51', '--set', 'dt=0.01'], 'dt'),
+])
+def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path):
+    res = run_sim(*args, '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert lines[0].startswith(f'sim: error: {key}')
+    assert 'Traceback' not in res.stderr
+    assert not (tmp_path / 'o' / 'summary.json').exists()
+
+
+def test_cli_invalid_yaml_file(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('dim: [2\n')
+    res = run_sim(str(bad), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr.startswith('sim: error: scenario:') and 'invalid YAML' in res.stderr
+
+
+def test_cli_unknown_key_in_file(tmp_path):
+    data = dict(BASE, colour='red')
+    path = tmp_path / 'extra.yaml'
+    path.write_text(yaml.safe_dump(data))
+    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr.startswith('sim: error: colour: unknown key')
+
+
+def test_cli_unwritable_output(tmp_path):
+    blocker = tmp_path / 'file'
+    blocker.write_text('not a directory')
+    res = run_sim('demo', '--out', str(blocker / 'sub'))
+    assert res.returncode == 2
+    assert res.stderr.startswith('sim: error: --out:')
+    assert len(res.stderr.strip().splitlines()) == 1
