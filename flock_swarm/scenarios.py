@@ -7,7 +7,7 @@ from typing import Any, Iterable
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import Scenario, apply_override, parse_scenario
+from flock_swarm.core.scenario import Scenario, apply_override, parse_scenario, parse_yaml
 
 PACKAGE = 'flock_swarm'
 
@@ -74,7 +74,7 @@ def load_mapping(name_or_path: str) -> dict:
     """
     path = resolve(name_or_path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = parse_yaml(path.read_text())
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark is not None else ''

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import apply_override, parse_scenario, realize
+from flock_swarm.core.scenario import apply_override, parse_scenario, parse_value, realize
 from flock_swarm.core.stability import check_step, packing_degree, pd_dt_max, pd_stable
 from flock_swarm.scenarios import load, load_mapping, preset_names
 
@@ -266,3 +266,19 @@ def test_cli_unwritable_output(tmp_path):
     assert res.returncode == 2
     assert res.stderr.startswith('sim: error: --out:')
     assert len(res.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize('text, value', [('1e-3', 0.001), ('5E-4', 0.0005), ('1.0e-3', 0.001),
+                                         ('-2e+1', -20.0), ('0.001', 0.001)])
+def test_exponents_without_a_dot_are_numbers(text, value):
+    assert parse_value(text) == value
+
+
+def test_exponent_override_reaches_the_scenario():
+    assert load('demo', ['dt=1e-3']).dt == 0.001
+
+
+def test_exponents_in_files_are_numbers(tmp_path):
+    path = tmp_path / 'exp.yaml'
+    path.write_text(yaml.safe_dump(BASE).replace('dt: 0.01', 'dt: 1e-2'))
+    assert load(str(path)).dt == 0.01

@@ -11,10 +11,12 @@ Agent ids are 0-based everywhere (``agent_0`` is the papers' agent 1).
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import yaml
 
 from flock_swarm.core.dynamics import FieldSpec
 from flock_swarm.core.errors import ScenarioError
@@ -461,15 +463,37 @@ def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> FieldSpec |
 # Overrides
 
 
+class ScenarioLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, also reading YAML 1.2 floats such as ``1e-3`` as numbers.
+
+    PyYAML follows YAML 1.1, where an exponent needs a dot (``1.0e-3``); ``1e-3`` would
+    otherwise arrive as the string ``'1e-3'``.
+    """
+
+
+ScenarioLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+    list('-+0123456789'))
+
+
+def parse_yaml(text: str) -> Any:
+    """Parse YAML text with :class:`ScenarioLoader`.
+
+    :param text: YAML text.
+    :return: the parsed value.
+    """
+    return yaml.load(text, Loader=ScenarioLoader)
+
+
 def parse_value(text: str) -> Any:
     """Parse the value of a ``--set key=value`` override as YAML (``0.5``, ``[1, 2]``, ``true``).
 
     :param text: the value text.
     :return: the parsed value.
     """
-    import yaml
     try:
-        return yaml.safe_load(text)
+        return parse_yaml(text)
     except yaml.YAMLError as exc:
         raise ScenarioError('--set', f'cannot parse value {text!r}: {exc.problem}') from None
 
