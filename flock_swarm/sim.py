@@ -21,7 +21,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, disk_graph, fixed_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
 from flock_swarm.core.protocols import advance_adaptive, swarm_control
-from flock_swarm.core.pseudo_leaders import select_for_graph
+from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
 from flock_swarm.core.stability import check_step
 
@@ -120,20 +120,14 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
     law, dt, steps = sc.law, sc.dt, sc.steps
     status, step = 'completed', 0
     started = last = time.monotonic()
-    prev_edges: tuple | None = None
-    reselections = 0
+    reselector = Reselector(law) if sc.informed.reselect and static is None else None
     metrics_now: dict = {}
     try:
         for step in range(steps + 1):
             state = leader.state
             edges = interaction_graph(sc, real, q, static)
-            if sc.informed.reselect and static is None:
-                coupled = edges.weight > 0
-                signature = (edges.i[coupled].tobytes(), edges.j[coupled].tobytes())
-                if prev_edges is not None and signature != prev_edges:
-                    reselect_pseudo_leaders(sc, agents, edges)
-                    reselections += 1
-                prev_edges = signature
+            if reselector is not None:
+                reselector.update(agents, edges)
             u = swarm_control(law, q, p, edges, state, agents, dt)
             if not (np.isfinite(u).all() and np.isfinite(q).all() and np.isfinite(p).all()):
                 status = 'diverged'
@@ -162,20 +156,7 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
                          f'({rate:.0f} steps/s)')
     except KeyboardInterrupt:
         status = 'interrupted'
-    return status, step, reselections
-
-
-def reselect_pseudo_leaders(sc: Scenario, agents, edges: EdgeList) -> None:
-    """Re-apply Theorem 1 to the current graph ([Zhou12] Section 4.4), keeping kept gains."""
-    law = sc.law
-    coupled = EdgeList(edges.n, edges.i[edges.weight > 0], edges.j[edges.weight > 0],
-                       edges.weight[edges.weight > 0])
-    chosen = select_for_graph(coupled, law.w, law.alpha)
-    new = np.zeros_like(agents.informed)
-    new[list(chosen.ids)] = True
-    joined = new & ~agents.informed
-    agents.adaptive[joined] = law.h0
-    agents.informed[:] = new
+    return status, step, 0 if reselector is None else reselector.count
 
 
 def edge_min_distance(q: np.ndarray, edges: EdgeList) -> float:
@@ -238,14 +219,15 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
     """
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / 'timeseries.npz', **result.series)
-    (out / 'scenario.json').write_text(json.dumps(sc.raw, indent=2, default=_jsonable) + '\n')
+    (out / 'scenario.json').write_text(json.dumps(sc.raw, indent=2, default=jsonable) + '\n')
     # summary.json last: its presence means the other files are complete.
     tmp = out / 'summary.json.tmp'
-    tmp.write_text(json.dumps(result.summary, indent=2, default=_jsonable) + '\n')
+    tmp.write_text(json.dumps(result.summary, indent=2, default=jsonable) + '\n')
     tmp.replace(out / 'summary.json')
 
 
-def _jsonable(value):
+def jsonable(value):
+    """Return a JSON-serialisable form of NumPy values (``inf`` becomes ``null``)."""
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):

@@ -22,7 +22,7 @@ import numpy as np
 
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.graphs import EdgeList
+from flock_swarm.core.graphs import EdgeList, within_radius
 
 
 @dataclass
@@ -497,3 +497,31 @@ def advance_adaptive(law: Protocol, q: np.ndarray, p: np.ndarray, leader: Leader
     rate = law.adaptive_rate(q, p, leader, agents)
     if rate is not None and agents.adaptive is not None:
         agents.adaptive += dt * rate
+
+
+def local_neighbours(law: Protocol, i: int, q: np.ndarray,
+                     weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Return agent ``i``'s neighbours (ascending ids) and edge weights, as the swarm sees them.
+
+    The same rule as the simulator's graph: the fixed weight matrix when there is one (every
+    other agent, with weight ``W_ij``, for laws acting on all pairs), otherwise the r-disk
+    neighbourhood (:func:`~flock_swarm.core.graphs.within_radius`), scaled by ``w`` for laws
+    acting on all pairs.
+
+    :param law: the law.
+    :param i: the agent.
+    :param q: positions of every agent, shape ``(n, dim)``.
+    :param weights: the fixed weight matrix, or ``None``.
+    :return: ``(ids, weights)``.
+    """
+    n = q.shape[0]
+    others = np.concatenate((np.arange(i), np.arange(i + 1, n)))
+    if weights is not None:
+        w = weights[i, others]
+        keep = np.ones(others.size, dtype=bool) if law.all_pairs else w > 0
+        return others[keep], w[keep]
+    diff = q[others] - q[i]
+    near = within_radius(np.einsum('ek,ek->e', diff, diff), law.radius, law.strict_radius)
+    if law.all_pairs:
+        return others, law.w * near.astype(float)
+    return others[near], np.ones(int(near.sum()))

@@ -95,3 +95,53 @@ def select_for_graph(edges: EdgeList, w: float, alpha: float) -> PseudoLeaderSel
     """
     unit = EdgeList(edges.n, edges.i, edges.j, np.ones(edges.size))
     return select_pseudo_leaders(edges_to_adjacency(unit), w, alpha)
+
+
+def reselect(law, agents, edges: EdgeList) -> PseudoLeaderSelection:
+    """Re-apply Theorem 1 to the current graph (Section 4.4), in place.
+
+    Agents that become pseudo-leaders start from the initial gain ``law.h0``; those that stay
+    keep their adapted gain.
+
+    :param law: a :class:`~flock_swarm.core.protocols.ZhouPseudoLeader` law.
+    :param agents: per-agent data of the whole swarm (``informed``, ``adaptive``), updated.
+    :param edges: the current graph; edges of zero weight are not couplings.
+    :return: the new selection.
+    """
+    keep = edges.weight > 0
+    coupled = EdgeList(edges.n, edges.i[keep], edges.j[keep], edges.weight[keep])
+    chosen = select_for_graph(coupled, law.w, law.alpha)
+    new = np.zeros_like(agents.informed)
+    new[list(chosen.ids)] = True
+    agents.adaptive[new & ~agents.informed] = law.h0
+    agents.informed[:] = new
+    return chosen
+
+
+class Reselector:
+    """Re-applies Theorem 1 whenever the coupling graph switches ([Zhou12] Section 4.4).
+
+    The simulator and every agent node hold one, so they re-select at the same steps.
+    """
+
+    def __init__(self, law) -> None:
+        """Create it for a :class:`~flock_swarm.core.protocols.ZhouPseudoLeader` law."""
+        self.law = law
+        self.previous: tuple[bytes, bytes] | None = None
+        self.count = 0
+
+    def update(self, agents, edges: EdgeList) -> bool:
+        """Re-select (in place) if the graph differs from the previous call's; return whether.
+
+        :param agents: per-agent data of the whole swarm, updated in place.
+        :param edges: the current graph.
+        :return: ``True`` when a re-selection happened.
+        """
+        keep = edges.weight > 0
+        signature = (edges.i[keep].tobytes(), edges.j[keep].tobytes())
+        changed = self.previous is not None and signature != self.previous
+        self.previous = signature
+        if changed:
+            reselect(self.law, agents, edges)
+            self.count += 1
+        return changed
