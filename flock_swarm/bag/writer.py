@@ -1,0 +1,436 @@
+"""Write rosbag2-compatible MCAP bags (ROS 2 Jazzy) without rosbag2_py.
+
+A bag is a directory ``NAME/`` holding ``NAME_0.mcap`` and, once the writer is closed,
+``metadata.yaml``; ``ros2 bag info/play``, Foxglove, ``mcap`` and ``rosbags`` read it. The
+layout follows rosbag2's MCAP storage plugin (``rosbag2_storage_mcap``) and
+``rosbag2_cpp::SequentialWriter``:
+
+- MCAP header profile ``ros2``;
+- one schema per message type, named ``pkg/msg/Type``, encoding ``ros2msg``, data the full
+  definition text (:mod:`flock_swarm.bag.msgdefs`);
+- one channel per topic, message encoding ``cdr``, channel metadata ``offered_qos_profiles``
+  (QoS YAML, metadata version 9) and ``topic_type_hash`` (``RIHS01_...``);
+- messages serialised by rclpy, ``log_time`` = ``publish_time`` = the given stamp;
+- an MCAP metadata record ``rosbag2`` (``serialized_metadata``: the bag metadata as YAML),
+  written when the bag opens and again when it closes, as rosbag2's ``update_metadata`` does;
+- ``metadata.yaml`` (``rosbag2_bagfile_information`` version 9) written on close.
+
+Messages are grouped in compressed chunks of about ``chunk_size`` bytes, and each finished chunk
+goes to the file at once: a process killed while recording leaves an MCAP whose complete chunks
+:class:`~flock_swarm.bag.reader.BagReader` recovers (at most one chunk is lost).
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+from numbers import Integral
+import os
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
+import yaml
+
+from flock_swarm.bag.msgdefs import encoded_definition, message_class, type_hash, type_name_of
+
+#: MCAP profile of ROS 2 bags.
+PROFILE = 'ros2'
+#: Message encoding of every channel (rosbag2's default serialization format).
+SERIALIZATION_FORMAT = 'cdr'
+#: ``rosbag2_bagfile_information`` version written by rosbag2 on Jazzy.
+METADATA_VERSION = 9
+#: Storage plugin identifier in ``metadata.yaml``.
+STORAGE_IDENTIFIER = 'mcap'
+#: ROS distribution whose message definitions and wheels this package is built on.
+ROS_DISTRO = 'jazzy'
+#: Name of the bag metadata file in the bag directory.
+METADATA_FILENAME = 'metadata.yaml'
+#: Name of the MCAP metadata record in which rosbag2 mirrors the bag metadata.
+ROSBAG2_METADATA_RECORD = 'rosbag2'
+#: rosbag2's starting time for a bag without messages (``std::chrono::nanoseconds::max()``).
+NO_MESSAGES_START_NS = 2**63 - 1
+
+_COMPRESSION = {
+    'zstd': CompressionType.ZSTD,
+    'lz4': CompressionType.LZ4,
+    'none': CompressionType.NONE,
+}
+
+
+def _library() -> str:
+    try:
+        ours = version('flock_swarm')
+    except PackageNotFoundError:
+        ours = 'unknown'
+    return f'flock_swarm {ours}; {LIBRARY_IDENTIFIER}'
+
+
+def _duration_yaml(nanoseconds: int) -> dict[str, int]:
+    # rmw_time_t as rosbag2 writes it; Infinite (2**63 - 1 ns) gives sec 9223372036,
+    # nsec 854775807, RMW_DURATION_INFINITE.
+    return {'sec': nanoseconds // 10**9, 'nsec': nanoseconds % 10**9}
+
+
+def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
+    """Convert a QoS profile to rosbag2's YAML mapping (metadata version 9).
+
+    Policies are written as rmw's strings (``keep_last``, ``reliable``, ``transient_local``,
+    ``automatic``...), durations as ``{sec, nsec}``, keys in rosbag2's order.
+
+    :param qos: the profile the topic's publisher offers.
+    :return: a plain dictionary ready for YAML.
+    """
+    return {
+        'history': qos.history.name.lower(),
+        'depth': int(qos.depth),
+        'reliability': qos.reliability.name.lower(),
+        'durability': qos.durability.name.lower(),
+        'deadline': _duration_yaml(qos.deadline.nanoseconds),
+        'lifespan': _duration_yaml(qos.lifespan.nanoseconds),
+        'liveliness': qos.liveliness.name.lower(),
+        'liveliness_lease_duration': _duration_yaml(qos.liveliness_lease_duration.nanoseconds),
+        'avoid_ros_namespace_conventions': bool(qos.avoid_ros_namespace_conventions),
+    }
+
+
+class _RosbagDumper(yaml.SafeDumper):
+    """A YAML dumper whose output looks like yaml-cpp's, which rosbag2 uses."""
+
+    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
+        # yaml-cpp indents a block sequence under its key; PyYAML would not.
+        super().increase_indent(flow, False)
+
+
+def _represent_str(dumper: yaml.SafeDumper, data: str) -> yaml.ScalarNode:
+    if data == '':
+        return dumper.represent_scalar('tag:yaml.org,2002:str', '', style='"')
+    return dumper.represent_str(data)
+
+
+def _represent_none(dumper: yaml.SafeDumper, data: None) -> yaml.ScalarNode:
+    return dumper.represent_scalar('tag:yaml.org,2002:null', '~')
+
+
+_RosbagDumper.add_representer(str, _represent_str)
+_RosbagDumper.add_representer(type(None), _represent_none)
+
+
+def dump_yaml(data: Any) -> str:
+    """Dump data as block-style YAML in the layout of rosbag2's files, keys kept in order.
+
+    :param data: plain dictionaries, lists, strings, numbers, booleans and ``None``.
+    :return: the YAML text.
+    """
+    return yaml.dump(data, Dumper=_RosbagDumper, default_flow_style=False, sort_keys=False,
+                     allow_unicode=True, width=1 << 16)
+
+
+def serialize_qos_profiles(profiles: list[QoSProfile]) -> str:
+    """Serialise offered QoS profiles as the ``offered_qos_profiles`` channel metadata string.
+
+    rosbag2 stores ``YAML::Dump`` of the profile list there; an empty list is ``[]``.
+
+    :param profiles: the profiles offered on the topic (usually one).
+    :return: the YAML text, without a trailing newline as yaml-cpp writes it.
+    """
+    return dump_yaml([qos_to_dict(qos) for qos in profiles]).rstrip('\n')
+
+
+class _FlushingFile:
+    """A binary output file whose every write reaches the operating system at once.
+
+    The mcap writer writes whole records (a finished chunk, its message indexes, a metadata
+    record), so flushing each write bounds what a killed process loses to the open chunk.
+    Not an ``io.RawIOBase``, so that the mcap writer does not wrap it in a buffer of its own.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self._file: BinaryIO = open(path, 'xb')
+
+    def write(self, data: bytes) -> int:
+        written = self._file.write(data)
+        self._file.flush()
+        return written
+
+    def tell(self) -> int:
+        return self._file.tell()
+
+    def flush(self) -> None:
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class _Topic:
+    """What the writer knows of one topic."""
+
+    def __init__(self, name: str, type_name: str, msg_class: type, channel_id: int,
+                 qos_profiles: list[dict[str, Any]], type_hash: str) -> None:
+        self.name = name
+        self.type_name = type_name
+        self.msg_class = msg_class
+        self.channel_id = channel_id
+        self.qos_profiles = qos_profiles
+        self.type_hash = type_hash
+        self.count = 0
+
+
+class BagWriter:
+    """Record ROS 2 messages into a rosbag2-compatible MCAP bag directory.
+
+    Use it as a context manager, or call :meth:`close`::
+
+        with BagWriter(Path('out/run1')) as bag:
+            bag.add_topic('/clock', Clock)
+            bag.write('/clock', clock_msg, t_ns)
+
+    Single-threaded: call it from one thread (an rclpy callback group, or the simulator loop).
+
+    :param path: the bag directory to create; it must not exist or be empty.
+    :param chunk_size: uncompressed size (bytes) after which a chunk is compressed and written;
+        at most this much recorded data is lost if the process is killed.
+    :param compression: chunk compression, ``'zstd'``, ``'lz4'`` or ``'none'``.
+    :param custom_metadata: MCAP metadata records written at once, name to string mapping
+        (scenario provenance, for example); more can be added with :meth:`add_metadata`.
+    :raises FileExistsError: if ``path`` is a file or a non-empty directory.
+    :raises ValueError: for an unknown compression or a chunk size below one byte.
+    """
+
+    def __init__(self, path: Path, *, chunk_size: int = 1 << 20, compression: str = 'zstd',
+                 custom_metadata: dict[str, dict[str, str]] | None = None) -> None:
+        """Create the bag directory and start its MCAP file."""
+        path = Path(path)
+        if compression not in _COMPRESSION:
+            raise ValueError(f'unknown bag compression {compression!r}; '
+                             f"expected one of {', '.join(sorted(_COMPRESSION))}")
+        if chunk_size < 1:
+            raise ValueError(f'chunk_size must be at least 1 byte, got {chunk_size}')
+        if path.exists() and not path.is_dir():
+            raise FileExistsError(f'cannot create bag directory {path}: a file of that name '
+                                  'exists')
+        if path.is_dir() and any(path.iterdir()):
+            raise FileExistsError(f'bag directory {path} already exists and is not empty; '
+                                  'choose another name or remove it')
+        path.mkdir(parents=True, exist_ok=True)
+        self._path = path
+        self._relative_file = f'{path.name}_0.mcap'
+        self._file = _FlushingFile(path / self._relative_file)
+        self._writer = Writer(self._file, chunk_size=chunk_size,
+                              compression=_COMPRESSION[compression])
+        self._writer.start(profile=PROFILE, library=_library())
+        self._schema_ids: dict[str, int] = {}
+        self._topics: dict[str, _Topic] = {}
+        self._start_ns: int | None = None
+        self._end_ns: int | None = None
+        self._closed = False
+        self._write_rosbag2_record()
+        for name, data in (custom_metadata or {}).items():
+            self.add_metadata(name, data)
+
+    @property
+    def path(self) -> Path:
+        """The bag directory."""
+        return self._path
+
+    @property
+    def mcap_path(self) -> Path:
+        """The MCAP file inside the bag directory."""
+        return self._path / self._relative_file
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Messages written so far, per topic (in the order topics were added)."""
+        return {name: topic.count for name, topic in self._topics.items()}
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
+        return self._closed
+
+    def __enter__(self) -> 'BagWriter':
+        """Return the writer itself."""
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Close the bag, also after an exception: what was recorded stays readable."""
+        self.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f'bag {self._path} is closed')
+
+    def add_topic(self, name: str, msg_type: type | str,
+                  qos: QoSProfile | None = None) -> None:
+        """Declare a topic: one MCAP channel, and the type's schema if it is new.
+
+        Adding a topic again with the same type does nothing, as in rosbag2.
+
+        :param name: fully qualified topic name, such as ``/agent_3/odom``.
+        :param msg_type: the message class, or its ``pkg/msg/Type`` name.
+        :param qos: the QoS profile the topic's publisher offers, recorded for replay;
+            ``None`` records no profile (a player then uses its defaults).
+        :raises ValueError: if the name is not absolute, or the topic exists with another type.
+        :raises DefinitionNotFoundError: if the type's definition is not installed.
+        """
+        self._check_open()
+        if not isinstance(name, str) or not name.startswith('/'):
+            raise ValueError(f'topic name must be absolute (start with /), got {name!r}')
+        type_name = type_name_of(msg_type)
+        if name in self._topics:
+            if self._topics[name].type_name != type_name:
+                raise ValueError(f'topic {name} already recorded with type '
+                                 f'{self._topics[name].type_name}, not {type_name}')
+            return
+        msg_class = msg_type if isinstance(msg_type, type) else message_class(type_name)
+        if type_name not in self._schema_ids:
+            definition = encoded_definition(type_name)
+            self._schema_ids[type_name] = self._writer.register_schema(
+                name=type_name, encoding=definition.encoding,
+                data=definition.text.encode('utf-8'))
+        profiles = [] if qos is None else [qos]
+        digest = type_hash(type_name)
+        channel_id = self._writer.register_channel(
+            topic=name, message_encoding=SERIALIZATION_FORMAT,
+            schema_id=self._schema_ids[type_name],
+            metadata={'offered_qos_profiles': serialize_qos_profiles(profiles),
+                      'topic_type_hash': digest})
+        self._topics[name] = _Topic(name, type_name, msg_class, channel_id,
+                                    [qos_to_dict(p) for p in profiles], digest)
+
+    def write(self, topic: str, msg: Any, t_ns: int) -> None:
+        """Serialise a message with rclpy and record it.
+
+        :param topic: a topic declared with :meth:`add_topic`.
+        :param msg: a message of the topic's type.
+        :param t_ns: receive and publish time (ns), the bag's time axis; simulation time for
+            a simulated run.
+        :raises KeyError: if the topic was not added.
+        :raises TypeError: if the message is not of the topic's type.
+        """
+        self._check_open()
+        expected = self._topic(topic).msg_class
+        if not isinstance(msg, expected):
+            raise TypeError(f'topic {topic} records {type_name_of(expected)}, '
+                            f'got {type(msg).__module__}.{type(msg).__qualname__}')
+        self.write_serialized(topic, serialize_message(msg), t_ns)
+
+    def write_serialized(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Record an already CDR-serialised message.
+
+        :param topic: a topic declared with :meth:`add_topic`.
+        :param data: the serialised message.
+        :param t_ns: receive and publish time (ns), non-negative.
+        :raises KeyError: if the topic was not added.
+        :raises ValueError: if the time is negative.
+        """
+        self._check_open()
+        entry = self._topic(topic)
+        if isinstance(t_ns, bool) or not isinstance(t_ns, Integral):
+            raise TypeError(f'message time must be an integer number of ns, got {t_ns!r}')
+        t_ns = int(t_ns)
+        if not 0 <= t_ns < 2**64:
+            raise ValueError(f'message time must be a non-negative 64-bit ns count, got {t_ns}')
+        # rosbag2 leaves the MCAP sequence at 0 (not assigned by the publisher).
+        self._writer.add_message(channel_id=entry.channel_id, log_time=t_ns,
+                                 data=bytes(data), publish_time=t_ns, sequence=0)
+        entry.count += 1
+        self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
+        self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Write an MCAP metadata record (string keys and values), such as run provenance.
+
+        It goes to the file at once, so it survives a killed process.
+
+        :param name: record name; ``rosbag2`` is reserved for the bag metadata.
+        :param data: the key-value pairs.
+        :raises ValueError: for the reserved name.
+        :raises TypeError: if a key or value is not a string.
+        """
+        self._check_open()
+        if name == ROSBAG2_METADATA_RECORD:
+            raise ValueError(f'metadata record name {name!r} is reserved for rosbag2')
+        self._add_metadata(name, data)
+
+    def _add_metadata(self, name: str, data: dict[str, str]) -> None:
+        if not isinstance(name, str):
+            raise TypeError(f'metadata record name must be a string, got {name!r}')
+        for key, value in data.items():
+            if not isinstance(key, str) or not isinstance(value, str):
+                raise TypeError(f'metadata record {name!r} must map strings to strings, '
+                                f'got {key!r}: {value!r}')
+        self._writer.add_metadata(name, dict(data))
+
+    def _topic(self, topic: str) -> _Topic:
+        try:
+            return self._topics[topic]
+        except KeyError:
+            raise KeyError(f'topic {topic!r} was not added to bag {self._path}; '
+                           'call add_topic first') from None
+
+    def bag_metadata(self) -> dict[str, Any]:
+        """Return the bag metadata as rosbag2 writes it (``rosbag2_bagfile_information``).
+
+        :return: the mapping under ``rosbag2_bagfile_information`` in ``metadata.yaml``.
+        """
+        count = sum(topic.count for topic in self._topics.values())
+        if self._start_ns is None or self._end_ns is None:
+            start, duration = NO_MESSAGES_START_NS, 0
+        else:
+            start, duration = self._start_ns, self._end_ns - self._start_ns
+        return {
+            'version': METADATA_VERSION,
+            'storage_identifier': STORAGE_IDENTIFIER,
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': count,
+            'topics_with_message_count': [
+                {
+                    'topic_metadata': {
+                        'name': topic.name,
+                        'type': topic.type_name,
+                        'serialization_format': SERIALIZATION_FORMAT,
+                        'offered_qos_profiles': topic.qos_profiles,
+                        'type_description_hash': topic.type_hash,
+                    },
+                    'message_count': topic.count,
+                }
+                for topic in self._topics.values()
+            ],
+            # Chunk compression is internal to the MCAP storage; rosbag2 leaves these empty.
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [self._relative_file],
+            'files': [{
+                'path': self._relative_file,
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'duration': {'nanoseconds': duration},
+                'message_count': count,
+            }],
+            'custom_data': None,
+            'ros_distro': ROS_DISTRO,
+        }
+
+    def _write_rosbag2_record(self) -> None:
+        self._add_metadata(ROSBAG2_METADATA_RECORD,
+                           {'serialized_metadata': dump_yaml(self.bag_metadata())})
+
+    def close(self) -> None:
+        """Finish the MCAP file (summary and indexes) and write ``metadata.yaml``.
+
+        Closing again does nothing.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._write_rosbag2_record()
+            self._writer.finish()
+        finally:
+            self._file.close()
+        text = dump_yaml({'rosbag2_bagfile_information': self.bag_metadata()})
+        # Written whole then renamed: a metadata.yaml is either absent or complete.
+        tmp = self._path / f'.{METADATA_FILENAME}.tmp'
+        tmp.write_text(text, encoding='utf-8')
+        os.replace(tmp, self._path / METADATA_FILENAME)
