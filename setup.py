@@ -29,6 +29,10 @@ setup(
     entry_points={
         'console_scripts': [
             'sim = flock_swarm.sim:main',
+            'swarm = flock_swarm.runner:main',
+            'leader = flock_swarm.nodes.leader:main',
+            'agent = flock_swarm.nodes.agent:main',
+            'world = flock_swarm.nodes.world:main',
         ],
     },
 )

@@ -1,0 +1,1 @@
+"""The ROS 2 nodes: thin plumbing between messages and the numerical core."""

@@ -1,0 +1,224 @@
+"""Plumbing shared by the leader, agent and world nodes: parameters, QoS, messages, time.
+
+Every node reads the same scenario (parameter ``scenario``: a preset name or a path); any
+other parameter whose name is a dotted scenario key overrides that single value, e.g.
+``ros2 run flock_swarm agent --ros-args -p agent_id:=3 -p scenario:=demo -p protocol.c1:=0.8``.
+"""
+
+import sys
+from typing import Any, Callable
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import AccelStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.scenario import Scenario
+from flock_swarm.scenarios import load
+
+#: Lockstep state and commands: reliable, because a lost odometry or command stalls the step
+#: until its timeout; the depth covers a burst of one message per agent and step.
+LOCKSTEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+#: /clock: reliable so that every tick reaches the leader in lockstep mode.
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Markers and metrics: reliable with a short queue, so RViz and Foxglove (which subscribe
+#: reliable by default) match, and a slow viewer only ever lags by a few frames.
+TELEMETRY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+
+#: Parameters every rclpy node has; they are not scenario overrides.
+ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
+#: The fixed frame of every position (REP-103).
+FRAME = 'world'
+#: Exit status for invalid configuration.
+EXIT_CONFIG = 2
+
+
+def odom_topic(i: int) -> str:
+    """Return the odometry topic of agent ``i`` (relative: namespaces apply)."""
+    return f'agent_{i}/odom'
+
+
+def cmd_topic(i: int) -> str:
+    """Return the command topic of agent ``i``."""
+    return f'agent_{i}/cmd_accel'
+
+
+LEADER_ODOM = 'leader/odom'
+LEADER_ACCEL = 'leader/accel'
+CLOCK = '/clock'
+MARKERS = 'swarm/markers'
+METRICS = 'swarm/metrics'
+
+
+class StepClock:
+    """Simulation time of step ``k``: ``t_k = k dt``, stamped exactly in integer nanoseconds."""
+
+    def __init__(self, dt: float) -> None:
+        """Create the clock for step ``dt`` seconds."""
+        self.dt = dt
+        self.dt_ns = int(round(dt * 1e9))
+
+    def stamp(self, k: int) -> Time:
+        """Return the stamp of step ``k``."""
+        ns = k * self.dt_ns
+        return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+    def ns(self, k: int) -> int:
+        """Return ``t_k`` in nanoseconds."""
+        return k * self.dt_ns
+
+    def step_of(self, stamp: Time) -> int:
+        """Return the step ``k`` of a stamp (nearest step)."""
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        return int(round(ns / self.dt_ns))
+
+
+def declare(node: Node, name: str, default: Any, description: str) -> Any:
+    """Declare a node parameter (unless an override already declared it) and return its value.
+
+    :param node: the node.
+    :param name: parameter name.
+    :param default: default value (its type is the parameter's type).
+    :param description: what it is, shown by ``ros2 param describe``.
+    :return: the value.
+    """
+    if not node.has_parameter(name):
+        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+    return node.get_parameter(name).value
+
+
+def scenario_overrides(node: Node, own: set[str]) -> dict[str, Any]:
+    """Return the node's parameters that override scenario keys (all but its own ones).
+
+    :param node: a node created with ``automatically_declare_parameters_from_overrides``.
+    :param own: names of the node's own parameters.
+    :return: ``{dotted.key: value}``.
+    """
+    out = {}
+    for name, param in node._parameters.items():
+        if name in own or name in ROS_PARAMS or name.startswith('qos_overrides.'):
+            continue
+        value = param.value
+        out[name] = list(value) if isinstance(value, (list, tuple, np.ndarray)) else value
+    return out
+
+
+def load_scenario(node: Node, own: set[str]) -> Scenario:
+    """Load the scenario named by the node's ``scenario`` parameter, with overrides.
+
+    :param node: the node (``scenario`` and ``seed`` parameters already declared).
+    :param own: names of the node's own parameters.
+    :return: the validated scenario.
+    :raises ScenarioError: on any invalid value.
+    """
+    name = node.get_parameter('scenario').value
+    seed = node.get_parameter('seed').value
+    if not isinstance(seed, int) or seed < -1:
+        raise ScenarioError('seed', f'must be -1 (the scenario seed) or >= 0, got {seed!r}')
+    return load(name, seed=None if seed == -1 else seed,
+                extra=scenario_overrides(node, own))
+
+
+def declare_common(node: Node) -> None:
+    """Declare the parameters every node has: ``scenario``, ``seed`` and ``mode``."""
+    declare(node, 'scenario', 'demo', 'scenario preset name or path to a YAML file')
+    declare(node, 'seed', -1, 'random seed; -1 keeps the scenario seed')
+    mode = declare(node, 'mode', 'lockstep',
+                   'lockstep (deterministic, world waits for every agent) or realtime')
+    if mode not in ('lockstep', 'realtime'):
+        raise ScenarioError('mode', f'must be lockstep or realtime, got {mode!r}')
+
+
+COMMON_PARAMS = {'scenario', 'seed', 'mode'}
+
+
+def make_odometry(q: np.ndarray, p: np.ndarray, stamp: Time, child: str) -> Odometry:
+    """Return an Odometry with position ``q`` and world-frame velocity ``p`` (2-D: z = 0)."""
+    msg = Odometry()
+    msg.header.stamp = stamp
+    msg.header.frame_id = FRAME
+    msg.child_frame_id = child
+    pos = msg.pose.pose.position
+    vel = msg.twist.twist.linear
+    pos.x, pos.y = float(q[0]), float(q[1])
+    vel.x, vel.y = float(p[0]), float(p[1])
+    if q.shape[0] == 3:
+        pos.z, vel.z = float(q[2]), float(p[2])
+    return msg
+
+
+def odometry_state(msg: Odometry, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(q, p)`` of an Odometry message."""
+    pos, vel = msg.pose.pose.position, msg.twist.twist.linear
+    if dim == 2:
+        return np.array([pos.x, pos.y]), np.array([vel.x, vel.y])
+    return np.array([pos.x, pos.y, pos.z]), np.array([vel.x, vel.y, vel.z])
+
+
+def make_accel(a: np.ndarray, stamp: Time) -> AccelStamped:
+    """Return an AccelStamped with linear acceleration ``a`` in the world frame."""
+    msg = AccelStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = FRAME
+    lin = msg.accel.linear
+    lin.x, lin.y = float(a[0]), float(a[1])
+    if a.shape[0] == 3:
+        lin.z = float(a[2])
+    return msg
+
+
+def accel_vector(msg: AccelStamped, dim: int) -> np.ndarray:
+    """Return the linear acceleration of an AccelStamped message."""
+    lin = msg.accel.linear
+    return np.array([lin.x, lin.y] if dim == 2 else [lin.x, lin.y, lin.z])
+
+
+def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None,
+             until: Callable[[Node], bool] | None = None) -> int:
+    """Run one node as in ros2/demos: init, spin, clean shutdown; return the exit status.
+
+    Invalid configuration is reported as one line on stderr with exit status 2.
+
+    :param name: executable name (prefix of error lines).
+    :param factory: builds the node (after ``rclpy.init``).
+    :param args: command-line arguments (``None``: ``sys.argv``).
+    :param until: optional condition ending the spin (the world ends after its last step).
+    :return: the exit status.
+    """
+    import rclpy
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        node = factory()
+        while rclpy.ok() and (until is None or not until(node)):
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except ScenarioError as exc:
+        print(f'{name}: error: {exc}', file=sys.stderr)
+        status = EXIT_CONFIG
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        # A signal shuts the context down asynchronously: a callback that was publishing at
+        # that moment fails with "context is invalid". That is the shutdown, not a fault.
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status

@@ -1,0 +1,104 @@
+"""The virtual leader node: publishes ``/leader/odom`` and ``/leader/accel`` every tick.
+
+Lockstep mode: driven by ``/clock``; on tick ``t_k`` the leader advances its model to step
+``k`` (RK4, the same :class:`~flock_swarm.core.dynamics.VirtualLeader` as ``sim``) and
+publishes its state stamped ``t_k``. Realtime mode: a wall-clock timer of period ``dt``
+advances and publishes.
+"""
+
+import sys
+import time
+
+from geometry_msgs.msg import AccelStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+
+from flock_swarm.core.dynamics import VirtualLeader
+from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
+                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, declare,
+                                      declare_common, load_scenario, make_accel, make_odometry,
+                                      run_node)
+
+
+LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout'}
+
+
+class LeaderNode(Node):
+    """Publishes the virtual leader's state ``(q_gamma, p_gamma, f_gamma)``."""
+
+    def __init__(self, **kwargs) -> None:
+        """Create the node; ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace...)."""
+        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
+        super().__init__('leader', **kwargs)
+        declare_common(self)
+        self.scenario = sc = load_scenario(self, LEADER_PARAMS)
+        self.clock = StepClock(sc.dt)
+        self.model = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
+        self.step = 0
+        self.target = -1
+        # Lockstep: hold the first tick until every agent and the world have matched the
+        # leader's topics, so nobody misses step 0 (bounded by start_timeout).
+        self.expect = declare(self, 'expect_subscribers', sc.n_agents + 1,
+                              'subscribers each leader topic must have before the first tick '
+                              'is answered (agents + world)')
+        self.start_timeout = declare(self, 'start_timeout', 30.0,
+                                     'seconds to wait for expect_subscribers')
+        self.matched = False
+        self.t0 = time.monotonic()
+        self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
+        self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
+        if self.get_parameter('mode').value == 'lockstep':
+            self.create_subscription(Clock, CLOCK, self.on_clock, CLOCK_QOS)
+            self.retry = self.create_timer(0.01, self.flush)
+        else:
+            self.create_timer(sc.dt, self.on_timer)
+
+    def on_clock(self, msg: Clock) -> None:
+        """Advance to the tick's step and publish (a repeated tick republishes)."""
+        k = self.clock.step_of(msg.clock)
+        if k < self.step:
+            self.get_logger().warning(f'clock went back to step {k} (at {self.step}); ignored')
+            return
+        self.target = k
+        self.flush()
+
+    def flush(self) -> None:
+        """Answer the latest tick once the subscribers are matched (or waited long enough)."""
+        if self.target < 0:
+            return
+        if not self.matched:
+            counts = (self.odom_pub.get_subscription_count(),
+                      self.accel_pub.get_subscription_count())
+            waited = time.monotonic() - self.t0
+            if min(counts) < self.expect and waited < self.start_timeout:
+                return
+            self.matched = True
+            self.retry.cancel()
+        while self.step < self.target:
+            self.model.step(self.scenario.dt)
+            self.step += 1
+        self.target = -1
+        self.publish()
+
+    def on_timer(self) -> None:
+        """Realtime mode: publish the current state, then advance one step."""
+        self.publish()
+        self.model.step(self.scenario.dt)
+        self.step += 1
+
+    def publish(self) -> None:
+        """Publish the state of the current step."""
+        state = self.model.state
+        stamp = self.clock.stamp(self.step)
+        self.odom_pub.publish(make_odometry(state.q, state.p, stamp, 'leader'))
+        self.accel_pub.publish(make_accel(state.a, stamp))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the leader node (``ros2 run flock_swarm leader``)."""
+    return run_node('leader', lambda: LeaderNode(), args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

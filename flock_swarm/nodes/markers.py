@@ -1,0 +1,86 @@
+"""RViz / Foxglove markers and diagnostic metrics of the swarm (message building only)."""
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from flock_swarm.core.graphs import EdgeList
+
+UNINFORMED = ColorRGBA(r=0.2, g=0.45, b=0.9, a=1.0)
+INFORMED = ColorRGBA(r=0.95, g=0.3, b=0.2, a=1.0)
+LEADER = ColorRGBA(r=0.1, g=0.1, b=0.1, a=1.0)
+#: Diagnostic levels (DiagnosticStatus.OK / WARN as integers).
+OK, WARN = 0, 1
+EDGE = ColorRGBA(r=0.5, g=0.5, b=0.5, a=0.6)
+VELOCITY = ColorRGBA(r=0.1, g=0.7, b=0.3, a=0.9)
+
+
+def _point(x: np.ndarray) -> Point:
+    return Point(x=float(x[0]), y=float(x[1]), z=float(x[2]) if x.shape[0] == 3 else 0.0)
+
+
+def _marker(mid: int, ns: str, kind: int, stamp: Time, frame: str, scale: float,
+            color: ColorRGBA) -> Marker:
+    m = Marker()
+    m.header.stamp = stamp
+    m.header.frame_id = frame
+    m.ns = ns
+    m.id = mid
+    m.type = kind
+    m.action = Marker.ADD
+    m.pose.orientation.w = 1.0
+    m.scale.x = m.scale.y = m.scale.z = scale
+    m.color = color
+    m.lifetime = Duration(sec=0, nanosec=0)
+    return m
+
+
+def swarm_markers(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed: np.ndarray,
+                  edges: EdgeList, stamp: Time, frame: str, size: float) -> MarkerArray:
+    """Return agents (sphere list, informed highlighted), velocities, edges and the leader.
+
+    :param q: positions ``(n, dim)``.
+    :param p: velocities ``(n, dim)``.
+    :param leader_q: the leader's position.
+    :param informed: informed flags ``(n,)``.
+    :param edges: the neighbour graph to draw.
+    :param stamp: the simulation-time stamp.
+    :param frame: the fixed frame.
+    :param size: agent diameter [m].
+    :return: the marker array.
+    """
+    agents = _marker(0, 'agents', Marker.SPHERE_LIST, stamp, frame, size, UNINFORMED)
+    agents.points = [_point(x) for x in q]
+    agents.colors = [INFORMED if f else UNINFORMED for f in informed]
+    vel = _marker(1, 'velocities', Marker.LINE_LIST, stamp, frame, 0.2 * size, VELOCITY)
+    vel.points = [pt for x, v in zip(q, p) for pt in (_point(x), _point(x + v))]
+    links = _marker(2, 'neighbours', Marker.LINE_LIST, stamp, frame, 0.1 * size, EDGE)
+    links.points = [pt for a, b in zip(edges.i, edges.j) for pt in (_point(q[a]), _point(q[b]))]
+    lead = _marker(3, 'leader', Marker.SPHERE, stamp, frame, 2.0 * size, LEADER)
+    lead.pose.position = _point(leader_q)
+    out = MarkerArray()
+    out.markers = [agents, vel, links, lead]
+    return out
+
+
+def metrics_message(values: dict[str, float | int | str], stamp: Time, level: int = 0,
+                    message: str = '') -> DiagnosticArray:
+    """Return the live metrics as a DiagnosticArray with one status ``flock_swarm/metrics``.
+
+    :param values: metric name to value.
+    :param stamp: the simulation-time stamp.
+    :param level: :class:`DiagnosticStatus` level (``WARN`` when commands were missed).
+    :param message: a short human-readable summary.
+    :return: the message.
+    """
+    status = DiagnosticStatus(level=bytes([level]), name='flock_swarm/metrics',
+                              message=message, hardware_id='flock_swarm')
+    status.values = [KeyValue(key=k, value=repr(v) if isinstance(v, float) else str(v))
+                     for k, v in values.items()]
+    out = DiagnosticArray()
+    out.header.stamp = stamp
+    out.status = [status]
+    return out

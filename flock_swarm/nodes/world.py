@@ -1,0 +1,439 @@
+"""The world node: integrates every agent, publishes odometry and ``/clock``, records the bag.
+
+Lockstep mode (default, deterministic): for step ``k`` the world publishes ``/clock`` ``t_k``
+and every ``/agent_<i>/odom`` stamped ``t_k``, then waits until every agent's
+``cmd_accel`` and the leader's state for ``t_k`` are in, or the per-step timeout expires (a
+late or missing agent gets a zero command: counted, logged, published on ``/swarm/metrics``
+and recorded). It then integrates exactly (the same :func:`step_agents` as ``sim``) to
+``t_{k+1}``. Realtime mode: a wall-clock timer steps with the latest commands (zero-order
+hold).
+
+Every message the world publishes or receives is written to a rosbag2-compatible MCAP bag
+in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; the run's
+``summary.json`` and ``timeseries.npz`` go to ``out_dir``.
+"""
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import AccelStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from visualization_msgs.msg import MarkerArray
+
+from flock_swarm import __version__
+from flock_swarm.core.dynamics import LeaderState, step_agents
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.graphs import disk_graph
+from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
+from flock_swarm.core.scenario import realize
+from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
+                                      LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
+                                      TELEMETRY_QOS, StepClock, accel_vector, cmd_topic,
+                                      declare, declare_common, load_scenario, make_odometry,
+                                      odom_topic, odometry_state, run_node)
+from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
+from flock_swarm.sim import (Recorder, SimResult, build_summary, edge_min_distance, jsonable,
+                             write_outputs)
+
+WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
+                                'marker_every', 'metrics_every', 'realtime_factor',
+                                'expect_subscribers'}
+
+
+class WorldNode(Node):
+    """Integrates the swarm, publishes odometry and ``/clock``, records everything."""
+
+    def __init__(self, progress: Callable[[str], None] | None = None, **kwargs) -> None:
+        """Create the node.
+
+        :param progress: called with a one-line status every two seconds (the runner prints
+            it); ``None`` logs it instead.
+        :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
+        """
+        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
+        super().__init__('world', **kwargs)
+        declare_common(self)
+        out_dir = declare(self, 'out_dir', '', 'directory for bag/, summary.json and '
+                          'timeseries.npz (empty: out/<scenario>_ros)')
+        self.record = declare(self, 'record', True, 'write the MCAP bag')
+        self.step_timeout = declare(self, 'step_timeout', 2.0,
+                                    'lockstep: seconds to wait for commands before a missing '
+                                    'agent gets a zero command')
+        self.start_timeout = declare(self, 'start_timeout', 30.0,
+                                     'lockstep: seconds to wait for agents and leader to '
+                                     'appear before starting anyway')
+        self.marker_every = declare(self, 'marker_every', 10, 'publish markers every N steps')
+        self.metrics_every = declare(self, 'metrics_every', 10, 'publish metrics every N steps')
+        self.realtime_factor = declare(self, 'realtime_factor', 1.0,
+                                       'realtime: simulated seconds per wall second')
+        self.expect_subscribers = declare(self, 'expect_subscribers', -1,
+                                          'subscribers each odometry topic must have before '
+                                          'the start (-1: n_agents)')
+        for key, value, ok in (('step_timeout', self.step_timeout, self.step_timeout > 0),
+                               ('start_timeout', self.start_timeout, self.start_timeout >= 0),
+                               ('marker_every', self.marker_every, self.marker_every >= 1),
+                               ('metrics_every', self.metrics_every, self.metrics_every >= 1),
+                               ('realtime_factor', self.realtime_factor,
+                                self.realtime_factor > 0)):
+            if not ok:
+                raise ScenarioError(key, f'invalid value {value!r}')
+        sc = self.scenario = load_scenario(self, WORLD_PARAMS)
+        self.progress = progress
+        self.lockstep = self.get_parameter('mode').value == 'lockstep'
+        self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
+        self.real = realize(sc)
+        self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
+        self.intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+        self.clock = StepClock(sc.dt)
+        n = sc.n_agents
+        self.k = 0
+        self.commands: dict[int, np.ndarray] = {}
+        self.held = np.zeros((n, sc.dim))
+        self.leader_odom: dict[int, tuple] = {}
+        self.leader_accel: dict[int, np.ndarray] = {}
+        self.last_leader = LeaderState(sc.leader.position.copy(), sc.leader.velocity.copy(),
+                                       np.zeros(sc.dim))
+        self.missed = np.zeros(n, dtype=int)
+        self.leader_missed = 0
+        self.run = RunMetrics(sc.collision_distance)
+        self.rec = Recorder()
+        self.done = False
+        self.started = False
+        self.status = 'running'
+        self.deadline = 0.0
+        self.t_wall0 = time.monotonic()
+        self.t_last_progress = self.t_wall0
+        self.metrics_now: dict = {}
+
+        self.bag = self._open_bag() if self.record else None
+        self.clock_pub = self._publisher(Clock, CLOCK, CLOCK_QOS)
+        self.odom_pubs = [self._publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
+                          for i in range(n)]
+        self.marker_pub = self._publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
+        self.metrics_pub = self._publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
+        self.cmd_topics = []
+        for i in range(n):
+            sub = self.create_subscription(AccelStamped, cmd_topic(i),
+                                           lambda msg, i=i: self.on_command(i, msg),
+                                           LOCKSTEP_QOS)
+            self.cmd_topics.append(sub.topic_name)
+            self._record_topic(sub.topic_name, AccelStamped, LOCKSTEP_QOS)
+        sub = self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, LOCKSTEP_QOS)
+        self.leader_odom_topic = sub.topic_name
+        self._record_topic(sub.topic_name, Odometry, LOCKSTEP_QOS)
+        sub = self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel,
+                                       LOCKSTEP_QOS)
+        self.leader_accel_topic = sub.topic_name
+        self._record_topic(sub.topic_name, AccelStamped, LOCKSTEP_QOS)
+        if self.lockstep:
+            self.timer = self.create_timer(0.01, self.on_lockstep_timer)
+        else:
+            self.timer = self.create_timer(sc.dt / self.realtime_factor, self.on_realtime_timer)
+
+    # -- recording ----------------------------------------------------------------------------
+
+    def _open_bag(self):
+        from flock_swarm.bag import (BagWriter, DefinitionNotFoundError, message_definition,
+                                     type_name_of)
+        path = self.out / 'bag'
+        if path.exists() and any(path.iterdir()):
+            raise ScenarioError('out_dir', f'{path} already holds a bag; choose another out_dir')
+        # Every schema is found before the bag file exists: a failure leaves nothing behind.
+        for msg_type in (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray):
+            try:
+                message_definition(type_name_of(msg_type))
+            except DefinitionNotFoundError as exc:
+                raise ScenarioError('record', f'{exc} (AMENT_PREFIX_PATH='
+                                    f'{os.environ.get("AMENT_PREFIX_PATH", "")!r}); '
+                                    'set it to the prefixes holding the ROS message '
+                                    'packages, or -p record:=false') from None
+        try:
+            self.out.mkdir(parents=True, exist_ok=True)
+            bag = BagWriter(path)
+        except OSError as exc:
+            raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
+                from None
+        sc = self.scenario
+        bag.add_metadata('flock_swarm', {
+            'scenario': json.dumps(sc.raw, default=jsonable),
+            'scenario_name': sc.name,
+            'seed': str(sc.seed),
+            'informed': json.dumps(self.real.informed_ids),
+            'mode': self.get_parameter('mode').value,
+            'flock_swarm_version': __version__,
+        })
+        return bag
+
+    def _record_topic(self, name: str, msg_type, qos) -> None:
+        if self.bag is not None:
+            self.bag.add_topic(name, msg_type, qos)
+
+    def _publisher(self, msg_type, topic: str, qos):
+        pub = self.create_publisher(msg_type, topic, qos)
+        self._record_topic(pub.topic_name, msg_type, qos)
+        return pub
+
+    def _publish(self, pub, msg, t_ns: int) -> None:
+        pub.publish(msg)
+        if self.bag is not None:
+            self.bag.write(pub.topic_name, msg, t_ns)
+
+    def _record_received(self, topic: str, msg, t_ns: int) -> None:
+        if self.bag is not None:
+            self.bag.write(topic, msg, t_ns)
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def on_command(self, i: int, msg: AccelStamped) -> None:
+        """Store agent ``i``'s command (lockstep: for its stamp's step; realtime: held)."""
+        k = self.clock.step_of(msg.header.stamp)
+        self._record_received(self.cmd_topics[i], msg, self.clock.ns(max(k, 0)))
+        u = accel_vector(msg, self.scenario.dim)
+        if not np.isfinite(u).all():
+            self.get_logger().warning(f'agent {i} sent a non-finite command at step {k}; '
+                                      'ignored')
+            return
+        if self.lockstep:
+            if k == self.k and self.started and not self.done:
+                self.commands[i] = u
+                self._maybe_finish()
+        else:
+            self.held[i] = u
+
+    def on_leader_odom(self, msg: Odometry) -> None:
+        """Store the leader's position and velocity."""
+        k = self.clock.step_of(msg.header.stamp)
+        self._record_received(self.leader_odom_topic, msg, self.clock.ns(max(k, 0)))
+        self.leader_odom[k] = odometry_state(msg, self.scenario.dim)
+        self._maybe_finish()
+
+    def on_leader_accel(self, msg: AccelStamped) -> None:
+        """Store the leader's acceleration."""
+        k = self.clock.step_of(msg.header.stamp)
+        self._record_received(self.leader_accel_topic, msg, self.clock.ns(max(k, 0)))
+        self.leader_accel[k] = accel_vector(msg, self.scenario.dim)
+        self._maybe_finish()
+
+    # -- lockstep -----------------------------------------------------------------------------
+
+    def ready_to_start(self) -> bool:
+        """Return whether every agent and the leader are discovered and subscribed."""
+        n = self.scenario.n_agents
+        need = n if self.expect_subscribers < 0 else self.expect_subscribers
+        if any(pub.get_subscription_count() < need for pub in self.odom_pubs):
+            return False
+        if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
+            return False
+        return (self.count_publishers(self.leader_odom_topic) >= 1
+                and self.clock_pub.get_subscription_count() >= 1)
+
+    def on_lockstep_timer(self) -> None:
+        """Start when everybody is there; turn an expired step into zero commands."""
+        if self.done:
+            return
+        now = time.monotonic()
+        if not self.started:
+            if self.ready_to_start() or now - self.t_wall0 >= self.start_timeout:
+                if not self.ready_to_start():
+                    self.get_logger().warning('start timeout: starting without every agent '
+                                              'or the leader')
+                self.started = True
+                self.t_wall0 = now
+                self.begin_step()
+            return
+        if now >= self.deadline:
+            self.finish_step(timed_out=True)
+
+    def begin_step(self) -> None:
+        """Publish ``/clock`` and every odometry for the current step."""
+        k, t_ns = self.k, self.clock.ns(self.k)
+        stamp = self.clock.stamp(k)
+        self.commands = {}
+        self.deadline = time.monotonic() + self.step_timeout
+        self._publish(self.clock_pub, Clock(clock=stamp), t_ns)
+        for i, pub in enumerate(self.odom_pubs):
+            self._publish(pub, make_odometry(self.q[i], self.p[i], stamp, f'agent_{i}'), t_ns)
+
+    def _maybe_finish(self) -> None:
+        if (self.lockstep and self.started and not self.done
+                and len(self.commands) == self.scenario.n_agents
+                and self.k in self.leader_odom and self.k in self.leader_accel):
+            self.finish_step(timed_out=False)
+
+    def finish_step(self, timed_out: bool) -> None:
+        """Close the current step: zero commands for absentees, record, integrate, go on."""
+        sc, k, n = self.scenario, self.k, self.scenario.n_agents
+        u = np.zeros((n, sc.dim))
+        missing = [i for i in range(n) if i not in self.commands]
+        for i, ui in self.commands.items():
+            u[i] = ui
+        leader_missing = k not in self.leader_odom or k not in self.leader_accel
+        if missing:
+            self.missed[missing] += 1
+            self.get_logger().warning(
+                f'step {k}: no command from agent(s) {missing} within {self.step_timeout:g} s; '
+                'zero command applied')
+        if leader_missing:
+            self.leader_missed += 1
+            self.get_logger().warning(f'step {k}: no leader state within '
+                                      f'{self.step_timeout:g} s')
+        else:
+            q_l, p_l = self.leader_odom.pop(k)
+            self.last_leader = LeaderState(q_l, p_l, self.leader_accel.pop(k))
+        for old in [s for s in self.leader_odom if s < k]:
+            del self.leader_odom[old]
+        for old in [s for s in self.leader_accel if s < k]:
+            del self.leader_accel[old]
+        self.observe(u, missing)
+        if self.done:
+            return
+        self.advance(u)
+        self.begin_step()
+
+    # -- shared stepping ----------------------------------------------------------------------
+
+    def observe(self, u: np.ndarray, missing: list[int]) -> None:
+        """Record the state of the current step, publish telemetry, finish after the last."""
+        sc, k = self.scenario, self.k
+        law = sc.law
+        leader = self.last_leader
+        stamp, t_ns = self.clock.stamp(k), self.clock.ns(k)
+        edges = disk_graph(self.q, law.radius, law.strict_radius)
+        self.run.update(self.q, edge_min_distance(self.q, edges))
+        last = k >= sc.steps
+        if k % sc.record_every == 0 or last:
+            self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
+                                            law.radius, law.strict_radius)
+            self.run.update(self.q, self.metrics_now['min_pair_distance'])
+            self.rec.add(t=k * sc.dt, q=self.q, p=self.p, u=u, leader_q=leader.q,
+                         leader_p=leader.p, leader_a=leader.a,
+                         informed=self.real.agents.informed,
+                         **{f'metric_{m}': self.metrics_now[m] for m in STEP_METRICS})
+        if k % self.marker_every == 0 or last:
+            self._publish(self.marker_pub, swarm_markers(
+                self.q, self.p, leader.q, self.real.agents.informed, edges, stamp, FRAME,
+                0.1 * law.radius), t_ns)
+        if k % self.metrics_every == 0 or missing or last:
+            if not self.metrics_now:
+                self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
+                                                law.radius, law.strict_radius)
+            values = dict(self.metrics_now, step=k, missed_commands=int(self.missed.sum()),
+                          missed_this_step=json.dumps(missing),
+                          leader_missed=self.leader_missed)
+            self._publish(self.metrics_pub, metrics_message(
+                values, stamp, WARN if missing else OK,
+                f'{len(missing)} missing command(s)' if missing else 'ok'), t_ns)
+        self._progress()
+        if last:
+            self.finish('completed')
+
+    def advance(self, u: np.ndarray) -> None:
+        """Integrate every agent over one step with ``u`` held."""
+        self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
+        self.k += 1
+        if not (np.isfinite(self.q).all() and np.isfinite(self.p).all()):
+            self.finish('diverged')
+
+    def on_realtime_timer(self) -> None:
+        """Realtime mode: step with the latest commands (zero-order hold)."""
+        if self.done:
+            return
+        k = self.k
+        stamp, t_ns = self.clock.stamp(k), self.clock.ns(k)
+        if k in self.leader_odom and k in self.leader_accel:
+            q_l, p_l = self.leader_odom[k]
+            self.last_leader = LeaderState(q_l, p_l, self.leader_accel[k])
+        elif self.leader_odom:
+            latest = max(self.leader_odom)
+            if latest in self.leader_accel:
+                q_l, p_l = self.leader_odom[latest]
+                self.last_leader = LeaderState(q_l, p_l, self.leader_accel[latest])
+        for old in [s for s in self.leader_odom if s < k - 10]:
+            del self.leader_odom[old]
+        for old in [s for s in self.leader_accel if s < k - 10]:
+            del self.leader_accel[old]
+        self._publish(self.clock_pub, Clock(clock=stamp), t_ns)
+        for i, pub in enumerate(self.odom_pubs):
+            self._publish(pub, make_odometry(self.q[i], self.p[i], stamp, f'agent_{i}'), t_ns)
+        u = self.held.copy()
+        self.started = True
+        self.observe(u, [])
+        if not self.done:
+            self.advance(u)
+
+    def _progress(self) -> None:
+        now = time.monotonic()
+        if now - self.t_last_progress < 2.0:
+            return
+        self.t_last_progress = now
+        sc, m = self.scenario, self.metrics_now
+        line = (f'[world] t = {self.k * sc.dt:.2f}/{sc.duration:g} s  step {self.k}/{sc.steps}'
+                f'  {self.k / max(now - self.t_wall0, 1e-9):.1f} steps/s'
+                f'  eta = {m.get("eta", 0.0):.2f}'
+                f'  mismatch = {m.get("velocity_mismatch_max", 0.0):.3g}'
+                f'  missed = {int(self.missed.sum())}')
+        if self.progress is not None:
+            self.progress(line)
+        else:
+            self.get_logger().info(line)
+
+    # -- the end ------------------------------------------------------------------------------
+
+    def finish(self, status: str) -> None:
+        """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent."""
+        if self.done:
+            return
+        self.done = True
+        self.status = status
+        self.timer.cancel()
+        self.write_results()
+
+    def write_results(self) -> None:
+        """Write what was recorded so far (also on an interrupted run)."""
+        if not self.rec.rows:
+            self.close_bag()
+            return
+        series = self.rec.arrays()
+        summary = build_summary(self.scenario, self.real, series, self.run, self.k,
+                                self.status)
+        summary.update({
+            'mode': self.get_parameter('mode').value,
+            'missed_commands': int(self.missed.sum()),
+            'missed_commands_per_agent': [int(x) for x in self.missed],
+            'leader_missed': self.leader_missed,
+            'wall_time_s': round(time.monotonic() - self.t_wall0, 3),
+            'bag': str(self.out / 'bag') if self.bag is not None else None,
+        })
+        self.result = SimResult(summary, series)
+        self.close_bag()
+        write_outputs(self.result, self.out, self.scenario)
+
+    def close_bag(self) -> None:
+        """Finalise the bag (MCAP summary and metadata.yaml)."""
+        if self.bag is not None:
+            self.bag.close()
+            self.bag = None
+
+    def close(self) -> None:
+        """Called on shutdown: keep what was recorded (status ``interrupted``)."""
+        if not self.done:
+            self.done = True
+            self.status = 'interrupted'
+            self.write_results()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the world node (``ros2 run flock_swarm world``); it exits after the last step."""
+    return run_node('world', lambda: WorldNode(), args, until=lambda node: node.done)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

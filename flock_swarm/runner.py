@@ -1,0 +1,264 @@
+"""Launch-free runner: world, leader and N agents in one process or as separate processes.
+
+``swarm SCENARIO [--set key=value ...] [--seed N] [--out DIR] [--processes]`` resolves the
+scenario (with overrides and seed) into ``DIR/scenario.yaml``, starts every node on that
+file, prints progress, and ends when the world has recorded its last step. Outputs:
+``DIR/bag/`` (rosbag2 MCAP), ``DIR/summary.json``, ``DIR/timeseries.npz`` and figures.
+"""
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml
+from flock_swarm.scenarios import load_mapping
+
+EXIT_USAGE = 2
+
+
+def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Path) -> Path:
+    """Validate the scenario with its overrides and write it to ``out/scenario.yaml``.
+
+    :param name: preset name or path.
+    :param overrides: ``key=value`` assignments.
+    :param seed: seed replacing the scenario's, or ``None``.
+    :param out: the output directory (created).
+    :return: the path every node is started with.
+    :raises ScenarioError: on invalid input.
+    """
+    data = load_mapping(name)
+    for assignment in overrides:
+        data = apply_override(data, assignment)
+    if seed is not None:
+        if seed < 0:
+            raise ScenarioError('--seed', f'must be >= 0, got {seed}')
+        data['seed'] = seed
+    parse_scenario(data)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / 'scenario.yaml'
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def node_parameters(scenario: Path, mode: str, extra: dict) -> dict:
+    """Return the parameters every node gets."""
+    return {'scenario': str(scenario), 'mode': mode, **extra}
+
+
+def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                   step_timeout: float = 2.0, executor: str = 'events',
+                   progress=None, timeout: float | None = None, agents=None,
+                   world_params: dict | None = None) -> dict:
+    """Run world, leader and every agent in this process on one executor.
+
+    :param scenario: the resolved scenario file.
+    :param out: the output directory.
+    :param mode: ``lockstep`` or ``realtime``.
+    :param domain_id: the ROS domain id of the run.
+    :param step_timeout: the world's per-step timeout [s].
+    :param executor: ``single`` (SingleThreadedExecutor) or ``events`` (EventsExecutor).
+    :param progress: callback for progress lines.
+    :param timeout: wall-clock limit [s] of the whole run (``None``: none).
+    :param agents: ids of the agents to start (``None``: all); the others stay absent.
+    :param world_params: further parameters of the world node.
+    :return: the summary.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.agent import AgentNode
+    from flock_swarm.nodes.leader import LeaderNode
+    from flock_swarm.nodes.world import WorldNode
+
+    def params(values: dict) -> list:
+        return [Parameter(k, value=v) for k, v in values.items()]
+
+    sc = parse_scenario(parse_yaml(scenario.read_text()))
+    base = node_parameters(scenario, mode, {})
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    nodes = []
+    try:
+        world = WorldNode(progress=progress, context=context, parameter_overrides=params(
+            dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))))
+        nodes.append(world)
+        started_agents = list(range(sc.n_agents)) if agents is None else list(agents)
+        nodes.append(LeaderNode(context=context, parameter_overrides=params(
+            dict(base, expect_subscribers=len(started_agents) + 1))))
+        for i in started_agents:
+            nodes.append(AgentNode(node_name=f'agent_{i}', context=context,
+                                   parameter_overrides=params(dict(base, agent_id=i))))
+        if executor == 'events':
+            from rclpy.experimental import EventsExecutor
+            ex = EventsExecutor(context=context)
+        else:
+            ex = SingleThreadedExecutor(context=context)
+        for node in nodes:
+            ex.add_node(node)
+        started = time.monotonic()
+        try:
+            while context.ok() and not world.done:
+                ex.spin_once(timeout_sec=0.1)
+                if timeout is not None and time.monotonic() - started > timeout:
+                    raise TimeoutError(f'the run did not finish within {timeout:g} s')
+        except KeyboardInterrupt:
+            pass
+        world.close()
+        ex.shutdown()
+        return world.result.summary if hasattr(world, 'result') else {}
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def executable(name: str) -> list[str]:
+    """Return the command of a node executable: ``ros2 run``'s, the venv's, or ``python -m``."""
+    prefix_lib = Path(sys.prefix) / 'lib' / 'flock_swarm' / name
+    if prefix_lib.is_file():
+        return [str(prefix_lib)]
+    found = shutil.which(name)
+    if found:
+        return [found]
+    return [sys.executable, '-m', f'flock_swarm.nodes.{name}']
+
+
+def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                  step_timeout: float = 2.0, timeout: float | None = None,
+                  log=None) -> dict:
+    """Run world, leader and every agent as separate OS processes (the ``ros2 run`` executables).
+
+    :param scenario: the resolved scenario file.
+    :param out: the output directory.
+    :param mode: ``lockstep`` or ``realtime``.
+    :param domain_id: ``ROS_DOMAIN_ID`` of every process.
+    :param step_timeout: the world's per-step timeout [s].
+    :param timeout: wall-clock limit [s] of the whole run.
+    :param log: file object receiving the agents' and leader's output (default: discarded).
+    :return: the summary.
+    """
+    sc = parse_scenario(parse_yaml(scenario.read_text()))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+    def ros_args(values: dict) -> list[str]:
+        out_args = ['--ros-args']
+        for k, v in values.items():
+            out_args += ['-p', f'{k}:={v}']
+        return out_args
+
+    base = node_parameters(scenario, mode, {})
+    sink = log if log is not None else subprocess.DEVNULL
+    others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
+                               stderr=sink)]
+    for i in range(sc.n_agents):
+        others.append(subprocess.Popen(
+            executable('agent') + ros_args(dict(base, agent_id=i)), env=env, stdout=sink,
+            stderr=sink))
+    world = subprocess.Popen(executable('world') + ros_args(
+        dict(base, out_dir=str(out), step_timeout=step_timeout)), env=env)
+    try:
+        world.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        world.send_signal(signal.SIGINT)
+        world.wait(timeout=30)
+        raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
+    finally:
+        for proc in others:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in others:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    summary = out / 'summary.json'
+    return json.loads(summary.read_text()) if summary.is_file() else {}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser of ``swarm``."""
+    parser = argparse.ArgumentParser(
+        prog='swarm', description='Fly a scenario through the real ROS 2 nodes (world, leader, '
+        'N agents) and record it.')
+    parser.add_argument('scenario', help='preset name or path to a YAML file')
+    parser.add_argument('--set', dest='overrides', action='append', default=[],
+                        metavar='KEY=VALUE', help='override one scenario value (repeatable)')
+    parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
+    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO_ros)')
+    parser.add_argument('--processes', action='store_true',
+                        help='run every node as its own OS process (default: one process)')
+    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep')
+    parser.add_argument('--domain-id', type=int,
+                        default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
+                        help='ROS domain id (default: $ROS_DOMAIN_ID or 0)')
+    parser.add_argument('--step-timeout', type=float, default=2.0,
+                        help='lockstep: seconds the world waits for a command')
+    parser.add_argument('--executor', choices=('single', 'events'), default='events',
+                        help='executor of the one-process run (events: rclpy.experimental.'
+                        'EventsExecutor, about twice as fast here)')
+    parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``swarm`` from the command line; return the exit status."""
+    args = build_parser().parse_args(argv)
+    say = (lambda line: print(line, file=sys.stderr, flush=True))
+    try:
+        if not 0 <= args.domain_id <= 232:
+            raise ScenarioError('--domain-id', f'must be in [0, 232], got {args.domain_id}')
+        if args.step_timeout <= 0:
+            raise ScenarioError('--step-timeout', f'must be > 0, got {args.step_timeout}')
+        name = Path(args.scenario).stem
+        out = args.out if args.out is not None else Path('out') / f'{name}_ros'
+        if (out / 'bag').exists() and any((out / 'bag').iterdir()):
+            raise ScenarioError('--out', f'{out / "bag"} already holds a bag; choose another '
+                                '--out')
+        scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out)
+    except ScenarioError as exc:
+        print(f'swarm: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f'swarm: error: --out: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    sc = parse_scenario(parse_yaml(scenario.read_text()))
+    layout = 'separate processes' if args.processes else 'one process'
+    say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
+        f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
+    if args.processes:
+        summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout)
+    else:
+        summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
+                                 args.executor, progress=say)
+    if not summary:
+        print('swarm: error: the world wrote no summary', file=sys.stderr)
+        return 1
+    if not args.no_plots and (out / 'timeseries.npz').is_file():
+        import numpy as np
+        from flock_swarm.plots import plot_timeseries
+        with np.load(out / 'timeseries.npz') as data:
+            plot_timeseries(dict(data), out, sc.name)
+    say(f'[swarm] {summary["status"]} at t = {summary["t_final"]:g} s: eta = '
+        f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
+        f'collisions = {summary["collisions"]}, missed commands = '
+        f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
+    say(f'[swarm] wrote {out}/bag, {out}/summary.json, {out}/timeseries.npz'
+        + ('' if args.no_plots else f', {out}/trajectories.png, {out}/metrics.png'))
+    return 0 if summary['status'] == 'completed' else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

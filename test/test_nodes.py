@@ -1,0 +1,242 @@
+"""The ROS 2 swarm, launch-free and in-process: real rclpy nodes on real DDS.
+
+Each run starts the world, the leader and the agents in one process on one executor with
+its own ``rclpy.Context`` and a unique domain id (:func:`flock_swarm.runner.run_in_process`).
+"""
+
+import json
+import os
+import signal
+import subprocess
+import time
+
+import numpy as np
+import pytest
+import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from numpy.testing import assert_allclose
+from rosbags.rosbag2 import Reader as RosbagsReader
+from rosbags.typesys import Stores, get_typestore
+
+from flock_swarm.bag import BagReader
+from flock_swarm.core.scenario import parse_scenario
+from flock_swarm.runner import executable, resolve_scenario, run_in_process, run_processes
+from flock_swarm.sim import simulate
+
+pytestmark = pytest.mark.ros
+
+#: Wall-clock bound of one run in these tests (a run that hangs fails instead of blocking CI).
+RUN_TIMEOUT = 240.0
+
+
+def ros_run(tmp_path, domain, preset, overrides, **kwargs):
+    out = tmp_path / 'run'
+    scenario = resolve_scenario(preset, overrides, None, out)
+    summary = run_in_process(scenario, out, domain_id=domain, timeout=RUN_TIMEOUT, **kwargs)
+    sc = parse_scenario(yaml.safe_load(scenario.read_text()))
+    return sc, summary, out
+
+
+@pytest.mark.parametrize('preset, overrides', [
+    # protocol (10): a few informed agents
+    ('demo', ['n_agents=8', 'informed.count=3', 'duration=3']),
+    # protocol (33): Lorenz leader, leader acceleration fed forward
+    ('su2009_fig6', ['duration=0.3']),
+    # Section V.C: informed agents, constant-acceleration leader
+    ('su2009_fig7', ['n_agents=8', 'informed.count=3',
+                     'initial.position_box=[[0, 12], [0, 12]]', 'duration=3']),
+    # Yu's pinning observers with intrinsic dynamics (RK4 in the world)
+    ('yu2010_sec41', ['n_agents=10', 'duration=0.5']),
+    # a fixed graph: Zhou's Section 5.1 (Lu dynamics, adaptive gains in the agents)
+    ('zhou2012_sec51', ['duration=0.1']),
+])
+def test_ros_run_reproduces_sim(tmp_path, ros_domain, preset, overrides):
+    sc, summary, out = ros_run(tmp_path, ros_domain, preset, overrides + ['record_every=1'],
+                               world_params={'record': False})
+    assert summary['status'] == 'completed'
+    assert summary['missed_commands'] == 0 and summary['leader_missed'] == 0
+    ref = simulate(sc).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert ros['t'].shape == ref['t'].shape == (sc.steps + 1,)
+        for name in ('q', 'p', 'u', 'leader_q', 'leader_p'):
+            assert_allclose(ros[name], ref[name], rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_swarm_converges_without_collisions(tmp_path, ros_domain):
+    """Su 2009 Theorem 2 (ii), (v) through the nodes: velocities match the leader's."""
+    sc, summary, out = ros_run(tmp_path, ros_domain, 'demo', [
+        'n_agents=6', 'protocol.name=su_accel', 'informed={select: all}',
+        'initial.position_box=[[0, 8], [0, 8]]', 'initial.velocity_box=[[0, 0.5], [0, 0.5]]',
+        'dt=0.05', 'duration=40', 'record_every=20'], world_params={'record': False})
+    assert summary['status'] == 'completed'
+    assert summary['velocity_mismatch_max'] < 0.05
+    assert summary['collisions'] == 0 and summary['min_pair_distance'] > 0.5
+    assert summary['components_final'] == 1
+
+
+def test_absent_agent_gets_zero_commands_and_is_counted(tmp_path, ros_domain):
+    sc, summary, out = ros_run(
+        tmp_path, ros_domain, 'demo', ['n_agents=4', 'informed.count=2', 'duration=0.2',
+                                       'record_every=1'],
+        agents=[0, 1, 3], step_timeout=0.2,
+        world_params={'record': False, 'start_timeout': 2.0, 'expect_subscribers': 3})
+    steps = sc.steps + 1
+    assert summary['status'] == 'completed'
+    assert summary['missed_commands_per_agent'] == [0, 0, steps, 0]
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['u'][:, 2], 0.0)
+        # The absent agent still moves: at its initial velocity, under a zero command.
+        assert_allclose(ros['p'][:, 2], np.broadcast_to(ros['p'][0, 2], ros['p'][:, 2].shape))
+    assert json.loads((out / 'summary.json').read_text())['missed_commands'] == steps
+
+
+def test_bag_of_a_ros_run(tmp_path, ros_domain):
+    """The recorded bag: complete, decodable by independent readers, reproducible from itself."""
+    sc, summary, out = ros_run(tmp_path, ros_domain, 'demo', [
+        'n_agents=5', 'informed.count=2', 'duration=1', 'record_every=1'])
+    steps = sc.steps + 1
+    bag = out / 'bag'
+    lockstep_topics = (['/clock', '/leader/odom', '/leader/accel']
+                       + [f'/agent_{i}/odom' for i in range(5)]
+                       + [f'/agent_{i}/cmd_accel' for i in range(5)])
+    with open(bag / 'bag_0.mcap', 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        info = reader.get_summary()
+        assert {s.encoding for s in info.schemas.values()} == {'ros2msg'}
+        assert {c.message_encoding for c in info.channels.values()} == {'cdr'}
+        counts = {info.channels[c].topic: n
+                  for c, n in info.statistics.channel_message_counts.items()}
+        for topic in lockstep_topics:
+            assert counts[topic] == steps, topic
+        assert counts['/swarm/markers'] >= 2 and counts['/swarm/metrics'] >= 2
+        odom = {}
+        for _, channel, message, decoded in reader.iter_decoded_messages(
+                topics=[f'/agent_{i}/odom' for i in range(5)]):
+            i = int(channel.topic.split('_')[1].split('/')[0])
+            k = round(message.log_time / (sc.dt * 1e9))
+            pos = decoded.pose.pose.position
+            odom[(k, i)] = (pos.x, pos.y)
+            assert decoded.header.frame_id == 'world' and decoded.child_frame_id == f'agent_{i}'
+    with np.load(out / 'timeseries.npz') as ros:
+        for (k, i), xy in odom.items():
+            assert_allclose(xy, ros['q'][k, i], rtol=0, atol=0)
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with RosbagsReader(bag) as rb:
+        assert rb.message_count == sum(counts.values())
+        clock = [typestore.deserialize_cdr(raw, conn.msgtype)
+                 for conn, _, raw in rb.messages([c for c in rb.connections
+                                                  if c.topic == '/clock'])]
+    assert [c.clock.sec * 10**9 + c.clock.nanosec for c in clock] == \
+        [round(k * sc.dt * 1e9) for k in range(steps)]
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert meta['storage_identifier'] == 'mcap' and meta['message_count'] == sum(counts.values())
+    # The bag alone reproduces the run: its scenario re-simulated gives the recorded states.
+    stored = BagReader(bag).metadata('flock_swarm')
+    assert json.loads(stored['informed']) == summary['informed']
+    again = simulate(parse_scenario(json.loads(stored['scenario']))).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['q'], again['q'], rtol=0, atol=1e-9)
+
+
+def test_separate_processes(tmp_path, ros_domain):
+    """World, leader and agents as OS processes (the ros2 run executables), own domain id."""
+    out = tmp_path / 'procs'
+    scenario = resolve_scenario('demo', [
+        'n_agents=3', 'protocol.name=su_accel', 'informed={select: all}',
+        'initial.position_box=[[0, 5], [0, 5]]', 'dt=0.05', 'duration=15', 'record_every=10'],
+        None, out)
+    with open(tmp_path / 'nodes.log', 'w') as log:
+        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                                log=log)
+    assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
+    assert summary['missed_commands'] == 0
+    assert summary['velocity_mismatch_max'] < 0.2 and summary['collisions'] == 0
+    counts = BagReader(out / 'bag').message_counts()
+    steps = 15 / 0.05 + 1
+    for topic in ['/clock', '/leader/odom', '/agent_0/odom', '/agent_2/cmd_accel']:
+        assert counts[topic] == steps, topic
+    # Same scenario, same seed: the distributed run is the simulator's run.
+    ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
+
+
+def wait_for(condition, timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
+    """SIGINT / SIGTERM mid-run: the world closes the bag and writes what it recorded."""
+    out = tmp_path / 'sig'
+    scenario = resolve_scenario('demo', ['n_agents=2', 'informed.count=1', 'duration=1000'],
+                                None, out)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
+    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+              for i in range(2)]
+    world = subprocess.Popen(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                             text=True)
+    mcap = out / 'bag' / 'bag_0.mcap'
+    try:
+        # Several flushed chunks (1 MiB before zstd, ~10x less on disk): the loop is under way.
+        wait_for(lambda: mcap.is_file() and mcap.stat().st_size > 300_000, 120,
+                 'the world to record a few chunks')
+        world.send_signal(sig)
+        _, err = world.communicate(timeout=60)
+    finally:
+        for proc in procs + [world]:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+    assert world.returncode == 0, err
+    assert 'Traceback' not in err
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'interrupted' and summary['steps'] > 100
+    reader = BagReader(out / 'bag')
+    assert not reader.recovered  # finalised: summary section and index present
+    meta = yaml.safe_load((out / 'bag' / 'metadata.yaml').read_text())
+    counts = reader.message_counts()
+    assert meta['rosbag2_bagfile_information']['message_count'] == sum(counts.values())
+    assert counts['/agent_0/odom'] >= summary['steps']
+
+
+@pytest.mark.parametrize('extra_env, args, key', [
+    ({'AMENT_PREFIX_PATH': '/nonexistent'}, [], 'record'),
+    ({}, ['-p', 'protocol.r:=-1.0'], 'protocol.r'),
+    ({}, ['-p', 'step_timeout:=0.0'], 'step_timeout'),
+    ({}, ['-p', 'mode:=warp'], 'mode'),
+    ({}, ['-p', 'colour:=red'], 'colour'),
+])
+def test_world_bad_configuration_is_one_line_exit_2(tmp_path, ros_domain, extra_env, args,
+                                                    key):
+    out = tmp_path / 'never'
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), **extra_env)
+    res = subprocess.run(executable('world') + ['--ros-args', '-p', 'scenario:=demo', '-p',
+                                                f'out_dir:={out}'] + args,
+                         env=env, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f'world: error: {key}'), res.stderr
+    assert not out.exists()
+
+
+def test_agent_id_out_of_range(ros_domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    res = subprocess.run(executable('agent') + ['--ros-args', '-p', 'scenario:=demo', '-p',
+                                                'agent_id:=30'],
+                         env=env, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert res.stderr.strip() == 'agent: error: agent_id: must be in [0, 29] ' \
+        '(n_agents = 30), got 30'
