@@ -1,0 +1,152 @@
+"""``colcon build`` installs the package, and the installed world node runs from the install.
+
+The package sources (what git tracks plus untracked, non-ignored files) are copied into a
+throwaway workspace and built with colcon from the test environment (PyPI's
+colcon-common-extensions, pinned in requirements/test.txt). The installed executables, data
+files and ament index marker are checked, then the *installed* world runs a few lockstep steps
+with nobody else on its domain, so every step ends by its timeout with zero commands.
+"""
+
+import json
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+PACKAGE = 'flock_swarm'
+REPO = Path(__file__).resolve().parents[1]
+#: Top-level entries of a working tree that are not package sources (virtualenv, run outputs,
+#: colcon's own directories), left out even if a global gitignore does not list them.
+NOT_SOURCES = {'.venv', 'out', 'build', 'install', 'log'}
+EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm')
+#: Wall-clock bounds: a build or a run that hangs fails the test instead of blocking CI.
+BUILD_TIMEOUT = 300.0
+RUN_TIMEOUT = 120.0
+#: The world run: demo with 3 agents for 0.06 s at dt = 0.02 s, i.e. steps 0..3, each closed
+#: by the step timeout (no agent or leader runs), starting at once.
+N_AGENTS = 3
+STEPS = 3
+WORLD_ARGS = ['-p', 'scenario:=demo', '-p', f'n_agents:={N_AGENTS}', '-p', 'informed.count:=1',
+              '-p', 'duration:=0.06', '-p', 'start_timeout:=0.0', '-p', 'step_timeout:=0.05']
+#: What the installed world script does (setuptools' entry-point script): load the console
+#: script from the first ``flock-swarm`` distribution on sys.path; print where the package and
+#: the world's module come from.
+IMPORT_CHECK = textwrap.dedent("""\
+    import sys
+    from importlib.metadata import distribution
+
+    import flock_swarm
+
+    print(flock_swarm.__file__)
+    world, = [ep for ep in distribution('flock-swarm').entry_points
+              if ep.group == 'console_scripts' and ep.name == 'world']
+    print(sys.modules[world.load().__module__].__file__)
+""")
+
+
+def source_files() -> list[str]:
+    """Return the package sources: tracked and untracked non-ignored files, relative paths."""
+    listed = subprocess.run(
+        ['git', 'ls-files', '-z', '--cached', '--others', '--exclude-standard'],
+        cwd=REPO, capture_output=True, check=True, timeout=60).stdout.decode()
+    return [f for f in listed.split('\0')
+            if f and f.split('/', 1)[0] not in NOT_SOURCES and (REPO / f).is_file()]
+
+
+def subprocess_env(**extra: str) -> dict[str, str]:
+    """Return the environment of the test's subprocesses: this venv's bin on PATH, as env.sh.
+
+    :param extra: further variables to set.
+    :return: the environment.
+    """
+    env = dict(os.environ, **extra)
+    venv_bin = str(Path(sys.executable).parent)
+    env['PATH'] = os.pathsep.join([venv_bin, env.get('PATH', '')])
+    # The ROS wheels' message packages are indexed under the venv (scripts/env.sh exports it).
+    prefixes = [p for p in env.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    if sys.prefix not in prefixes:
+        env['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *prefixes])
+    return env
+
+
+def run_installed(ws: Path, command: list[str], env: dict[str, str]):
+    """Run ``command`` in ``ws`` after sourcing the workspace's ``install/setup.bash``."""
+    return subprocess.run(['bash', '-c', 'source install/setup.bash && exec "$@"', 'bash',
+                           *command], cwd=ws, env=env, capture_output=True, text=True,
+                          timeout=RUN_TIMEOUT)
+
+
+@pytest.fixture(scope='module')
+def workspace(tmp_path_factory) -> Path:
+    """Copy the sources into ``ws/src/flock_swarm``, run ``colcon build``, return ``ws``."""
+    ws = tmp_path_factory.mktemp('colcon') / 'ws'
+    dest = ws / 'src' / PACKAGE
+    for rel in source_files():
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO / rel, dest / rel)
+    # An empty COLCON_HOME: no user defaults (~/.colcon) change the build.
+    result = subprocess.run(
+        [sys.executable, '-m', 'colcon', 'build', '--base-paths', 'src'], cwd=ws,
+        env=subprocess_env(COLCON_HOME=str(ws / 'colcon_home')), capture_output=True, text=True,
+        timeout=BUILD_TIMEOUT)
+    assert result.returncode == 0, f'colcon build failed:\n{result.stdout}\n{result.stderr}'
+    return ws
+
+
+def test_colcon_build_installs_package(workspace):
+    prefix = workspace / 'install' / PACKAGE
+    for name in EXECUTABLES:
+        exe = prefix / 'lib' / PACKAGE / name
+        assert exe.is_file(), exe
+        assert os.access(exe, os.X_OK), exe
+    share = prefix / 'share'
+    assert (share / PACKAGE / 'package.xml').is_file()
+    assert (share / PACKAGE / 'config' / 'demo.yaml').is_file()
+    assert (share / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
+
+
+def test_installed_package_shadows_the_working_tree(workspace):
+    result = run_installed(workspace, ['python', '-c', IMPORT_CHECK], subprocess_env())
+    assert result.returncode == 0, result.stderr
+    install = (workspace / 'install' / PACKAGE).resolve()
+    paths = [Path(line).resolve() for line in result.stdout.splitlines()]
+    assert len(paths) == 2
+    for path in paths:
+        assert path.is_relative_to(install), path
+    shebang = (install / 'lib' / PACKAGE / 'world').read_text().splitlines()[0]
+    assert shebang == f'#!{sys.executable}'
+
+
+def test_installed_world_runs_lockstep_steps(workspace, tmp_path, ros_domain):
+    out = tmp_path / 'out'
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    exe = f'install/{PACKAGE}/lib/{PACKAGE}/world'
+    result = run_installed(workspace, [exe, '--ros-args', *WORLD_ARGS, '-p', f'out_dir:={out}'],
+                           env)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed'
+    assert summary['steps'] == STEPS
+    # Steps 0..STEPS each end by the timeout with a zero command for every agent.
+    assert summary['missed_commands'] == N_AGENTS * (STEPS + 1)
+    assert summary['missed_commands_per_agent'] == [STEPS + 1] * N_AGENTS
+    assert summary['leader_missed'] == STEPS + 1
+    assert (out / 'bag' / 'metadata.yaml').is_file()
+
+
+def test_installed_world_rejects_invalid_parameter(workspace, tmp_path, ros_domain):
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    exe = f'install/{PACKAGE}/lib/{PACKAGE}/world'
+    out = tmp_path / 'out'
+    result = run_installed(workspace, [exe, '--ros-args', *WORLD_ARGS, '-p', 'protocol.h:=1.5',
+                                       '-p', f'out_dir:={out}'], env)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith('world: error: protocol.h'), lines[0]
