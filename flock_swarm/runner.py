@@ -49,15 +49,15 @@ def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Pat
     return path
 
 
-def node_parameters(scenario: Path, mode: str, extra: dict) -> dict:
+def node_parameters(scenario: Path, mode: str, realtime_factor: float) -> dict:
     """Return the parameters every node gets."""
-    return {'scenario': str(scenario), 'mode': mode, **extra}
+    return {'scenario': str(scenario), 'mode': mode, 'realtime_factor': float(realtime_factor)}
 
 
 def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                    step_timeout: float = 2.0, executor: str = 'events',
                    progress=None, timeout: float | None = None, agents=None,
-                   world_params: dict | None = None) -> dict:
+                   world_params: dict | None = None, realtime_factor: float = 1.0) -> dict:
     """Run world, leader and every agent in this process on one executor.
 
     :param scenario: the resolved scenario file.
@@ -70,6 +70,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     :param timeout: wall-clock limit [s] of the whole run (``None``: none).
     :param agents: ids of the agents to start (``None``: all); the others stay absent.
     :param world_params: further parameters of the world node.
+    :param realtime_factor: realtime mode: simulated seconds per wall second.
     :return: the summary.
     """
     import rclpy
@@ -85,7 +86,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
         return [Parameter(k, value=v) for k, v in values.items()]
 
     sc = parse_scenario(parse_yaml(scenario.read_text()))
-    base = node_parameters(scenario, mode, {})
+    base = node_parameters(scenario, mode, realtime_factor)
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
     nodes = []
@@ -136,7 +137,7 @@ def executable(name: str) -> list[str]:
 
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
-                  log=None) -> dict:
+                  log=None, realtime_factor: float = 1.0) -> dict:
     """Run world, leader and every agent as separate OS processes (the ``ros2 run`` executables).
 
     :param scenario: the resolved scenario file.
@@ -146,6 +147,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param step_timeout: the world's per-step timeout [s].
     :param timeout: wall-clock limit [s] of the whole run.
     :param log: file object receiving the agents' and leader's output (default: discarded).
+    :param realtime_factor: realtime mode: simulated seconds per wall second.
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
@@ -158,7 +160,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
             out_args += ['-p', f'{k}:={v}']
         return out_args
 
-    base = node_parameters(scenario, mode, {})
+    base = node_parameters(scenario, mode, realtime_factor)
     sink = log if log is not None else subprocess.DEVNULL
     others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
                                stderr=sink)]
@@ -204,6 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--domain-id', type=int,
                         default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
                         help='ROS domain id (default: $ROS_DOMAIN_ID or 0)')
+    parser.add_argument('--realtime-factor', type=float, default=1.0,
+                        help='realtime mode: simulated seconds per wall second')
     parser.add_argument('--step-timeout', type=float, default=2.0,
                         help='lockstep: seconds the world waits for a command')
     parser.add_argument('--executor', choices=('single', 'events'), default='events',
@@ -220,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if not 0 <= args.domain_id <= 232:
             raise ScenarioError('--domain-id', f'must be in [0, 232], got {args.domain_id}')
+        if args.realtime_factor <= 0:
+            raise ScenarioError('--realtime-factor',
+                                f'must be > 0, got {args.realtime_factor}')
         if args.step_timeout <= 0:
             raise ScenarioError('--step-timeout', f'must be > 0, got {args.step_timeout}')
         name = Path(args.scenario).stem
@@ -239,10 +246,12 @@ def main(argv: list[str] | None = None) -> int:
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
     if args.processes:
-        summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout)
+        summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
+                                realtime_factor=args.realtime_factor)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
-                                 args.executor, progress=say)
+                                 args.executor, progress=say,
+                                 realtime_factor=args.realtime_factor)
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
         return 1

@@ -80,10 +80,17 @@ def test_absent_agent_gets_zero_commands_and_is_counted(tmp_path, ros_domain):
         tmp_path, ros_domain, 'demo', ['n_agents=4', 'informed.count=2', 'duration=0.2',
                                        'record_every=1'],
         agents=[0, 1, 3], step_timeout=0.2,
-        world_params={'record': False, 'start_timeout': 2.0, 'expect_subscribers': 3})
+        world_params={'start_timeout': 2.0, 'expect_subscribers': 3})
     steps = sc.steps + 1
     assert summary['status'] == 'completed'
     assert summary['missed_commands_per_agent'] == [0, 0, steps, 0]
+    # The bag's /swarm/metrics says so too: every step with a miss is published, level WARN.
+    statuses = [msg.status[0] for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics'])]
+    assert len(statuses) == steps
+    values = [{kv.key: kv.value for kv in st.values} for st in statuses]
+    assert [int(v['missed_commands']) for v in values] == list(range(1, steps + 1))
+    assert all(json.loads(v['missed_this_step']) == [2] for v in values)
+    assert all(st.level == b'\x01' for st in statuses)
     with np.load(out / 'timeseries.npz') as ros:
         assert_allclose(ros['u'][:, 2], 0.0)
         # The absent agent still moves: at its initial velocity, under a zero command.
@@ -240,3 +247,24 @@ def test_agent_id_out_of_range(ros_domain):
     assert res.returncode == 2
     assert res.stderr.strip() == 'agent: error: agent_id: must be in [0, 29] ' \
         '(n_agents = 30), got 30'
+
+
+def test_realtime_mode_flies_on_wall_clock_timers(tmp_path, ros_domain):
+    """Realtime: no lockstep; the world steps on a timer with the latest commands (held)."""
+    sc, summary, out = ros_run(
+        tmp_path, ros_domain, 'demo', ['n_agents=4', 'protocol.name=su_accel',
+                                       'informed={select: all}', 'dt=0.02', 'duration=10',
+                                       'initial.position_box=[[0, 6], [0, 6]]'],
+        mode='realtime', realtime_factor=2.0)
+    assert summary['status'] == 'completed' and summary['mode'] == 'realtime'
+    assert summary['steps'] == sc.steps
+    # 10 simulated seconds at 2x real time: at least 5 s of wall clock (timers, not lockstep).
+    assert summary['wall_time_s'] >= 4.5
+    counts = BagReader(out / 'bag').message_counts()
+    assert counts['/clock'] == sc.steps + 1
+    # Agents answer on their own timers: commands arrive, but not one per step exactly.
+    assert 0 < counts['/agent_0/cmd_accel'] <= 2 * (sc.steps + 1)
+    # Commands answer odometry at least one step old. With dt = 0.02 the delayed loop still
+    # tracks the leader (the undelayed reference reaches 0.14 at 10 s; a one-step delay at
+    # dt = 0.05 would leave about 2 m/s: see docs/ros.md).
+    assert summary['velocity_mismatch_max'] < 0.5

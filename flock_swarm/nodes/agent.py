@@ -25,7 +25,7 @@ from flock_swarm.core.scenario import Scenario, all_pairs_weights, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                       StepClock, accel_vector, cmd_topic, declare,
                                       declare_common, load_scenario, make_accel, odom_topic,
-                                      odometry_state, run_node)
+                                      odometry_state, run_node, timer_period)
 
 
 @dataclass
@@ -137,7 +137,7 @@ class AgentNode(Node):
         if self.lockstep:
             self.create_timer(0.01, self.flush)
         else:
-            self.create_timer(sc.dt, self.on_timer)
+            self.create_timer(timer_period(self, sc.dt), self.on_timer)
 
     def on_odom(self, j: int, msg: Odometry) -> None:
         """Store agent ``j``'s odometry for its step."""

@@ -138,9 +138,18 @@ def declare_common(node: Node) -> None:
                    'lockstep (deterministic, world waits for every agent) or realtime')
     if mode not in ('lockstep', 'realtime'):
         raise ScenarioError('mode', f'must be lockstep or realtime, got {mode!r}')
+    factor = declare(node, 'realtime_factor', 1.0,
+                     'realtime mode: simulated seconds per wall second (same for every node)')
+    if not isinstance(factor, (int, float)) or factor <= 0:
+        raise ScenarioError('realtime_factor', f'must be > 0, got {factor!r}')
 
 
-COMMON_PARAMS = {'scenario', 'seed', 'mode'}
+def timer_period(node: Node, dt: float) -> float:
+    """Return the wall-clock period of a realtime-mode timer for simulation step ``dt``."""
+    return dt / node.get_parameter('realtime_factor').value
+
+
+COMMON_PARAMS = {'scenario', 'seed', 'mode', 'realtime_factor'}
 
 
 def make_odometry(q: np.ndarray, p: np.ndarray, stamp: Time, child: str) -> Odometry:

@@ -18,7 +18,7 @@ from flock_swarm.core.dynamics import VirtualLeader
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, declare,
                                       declare_common, load_scenario, make_accel, make_odometry,
-                                      run_node)
+                                      run_node, timer_period)
 
 
 LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout'}
@@ -52,7 +52,7 @@ class LeaderNode(Node):
             self.create_subscription(Clock, CLOCK, self.on_clock, CLOCK_QOS)
             self.retry = self.create_timer(0.01, self.flush)
         else:
-            self.create_timer(sc.dt, self.on_timer)
+            self.create_timer(timer_period(self, sc.dt), self.on_timer)
 
     def on_clock(self, msg: Clock) -> None:
         """Advance to the tick's step and publish (a repeated tick republishes)."""

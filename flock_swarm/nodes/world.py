@@ -38,14 +38,13 @@ from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LE
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
                                       TELEMETRY_QOS, StepClock, accel_vector, cmd_topic,
                                       declare, declare_common, load_scenario, make_odometry,
-                                      odom_topic, odometry_state, run_node)
+                                      odom_topic, odometry_state, run_node, timer_period)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
 from flock_swarm.sim import (Recorder, SimResult, build_summary, edge_min_distance, jsonable,
                              write_outputs)
 
 WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
-                                'marker_every', 'metrics_every', 'realtime_factor',
-                                'expect_subscribers'}
+                                'marker_every', 'metrics_every', 'expect_subscribers'}
 
 
 class WorldNode(Node):
@@ -72,17 +71,13 @@ class WorldNode(Node):
                                      'appear before starting anyway')
         self.marker_every = declare(self, 'marker_every', 10, 'publish markers every N steps')
         self.metrics_every = declare(self, 'metrics_every', 10, 'publish metrics every N steps')
-        self.realtime_factor = declare(self, 'realtime_factor', 1.0,
-                                       'realtime: simulated seconds per wall second')
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
                                           'subscribers each odometry topic must have before '
                                           'the start (-1: n_agents)')
         for key, value, ok in (('step_timeout', self.step_timeout, self.step_timeout > 0),
                                ('start_timeout', self.start_timeout, self.start_timeout >= 0),
                                ('marker_every', self.marker_every, self.marker_every >= 1),
-                               ('metrics_every', self.metrics_every, self.metrics_every >= 1),
-                               ('realtime_factor', self.realtime_factor,
-                                self.realtime_factor > 0)):
+                               ('metrics_every', self.metrics_every, self.metrics_every >= 1)):
             if not ok:
                 raise ScenarioError(key, f'invalid value {value!r}')
         sc = self.scenario = load_scenario(self, WORLD_PARAMS)
@@ -136,7 +131,7 @@ class WorldNode(Node):
         if self.lockstep:
             self.timer = self.create_timer(0.01, self.on_lockstep_timer)
         else:
-            self.timer = self.create_timer(sc.dt / self.realtime_factor, self.on_realtime_timer)
+            self.timer = self.create_timer(timer_period(self, sc.dt), self.on_realtime_timer)
 
     # -- recording ----------------------------------------------------------------------------
 
