@@ -145,33 +145,27 @@ class AgentNode(Node):
         self.latest.odom[j] = state
         if j == self.controller.i:
             self.latest_stamp = msg.header.stamp
-        if self.lockstep:
-            k = self.clock.step_of(msg.header.stamp)
-            box = self.controller.inputs(k)
-            if box is not None:
-                box.odom[j] = state
-                self.try_answer(k)
+        self.stash(msg.header.stamp, lambda box: box.odom.__setitem__(j, state))
 
     def on_leader_odom(self, msg: Odometry) -> None:
         """Store the leader's position and velocity for its step."""
         state = odometry_state(msg, self.scenario.dim)
         self.latest.leader_odom = state
-        if self.lockstep:
-            k = self.clock.step_of(msg.header.stamp)
-            box = self.controller.inputs(k)
-            if box is not None:
-                box.leader_odom = state
-                self.try_answer(k)
+        self.stash(msg.header.stamp, lambda box: setattr(box, 'leader_odom', state))
 
     def on_leader_accel(self, msg: AccelStamped) -> None:
         """Store the leader's acceleration ``f_gamma`` for its step."""
         a = accel_vector(msg, self.scenario.dim)
         self.latest.leader_accel = a
+        self.stash(msg.header.stamp, lambda box: setattr(box, 'leader_accel', a))
+
+    def stash(self, stamp, store) -> None:
+        """Lockstep: put an input into the buffer of its stamp's step, answer if complete."""
         if self.lockstep:
-            k = self.clock.step_of(msg.header.stamp)
+            k = self.clock.step_of(stamp)
             box = self.controller.inputs(k)
             if box is not None:
-                box.leader_accel = a
+                store(box)
                 self.try_answer(k)
 
     def try_answer(self, k: int) -> None:
