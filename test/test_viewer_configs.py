@@ -1,0 +1,44 @@
+"""RViz and Foxglove configurations match what the world publishes."""
+
+import json
+import re
+from pathlib import Path
+
+import yaml
+
+from flock_swarm.core.metrics import STEP_METRICS
+from flock_swarm.nodes.common import FRAME, MARKERS, METRICS
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config'
+
+
+def test_rviz_shows_the_markers_in_the_world_frame():
+    rviz = yaml.safe_load((CONFIG / 'swarm.rviz').read_text())
+    manager = rviz['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == FRAME
+    displays = {d['Class']: d for d in manager['Displays']}
+    markers = displays['rviz_default_plugins/MarkerArray']
+    assert markers['Topic']['Value'] == '/' + MARKERS
+    # The world publishes markers reliable (TELEMETRY_QOS): the display must subscribe reliable.
+    assert markers['Topic']['Reliability Policy'] == 'Reliable'
+    assert set(markers['Namespaces']) == {'agents', 'velocities', 'neighbours', 'leader'}
+    assert 'rviz_default_plugins/Grid' in displays
+
+
+def test_foxglove_layout_panels_use_published_topics_and_keys():
+    layout = json.loads((CONFIG / 'foxglove_layout.json').read_text())
+    panels = layout['configById']
+    three_d = next(v for k, v in panels.items() if k.startswith('3D!'))
+    assert three_d['topics']['/' + MARKERS]['visible'] is True
+    keys = set()
+    for name, panel in panels.items():
+        for path in panel.get('paths', []):
+            topic = path['value'].split('.')[0]
+            assert topic in ('/' + METRICS, '/leader/odom', '/agent_0/odom'), path
+            keys.update(re.findall(r'key=="(\w+)"', path['value']))
+    assert keys and keys <= set(STEP_METRICS)
+    diag = next(v for k, v in panels.items() if k.startswith('DiagnosticStatusPanel!'))
+    assert diag['topicToRender'] == '/' + METRICS
+    # Every panel in the arrangement exists.
+    referenced = re.findall(r'"(\w+![\w-]+)"', json.dumps(layout['layout']))
+    assert set(referenced) == set(panels)
