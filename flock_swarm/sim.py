@@ -132,7 +132,12 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
             if not (np.isfinite(u).all() and np.isfinite(q).all() and np.isfinite(p).all()):
                 status = 'diverged'
                 break
-            run.update(q, edge_min_distance(q, edges))
+            if static is None:
+                # r-disk edges cover every pair within the radius; all-pairs edges every pair.
+                run.update_from_edges(q, edges, np.inf if law.all_pairs else law.radius)
+            else:
+                run.update_from_edges(q, disk_graph(q, sc.collision_distance),
+                                      sc.collision_distance)
             if step % sc.record_every == 0 or step == steps:
                 metrics_now = step_metrics(q, p, state, sc.eta_tolerance, law.radius,
                                            law.strict_radius)
@@ -157,14 +162,6 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
     except KeyboardInterrupt:
         status = 'interrupted'
     return status, step, 0 if reselector is None else reselector.count
-
-
-def edge_min_distance(q: np.ndarray, edges: EdgeList) -> float:
-    """Return the smallest distance along the given edges (``inf`` without edges)."""
-    if edges.size == 0:
-        return float('inf')
-    d = q[edges.j] - q[edges.i]
-    return float(np.sqrt(np.einsum('ek,ek->e', d, d).min()))
 
 
 def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics,

@@ -9,6 +9,7 @@ import pytest
 from flock_swarm.core import metrics as mt
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.protocols import PROTOCOLS
 
 
@@ -151,3 +152,20 @@ def test_su_energy_two_agents_at_rest_at_desired_distance():
                     atol=1e-13)
     assert_allclose(mt.su_energy(q, p, leader, law, np.array([True, True]), law.c1),
                     0.5 * law.c1 * law.d ** 2, rtol=1e-12)
+
+
+@pytest.mark.parametrize('collision_distance', [0.05, 0.3, 2.0])
+def test_update_from_edges_matches_a_full_search(collision_distance):
+    """Collision pairs and minimum distance from the step's edges == a brute-force search."""
+    rng = np.random.default_rng(11)
+    radius = 1.0
+    fast, full = mt.RunMetrics(collision_distance), mt.RunMetrics(collision_distance)
+    for _ in range(5):
+        q = rng.uniform(0.0, 3.0, size=(40, 2))
+        fast.update_from_edges(q, disk_graph(q, radius), radius)
+        gaps = np.linalg.norm(q[:, None] - q[None], axis=-1)
+        i, j = np.nonzero(np.triu(gaps < collision_distance, k=1))
+        full.collision_pairs |= set(zip(i.tolist(), j.tolist()))
+        full.min_pair_distance = min(full.min_pair_distance, gaps[np.triu_indices(40, 1)].min())
+    assert fast.collision_pairs == full.collision_pairs
+    assert fast.min_pair_distance == pytest.approx(full.min_pair_distance, rel=1e-12)

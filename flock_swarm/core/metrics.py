@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.graphs import components, disk_graph
+from flock_swarm.core.graphs import EdgeList, components, disk_graph
 
 #: The names of the per-step metrics, in the order of :func:`step_metrics`.
 STEP_METRICS = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
@@ -81,6 +81,30 @@ class RunMetrics:
         self.min_pair_distance = min(self.min_pair_distance, step_min_distance)
         if step_min_distance < self.collision_distance:
             self.collision_pairs |= close_pairs(q, self.collision_distance)
+
+    def update_from_edges(self, q: np.ndarray, edges: EdgeList, radius: float) -> None:
+        """Fold in one instant from the interaction edges already computed for the step.
+
+        Pairs closer than ``collision_distance`` are among the r-disk edges whenever
+        ``collision_distance <= radius``, so no second neighbour search is needed; the minimum
+        distance is exact whenever it is below ``radius`` (otherwise the pairs are farther
+        apart than ``radius`` and the recorded instants give it).
+
+        :param q: positions.
+        :param edges: the step's r-disk (or denser) graph.
+        :param radius: the radius the edges cover completely.
+        """
+        if edges.size == 0:
+            return
+        d = q[edges.j] - q[edges.i]
+        dist = np.sqrt(np.einsum('ek,ek->e', d, d))
+        self.min_pair_distance = min(self.min_pair_distance, float(dist.min()))
+        if self.collision_distance > radius:
+            self.update(q, float(dist.min()))
+            return
+        close = dist < self.collision_distance
+        if close.any():
+            self.collision_pairs.update(zip(edges.i[close].tolist(), edges.j[close].tolist()))
 
 
 def su_energy(q: np.ndarray, p: np.ndarray, leader: LeaderState, law, informed: np.ndarray,

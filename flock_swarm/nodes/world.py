@@ -40,8 +40,7 @@ from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LE
                                       declare, declare_common, load_scenario, make_odometry,
                                       odom_topic, odometry_state, run_node, timer_period)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
-from flock_swarm.sim import (Recorder, SimResult, build_summary, edge_min_distance, jsonable,
-                             write_outputs)
+from flock_swarm.sim import Recorder, SimResult, build_summary, jsonable, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
                                 'marker_every', 'metrics_every', 'expect_subscribers'}
@@ -302,7 +301,7 @@ class WorldNode(Node):
         leader = self.last_leader
         stamp, t_ns = self.clock.stamp(k), self.clock.ns(k)
         edges = disk_graph(self.q, law.radius, law.strict_radius)
-        self.run.update(self.q, edge_min_distance(self.q, edges))
+        self.run.update_from_edges(self.q, edges, law.radius)
         last = k >= sc.steps
         if k % sc.record_every == 0 or last:
             self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
