@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.dynamics import VirtualLeader, step_agents
+from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, disk_graph, fixed_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
@@ -54,6 +54,56 @@ class Recorder:
     def arrays(self) -> dict[str, np.ndarray]:
         """Return the recorded columns as arrays (first axis: time)."""
         return {key: np.stack(rows) for key, rows in self.rows.items()}
+
+
+class RunLog:
+    """Whole-run metrics and the subsampled time series, fed one step at a time.
+
+    The one bookkeeping of a run, shared by ``sim``, the world node and ``analyze``: every
+    step updates the whole-run metrics from the step's edges; every ``record_every``-th step
+    and the last are measured with :func:`step_metrics` and recorded.
+    """
+
+    def __init__(self, eta_tolerance: float, collision_distance: float, radius: float,
+                 strict: bool, record_every: int) -> None:
+        """Create the log.
+
+        :param eta_tolerance: velocity tolerance of ``eta``.
+        :param collision_distance: pairs closer than this count as collisions.
+        :param radius: radius of the r-disk graph whose components are counted.
+        :param strict: ``< r`` (``True``) or ``<= r`` neighbourhoods.
+        :param record_every: subsampling of the time series.
+        """
+        self.eta_tolerance = eta_tolerance
+        self.radius, self.strict, self.every = radius, strict, record_every
+        self.metrics = RunMetrics(collision_distance)
+        self.rec = Recorder()
+        self.latest: dict = {}
+
+    @classmethod
+    def for_scenario(cls, sc: Scenario) -> 'RunLog':
+        """Return the log of a scenario's run."""
+        return cls(sc.eta_tolerance, sc.collision_distance, sc.law.radius,
+                   sc.law.strict_radius, sc.record_every)
+
+    def observe(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
+                leader: LeaderState, informed: np.ndarray, edges: EdgeList,
+                edges_radius: float, last: bool, **extra) -> dict | None:
+        """Fold in step ``k``; return its metrics when it is recorded, else ``None``.
+
+        :param edges: the step's graph, complete within ``edges_radius``.
+        :param extra: further per-step arrays to record (e.g. adaptive gains ``h``).
+        """
+        self.metrics.update_from_edges(q, edges, edges_radius)
+        if k % self.every and not last:
+            return None
+        now = step_metrics(q, p, leader, self.eta_tolerance, self.radius, self.strict)
+        self.metrics.update(q, now['min_pair_distance'])
+        self.rec.add(t=t, q=q, p=p, u=u, leader_q=leader.q, leader_p=leader.p,
+                     leader_a=leader.a, informed=informed, **extra,
+                     **{f'metric_{name}': now[name] for name in STEP_METRICS})
+        self.latest = now
+        return now
 
 
 def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
@@ -99,29 +149,26 @@ def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
     leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
     intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
     static = static_graph(sc, real)
-    run = RunMetrics(sc.collision_distance)
-    rec = Recorder()
+    log = RunLog.for_scenario(sc)
     started = time.monotonic()
     # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
     with np.errstate(over='ignore', invalid='ignore'):
         status, step, reselections = _run_loop(
-            sc, real, q, p, agents, leader, intrinsic, static, run, rec, progress,
-            progress_every)
-    series = rec.arrays()
-    summary = build_summary(sc, real, series, run, step, status)
+            sc, real, q, p, agents, leader, intrinsic, static, log, progress, progress_every)
+    series = log.rec.arrays()
+    summary = build_summary(sc, real, series, log.metrics, step, status)
     summary['pseudo_leader_reselections'] = reselections
     summary['wall_time_s'] = round(time.monotonic() - started, 3)
     return SimResult(summary, series)
 
 
-def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progress,
+def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, log, progress,
               progress_every):
     """Advance the swarm to the end (or divergence, or Ctrl-C); return how it ended."""
     law, dt, steps = sc.law, sc.dt, sc.steps
     status, step = 'completed', 0
     started = last = time.monotonic()
     reselector = Reselector(law) if sc.informed.reselect and static is None else None
-    metrics_now: dict = {}
     try:
         for step in range(steps + 1):
             state = leader.state
@@ -134,18 +181,13 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
                 break
             if static is None:
                 # r-disk edges cover every pair within the radius; all-pairs edges every pair.
-                run.update_from_edges(q, edges, np.inf if law.all_pairs else law.radius)
+                covered, radius = edges, np.inf if law.all_pairs else law.radius
             else:
-                run.update_from_edges(q, disk_graph(q, sc.collision_distance),
-                                      sc.collision_distance)
-            if step % sc.record_every == 0 or step == steps:
-                metrics_now = step_metrics(q, p, state, sc.eta_tolerance, law.radius,
-                                           law.strict_radius)
-                run.update(q, metrics_now['min_pair_distance'])
-                rec.add(t=step * dt, q=q, p=p, u=u, leader_q=state.q, leader_p=state.p,
-                        leader_a=state.a, informed=agents.informed,
-                        **({'h': agents.adaptive} if agents.adaptive is not None else {}),
-                        **{f'metric_{k}': metrics_now[k] for k in STEP_METRICS})
+                covered = disk_graph(q, sc.collision_distance)
+                radius = sc.collision_distance
+            log.observe(step, step * dt, q, p, u, state, agents.informed, covered, radius,
+                        step == steps,
+                        **({'h': agents.adaptive} if agents.adaptive is not None else {}))
             if step == steps:
                 break
             advance_adaptive(law, q, p, state, agents, dt)
@@ -156,8 +198,8 @@ def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, run, rec, progr
                 last = now
                 rate = (step + 1) / max(now - started, 1e-9)
                 progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
-                         f'step {step + 1}/{steps}  eta = {metrics_now.get("eta", 0):.2f}  '
-                         f'mismatch = {metrics_now.get("velocity_mismatch_max", 0):.3g}  '
+                         f'step {step + 1}/{steps}  eta = {log.latest.get("eta", 0):.2f}  '
+                         f'mismatch = {log.latest.get("velocity_mismatch_max", 0):.3g}  '
                          f'({rate:.0f} steps/s)')
     except KeyboardInterrupt:
         status = 'interrupted'

@@ -32,7 +32,7 @@ from flock_swarm import __version__
 from flock_swarm.core.dynamics import LeaderState, step_agents
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
+from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
@@ -40,7 +40,7 @@ from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LE
                                       declare, declare_common, load_scenario, make_odometry,
                                       odom_topic, odometry_state, run_node, timer_period)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
-from flock_swarm.sim import Recorder, SimResult, build_summary, jsonable, write_outputs
+from flock_swarm.sim import RunLog, SimResult, build_summary, jsonable, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
                                 'marker_every', 'metrics_every', 'expect_subscribers'}
@@ -97,8 +97,7 @@ class WorldNode(Node):
                                        np.zeros(sc.dim))
         self.missed = np.zeros(n, dtype=int)
         self.leader_missed = 0
-        self.run = RunMetrics(sc.collision_distance)
-        self.rec = Recorder()
+        self.log = RunLog.for_scenario(sc)
         self.done = False
         self.started = False
         self.status = 'running'
@@ -301,16 +300,11 @@ class WorldNode(Node):
         leader = self.last_leader
         stamp, t_ns = self.clock.stamp(k), self.clock.ns(k)
         edges = disk_graph(self.q, law.radius, law.strict_radius)
-        self.run.update_from_edges(self.q, edges, law.radius)
         last = k >= sc.steps
-        if k % sc.record_every == 0 or last:
-            self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
-                                            law.radius, law.strict_radius)
-            self.run.update(self.q, self.metrics_now['min_pair_distance'])
-            self.rec.add(t=k * sc.dt, q=self.q, p=self.p, u=u, leader_q=leader.q,
-                         leader_p=leader.p, leader_a=leader.a,
-                         informed=self.real.agents.informed,
-                         **{f'metric_{m}': self.metrics_now[m] for m in STEP_METRICS})
+        now = self.log.observe(k, k * sc.dt, self.q, self.p, u, leader,
+                               self.real.agents.informed, edges, law.radius, last)
+        if now is not None:
+            self.metrics_now = now
         if k % self.marker_every == 0 or last:
             self._publish(self.marker_pub, swarm_markers(
                 self.q, self.p, leader.q, self.real.agents.informed, edges, stamp, FRAME,
@@ -392,11 +386,11 @@ class WorldNode(Node):
 
     def write_results(self) -> None:
         """Write what was recorded so far (also on an interrupted run)."""
-        if not self.rec.rows:
+        if not self.log.rec.rows:
             self.close_bag()
             return
-        series = self.rec.arrays()
-        summary = build_summary(self.scenario, self.real, series, self.run, self.k,
+        series = self.log.rec.arrays()
+        summary = build_summary(self.scenario, self.real, series, self.log.metrics, self.k,
                                 self.status)
         summary.update({
             'mode': self.get_parameter('mode').value,
