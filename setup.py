@@ -34,6 +34,8 @@ setup(
             'leader = flock_swarm.nodes.leader:main',
             'agent = flock_swarm.nodes.agent:main',
             'world = flock_swarm.nodes.world:main',
+            'replay = flock_swarm.replay:main',
+            'analyze = flock_swarm.analyze:main',
         ],
     },
 )

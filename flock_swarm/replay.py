@@ -1,0 +1,639 @@
+"""Republish a recorded bag with its recorded timing, like ``ros2 bag play``.
+
+Usage::
+
+    replay BAG [--rate R] [--loop] [--topics T [T ...]] [--regex PATTERN]
+               [--exclude PATTERN] [--start-offset S] [--clock] [--clock-rate HZ]
+               [--wait-for-subscribers N] [--wait-timeout S] [--delay S] [--quiet]
+               [--ros-args ...]
+
+``BAG`` is a bag directory or one ``.mcap`` file, written by this package or by
+``ros2 bag record -s mcap``. Each message is published at wall time
+``start + (log_time - t_start) / rate`` (monotonic clock), as the CDR bytes it was recorded
+with: :meth:`rclpy.publisher.Publisher.publish` takes ``bytes`` and hands them to
+``rcl_publish_serialized_message``, so nothing is deserialised. Unless ``--quiet``, a
+progress line on stderr, updated twice a second, gives the bag time (ns since the epoch, or
+simulation time for a simulated run) and the time elapsed since the start of the bag::
+
+    [RUNNING]  Bag Time 1700000012.340000000  Duration 2.340000000/10.000000000
+
+Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
+expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
+with status 2. Ctrl-C stops the playback and exits with status 0. See ``docs/replay.md``.
+"""
+
+import argparse
+from dataclasses import dataclass, field
+import math
+from numbers import Integral
+from pathlib import Path
+import re
+import sys
+import threading
+import time
+from typing import Callable, Iterable, Sequence, TextIO
+
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import (
+    DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
+from rosgraph_msgs.msg import Clock
+
+from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
+from flock_swarm.bag.msgdefs import DefinitionNotFoundError
+
+#: Exit status for invalid input (as argparse uses).
+EXIT_USAGE = 2
+#: Exit status when the bag turns out unreadable during playback.
+EXIT_FAILURE = 1
+#: The simulation clock topic (REP-2008 ``/clock``).
+CLOCK_TOPIC = '/clock'
+#: Publisher depth of replayed volatile topics, at least: the recorded offer's depth sized the
+#: original publisher's queue for its own rate, while a replay at ``--rate 10`` sends bursts ten
+#: times denser; a reliable writer overwrites unacknowledged samples once its queue is full.
+REPLAY_DEPTH = 100
+#: /clock: reliable, because a reliable offer matches both reliable subscribers (this
+#: package's nodes) and best-effort ones (rclpy's and rclcpp's time sources); volatile, so a
+#: late joiner does not receive stale times; a short queue, since only the latest time matters.
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Longest single wait (s): bounds the reaction time to Ctrl-C and :meth:`Player.stop`.
+MAX_WAIT = 0.05
+#: Final stretch (s) of a wait that is slept rather than spent in the executor: rcl's wait
+#: overshoots its timeout by up to ~3.5 ms now and then on these machines, time.sleep by ~0.1 ms.
+SLEEP_MARGIN = 0.005
+#: Wall seconds between two progress updates (ros2 bag play updates a few times a second).
+PROGRESS_PERIOD = 0.5
+
+_NS = 10**9
+
+
+class ReplayError(ValueError):
+    """An invalid replay option; the message is one line and starts with the option."""
+
+    def __init__(self, option: str, reason: str) -> None:
+        """Create the error.
+
+        :param option: the offending option, such as ``--rate``.
+        :param reason: what is wrong, one line.
+        """
+        super().__init__(f'{option}: {reason}')
+        self.option = option
+        self.reason = reason
+
+
+@dataclass
+class PlayResult:
+    """What :meth:`Player.play` did."""
+
+    #: Messages published per topic (over all passes).
+    published: dict[str, int] = field(default_factory=dict)
+    #: /clock messages published (``--clock``).
+    clock_ticks: int = 0
+    #: Passes through the bag that were started (more than one with ``loop``).
+    passes: int = 0
+    #: Whether every publisher had its subscribers before the start (always with ``N = 0``).
+    matched: bool = True
+    #: Whether Ctrl-C, a shutdown of the context or :meth:`Player.stop` ended the playback.
+    interrupted: bool = False
+    #: Largest delay (s) of a publication behind its scheduled wall time.
+    max_lateness: float = 0.0
+
+    @property
+    def total(self) -> int:
+        """All messages published (without /clock)."""
+        return sum(self.published.values())
+
+
+def replay_qos(profiles: Sequence[QoSProfile]) -> QoSProfile:
+    """Return the QoS a replay publisher offers, given the offers recorded for the topic.
+
+    As ``rosbag2_transport`` does: the recorded offer is kept (reliability, durability,
+    deadline, lifespan, liveliness), since it is what the topic's subscribers were made to
+    match. Offers that disagree on reliability or durability fall back to reliable and
+    volatile: a reliable offer matches reliable and best-effort requests alike, and volatile
+    does not hand stale history to late joiners. A transient-local topic keeps its recorded
+    depth (that many latched messages); a volatile one gets at least :data:`REPLAY_DEPTH`.
+    With no recorded offer: reliable, volatile, keep last :data:`REPLAY_DEPTH`, which
+    matches any subscription whose durability is volatile (rclpy's and rclcpp's default).
+
+    :param profiles: the recorded offers (:func:`flock_swarm.bag.parse_qos_profiles`).
+    :return: the profile for the replay publisher.
+    """
+    if not profiles:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REPLAY_DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+    first = profiles[0]
+    reliability = first.reliability
+    if (any(p.reliability != reliability for p in profiles)
+            or reliability not in (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT)):
+        reliability = ReliabilityPolicy.RELIABLE
+    durability = first.durability
+    if (any(p.durability != durability for p in profiles)
+            or durability not in (DurabilityPolicy.VOLATILE, DurabilityPolicy.TRANSIENT_LOCAL)):
+        durability = DurabilityPolicy.VOLATILE
+    liveliness = first.liveliness
+    if liveliness not in (LivelinessPolicy.AUTOMATIC, LivelinessPolicy.MANUAL_BY_TOPIC):
+        liveliness = LivelinessPolicy.AUTOMATIC
+    history = (HistoryPolicy.KEEP_ALL if first.history == HistoryPolicy.KEEP_ALL
+               else HistoryPolicy.KEEP_LAST)
+    if durability == DurabilityPolicy.TRANSIENT_LOCAL:
+        depth = max(int(first.depth), 1)
+    else:
+        depth = max(int(first.depth), REPLAY_DEPTH)
+    return QoSProfile(
+        history=history, depth=depth, reliability=reliability, durability=durability,
+        deadline=first.deadline, lifespan=first.lifespan, liveliness=liveliness,
+        liveliness_lease_duration=first.liveliness_lease_duration,
+        avoid_ros_namespace_conventions=first.avoid_ros_namespace_conventions)
+
+
+def select_topics(available: Iterable[str], topics: Sequence[str] | None = None,
+                  regex: str | None = None, exclude: str | None = None,
+                  clock: bool = False) -> list[str]:
+    """Return the recorded topics to replay, in bag order.
+
+    The filters combine as in rosbag2's storage filter: a topic is replayed if it is in
+    ``topics`` (when given) and matches ``regex`` (when given) and does not match
+    ``exclude``. Patterns are Python regular expressions searched anywhere in the name
+    (:func:`re.search`); anchor them (``^/agent_\\d+/odom$``) to match whole names. With
+    ``clock``, the recorded /clock is left out: the player publishes /clock itself.
+
+    :param available: the topics of the bag.
+    :param topics: topic names to replay; every one must be in the bag.
+    :param regex: keep only topics matching this pattern.
+    :param exclude: drop topics matching this pattern.
+    :param clock: whether the player publishes /clock (``--clock``).
+    :return: the selected topics.
+    :raises ReplayError: for a topic the bag does not have, an invalid pattern, /clock named
+        together with ``clock``, or a selection left empty.
+    """
+    available = list(available)
+    compiled = {}
+    for option, pattern in (('--regex', regex), ('--exclude', exclude)):
+        if pattern is not None:
+            try:
+                compiled[option] = re.compile(pattern)
+            except re.error as exc:
+                raise ReplayError(option, f'invalid regular expression {pattern!r}: {exc}'
+                                  ) from None
+    selected = available
+    if topics is not None:
+        missing = [name for name in topics if name not in available]
+        if missing:
+            raise ReplayError('--topics', f"not in the bag: {', '.join(missing)} (the bag has "
+                              f"{', '.join(available) or 'no topics'})")
+        if clock and CLOCK_TOPIC in topics:
+            raise ReplayError('--topics', f'{CLOCK_TOPIC} cannot be replayed with --clock, '
+                              f'which publishes {CLOCK_TOPIC} from bag time')
+        selected = [name for name in available if name in set(topics)]
+    if '--regex' in compiled:
+        selected = [name for name in selected if compiled['--regex'].search(name)]
+        if not selected:
+            raise ReplayError('--regex', f'{regex!r} matches no selected topic of the bag')
+    if '--exclude' in compiled:
+        selected = [name for name in selected if not compiled['--exclude'].search(name)]
+        if not selected:
+            raise ReplayError('--exclude', f'{exclude!r} leaves no topic to replay')
+    if clock:
+        selected = [name for name in selected if name != CLOCK_TOPIC]
+        if not selected:
+            raise ReplayError('--clock', f'the only selected topic is {CLOCK_TOPIC}, which '
+                              '--clock replaces')
+    if not selected:
+        raise ReplayError('BAG', 'the bag has no topics')
+    return selected
+
+
+def bag_timeline(reader: BagReader) -> tuple[int, int] | None:
+    """Return the log times (ns) of the first and last message of the whole bag.
+
+    Taken from ``metadata.yaml`` when the bag has a sound one, else from a pass over the
+    messages (a recovered bag, or a bare ``.mcap`` file).
+
+    :param reader: the open bag.
+    :return: ``(start_ns, end_ns)``, or None for a bag without messages.
+    """
+    info = reader.bag_metadata
+    if info is not None and not reader.recovered:
+        try:
+            if int(info['message_count']) == 0:
+                return None
+            start = int(info['starting_time']['nanoseconds_since_epoch'])
+            return start, start + int(info['duration']['nanoseconds'])
+        except (KeyError, TypeError, ValueError):
+            pass
+    start = end = None
+    for message in reader.messages():
+        t = message.log_time_ns
+        start = t if start is None else min(start, t)
+        end = t if end is None else max(end, t)
+    return None if start is None else (start, end)
+
+
+def recorded_offers(reader: BagReader, topics: Iterable[str]) -> dict[str, str]:
+    """Return the recorded ``offered_qos_profiles`` text of topics that have messages.
+
+    Reads messages only until each topic has shown one (usually within the first chunk).
+
+    :param reader: the open bag.
+    :param topics: the topics wanted.
+    :return: topic to the channel's ``offered_qos_profiles`` (topics without messages are
+        left out).
+    """
+    counts = reader.message_counts()
+    wanted = {name for name in topics if counts.get(name)}
+    offers: dict[str, str] = {}
+    if wanted:
+        for message in reader.messages(wanted):
+            offers.setdefault(message.topic, message.offered_qos_profiles)
+            if len(offers) == len(wanted):
+                break
+    return offers
+
+
+def format_ns(ns: int) -> str:
+    """Format a time in ns as seconds with nine decimals, exactly (no float rounding)."""
+    sign = '-' if ns < 0 else ''
+    ns = abs(ns)
+    return f'{sign}{ns // _NS}.{ns % _NS:09d}'
+
+
+def _count(number: int, noun: str, plural: str | None = None) -> str:
+    return f'{number} {noun if number == 1 else plural or noun + "s"}'
+
+
+def _check_number(option: str, value: float, low: float, strict: bool) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value < low or (strict and value == low):
+        relation = '>' if strict else '>='
+        raise ReplayError(option, f'must be a finite number {relation} {low:g}, got {value:g}')
+    return value
+
+
+class Player(Node):
+    """A node that republishes a bag's messages with their recorded timing.
+
+    The bag is opened and the options are checked before the node exists, so invalid input
+    raises without leaving a node behind. The player spins itself (its own executor, in the
+    thread calling :meth:`play`): do not add it to another executor.
+
+    :param bag: the bag (directory or ``.mcap`` file), or an open :class:`BagReader`.
+    :param rate: time scaling: wall seconds per bag second are ``1 / rate``.
+    :param loop: start again from the start offset after the last message, until stopped.
+    :param topics: replay only these topics (all when None).
+    :param regex: replay only topics matching this pattern (:func:`select_topics`).
+    :param exclude: do not replay topics matching this pattern.
+    :param start_offset: seconds into the bag at which to start; earlier messages are skipped.
+    :param clock: publish /clock (rosgraph_msgs/Clock) from bag time; a recorded /clock is
+        then not replayed.
+    :param clock_rate: /clock publications per wall second.
+    :param wait_subscribers: before the start, wait until every publisher (/clock included)
+        has this many matched subscriptions.
+    :param wait_timeout: longest wait (s) for those subscribers; then play anyway.
+    :param delay: wall seconds to wait before the first message (after the subscribers).
+    :param progress: stream for the progress line (None: no progress).
+    :param say: receives warning and information lines (default: stderr).
+    :param node_name: name of the node.
+    :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``namespace``...).
+    :raises BagError: if the bag cannot be read.
+    :raises ReplayError: for an invalid option or a selection without replayable topics.
+    """
+
+    def __init__(self, bag: BagReader | Path | str, *, rate: float = 1.0, loop: bool = False,
+                 topics: Sequence[str] | None = None, regex: str | None = None,
+                 exclude: str | None = None, start_offset: float = 0.0, clock: bool = False,
+                 clock_rate: float = 100.0, wait_subscribers: int = 0,
+                 wait_timeout: float = 10.0, delay: float = 0.0,
+                 progress: TextIO | None = None, say: Callable[[str], None] | None = None,
+                 node_name: str = 'replay', **kwargs) -> None:
+        """Open the bag, check the options, create the node and its publishers."""
+        self._say = say if say is not None else (
+            lambda line: print(line, file=sys.stderr, flush=True))
+        self._rate = _check_number('--rate', rate, 0.0, strict=True)
+        self._clock_period = 1.0 / _check_number('--clock-rate', clock_rate, 0.0, strict=True)
+        offset = _check_number('--start-offset', start_offset, 0.0, strict=False)
+        self._wait_timeout = _check_number('--wait-timeout', wait_timeout, 0.0, strict=False)
+        self._delay = _check_number('--delay', delay, 0.0, strict=False)
+        if (not isinstance(wait_subscribers, Integral) or isinstance(wait_subscribers, bool)
+                or wait_subscribers < 0):
+            raise ReplayError('--wait-for-subscribers',
+                              f'must be a whole number >= 0, got {wait_subscribers}')
+        self._wait_subscribers = int(wait_subscribers)
+        self._loop = bool(loop)
+        self._progress = progress
+        self._reader = bag if isinstance(bag, BagReader) else BagReader(Path(bag))
+        if self._reader.warning:
+            self._say(f'replay: warning: {self._reader.warning}')
+        recorded = self._reader.topics()
+        selected = select_topics(recorded, topics, regex, exclude, clock)
+        if clock and CLOCK_TOPIC in recorded:
+            self._say(f'[replay] --clock: the recorded {CLOCK_TOPIC} is not replayed; '
+                      f'{CLOCK_TOPIC} follows bag time at {1.0 / self._clock_period:g} Hz')
+        classes: dict[str, type] = {}
+        unknown = []
+        for name in selected:
+            try:
+                classes[name] = message_class(recorded[name])
+            except (DefinitionNotFoundError, ValueError):
+                unknown.append(f'{name} ({recorded[name] or "no schema"})')
+        if unknown:
+            self._say(f'replay: warning: skipping topics whose message types are not '
+                      f"installed: {', '.join(unknown)}")
+        if not classes:
+            raise ReplayError(str(self._reader.path), 'none of the selected topics has an '
+                              'installed message type')
+        timeline = bag_timeline(self._reader)
+        self._bag_start, self._bag_end = timeline if timeline is not None else (0, 0)
+        self._offset_ns = round(offset * _NS)
+        if self._offset_ns > self._bag_end - self._bag_start:
+            raise ReplayError('--start-offset', f'{offset:g} s is past the end of the bag '
+                              f'(duration {format_ns(self._bag_end - self._bag_start)} s)')
+        offers = recorded_offers(self._reader, classes)
+        qos = {}
+        for name in classes:
+            try:
+                qos[name] = replay_qos(parse_qos_profiles(offers.get(name, '')))
+            except BagError as exc:
+                self._say(f'replay: warning: {name}: {exc}; offering the default QoS')
+                qos[name] = replay_qos([])
+        super().__init__(node_name, **kwargs)
+        self._topic_pubs: dict[str, Publisher] = {
+            name: self.create_publisher(cls, name, qos[name]) for name, cls in classes.items()}
+        self._clock_pub = (self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS) if clock
+                           else None)
+        self._stop = threading.Event()
+        self._executor: SingleThreadedExecutor | None = None
+        # Wall time (monotonic) and bag time (ns) at which the current pass started.
+        self._wall_zero = 0.0
+        self._pass_start_ns = self._bag_start + self._offset_ns
+        self._next_clock = math.inf
+        self._next_progress = 0.0
+        self._progress_shown = False
+
+    @property
+    def topics(self) -> list[str]:
+        """The topics replayed, in bag order."""
+        return list(self._topic_pubs)
+
+    @property
+    def qos_profiles(self) -> dict[str, QoSProfile]:
+        """The QoS offered on each replayed topic."""
+        return {name: pub.qos_profile for name, pub in self._topic_pubs.items()}
+
+    @property
+    def duration_ns(self) -> int:
+        """Time (ns) from the first to the last message of the bag."""
+        return self._bag_end - self._bag_start
+
+    def stop(self) -> None:
+        """Ask the running :meth:`play` to return soon (within :data:`MAX_WAIT`).
+
+        Safe to call from any thread; a later :meth:`play` starts afresh.
+        """
+        self._stop.set()
+
+    def play(self, max_passes: int | None = None) -> PlayResult:
+        """Replay the bag: wait for subscribers, then publish every message on schedule.
+
+        Ctrl-C (or a shutdown of the node's context, or :meth:`stop`) ends the playback
+        early; the result then says ``interrupted``.
+
+        :param max_passes: stop after this many passes through the bag (None: one, or
+            endless with ``loop``).
+        :return: what was published.
+        """
+        result = PlayResult(published=dict.fromkeys(self._topic_pubs, 0))
+        self._stop.clear()
+        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor.add_node(self)
+        try:
+            result.matched = self._wait_for_subscribers()
+            self._spin_until(time.monotonic() + self._delay)
+            while not self._stop.is_set():
+                result.passes += 1
+                published = self._play_pass(result)
+                if (not self._loop or published == 0
+                        or (max_passes is not None and result.passes >= max_passes)):
+                    break
+            result.interrupted = self._stop.is_set()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            # Ctrl-C: rclpy's signal handler shuts the context down and, when the signal
+            # lands in a wait, raises KeyboardInterrupt there. Either way the playback ends.
+            result.interrupted = True
+        except Exception:
+            # A signal shuts the context down asynchronously: a publish at that moment fails
+            # with "context is invalid". That is the shutdown, not a fault.
+            if self.context.ok():
+                raise
+            result.interrupted = True
+        finally:
+            if self._progress_shown:
+                self._show_progress(final=True)
+            self._executor.remove_node(self)
+            self._executor.shutdown()
+            self._executor = None
+        return result
+
+    def _wait_for_subscribers(self) -> bool:
+        publishers = list(self._topic_pubs.values())
+        if self._clock_pub is not None:
+            publishers.append(self._clock_pub)
+        needed = self._wait_subscribers
+        deadline = time.monotonic() + self._wait_timeout
+        while not self._stop.is_set():
+            short = [pub for pub in publishers if pub.get_subscription_count() < needed]
+            if not short:
+                return True
+            if time.monotonic() >= deadline:
+                names = ', '.join(f'{pub.topic_name} ({pub.get_subscription_count()})'
+                                  for pub in short)
+                self._say(f'replay: warning: after {self._wait_timeout:g} s, fewer than '
+                          f'{needed} subscribers on {names}; playing anyway')
+                return False
+            self._spin_once(min(MAX_WAIT, deadline - time.monotonic()))
+        return False
+
+    def _bag_now(self, wall: float) -> int:
+        return self._pass_start_ns + round((wall - self._wall_zero) * self._rate * _NS)
+
+    def _play_pass(self, result: PlayResult) -> int:
+        """Publish the messages from the start offset to the end once; return their number."""
+        start_ns = self._bag_start + self._offset_ns
+        self._pass_start_ns = start_ns
+        self._wall_zero = time.monotonic()
+        if self._clock_pub is not None:
+            self._next_clock = self._wall_zero
+        published = 0
+        for message in self._reader.messages(self._topic_pubs):
+            if message.log_time_ns < start_ns:
+                continue
+            due = self._wall_zero + (message.log_time_ns - start_ns) / _NS / self._rate
+            if not self._wait_until(due, result):
+                break
+            data = message.data
+            self._topic_pubs[message.topic].publish(
+                data if type(data) is bytes else bytes(data))
+            result.max_lateness = max(result.max_lateness, time.monotonic() - due)
+            result.published[message.topic] += 1
+            published += 1
+        return published
+
+    def _wait_until(self, due: float, result: PlayResult) -> bool:
+        """Publish /clock ticks and progress until the wall time ``due``; False if stopped."""
+        while True:
+            now = time.monotonic()
+            if now >= self._next_clock:
+                self._publish_clock(now)
+                result.clock_ticks += 1
+                # After a stall, carry on from now rather than publish a burst of ticks.
+                self._next_clock = max(self._next_clock + self._clock_period, now)
+            if self._progress is not None and now >= self._next_progress:
+                self._show_progress()
+                self._next_progress = now + PROGRESS_PERIOD
+            if self._stop.is_set():
+                return False
+            if now >= due:
+                return True
+            wake = min(due, self._next_clock, now + MAX_WAIT)
+            if self._progress is not None:
+                wake = min(wake, self._next_progress)
+            self._spin_once(wake - now)
+
+    def _spin_until(self, until: float) -> None:
+        while not self._stop.is_set():
+            remaining = until - time.monotonic()
+            if remaining <= 0:
+                return
+            self._spin_once(min(remaining, MAX_WAIT))
+
+    def _spin_once(self, timeout: float) -> None:
+        """Wait, serving the node's services; raise once the context is shut down.
+
+        The executor's wait overshoots now and then by a few ms, so the last
+        :data:`SLEEP_MARGIN` before a deadline is slept instead (overshoot ~0.1 ms).
+        """
+        if timeout > SLEEP_MARGIN:
+            self._executor.spin_once(timeout_sec=timeout - SLEEP_MARGIN)
+        elif timeout > 0:
+            time.sleep(timeout)
+        if not self.context.ok():
+            raise ExternalShutdownException()
+
+    def _publish_clock(self, wall: float) -> None:
+        ns = self._bag_now(wall)
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(ns, _NS)
+        self._clock_pub.publish(msg)
+
+    def _show_progress(self, final: bool = False) -> None:
+        stream = self._progress
+        bag_now = min(self._bag_now(time.monotonic()), self._bag_end)
+        line = (f'[RUNNING]  Bag Time {format_ns(bag_now)}  Duration '
+                f'{format_ns(bag_now - self._bag_start)}/{format_ns(self.duration_ns)}')
+        try:
+            tty = stream.isatty()
+        except (AttributeError, ValueError):
+            tty = False
+        if tty:
+            stream.write(f'\r{line}' + ('\n' if final else ''))
+        else:
+            stream.write(f'{line}\n')
+        stream.flush()
+        self._progress_shown = True
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser of ``replay``."""
+    parser = argparse.ArgumentParser(
+        prog='replay', description='Republish the topics of a ROS 2 MCAP bag with their '
+        'recorded timing and QoS, like ros2 bag play. Progress on stderr: [RUNNING]  Bag Time '
+        'T  Duration ELAPSED/TOTAL (seconds).',
+        epilog='ROS arguments go after --ros-args (remapping, namespace); the domain comes '
+        'from ROS_DOMAIN_ID.')
+    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
+    parser.add_argument('-r', '--rate', type=float, default=1.0,
+                        help='time scaling: 2 plays twice as fast (default 1)')
+    parser.add_argument('-l', '--loop', action='store_true',
+                        help='play again from the start offset after the end, until Ctrl-C')
+    parser.add_argument('--topics', nargs='+', metavar='TOPIC',
+                        help='replay only these topics (each must be in the bag)')
+    parser.add_argument('-e', '--regex', metavar='PATTERN',
+                        help='replay only topics matching this Python regular expression '
+                        '(searched anywhere in the name)')
+    parser.add_argument('-x', '--exclude', metavar='PATTERN',
+                        help='do not replay topics matching this regular expression')
+    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                        help='start S seconds after the first message of the bag')
+    parser.add_argument('--clock', action='store_true',
+                        help='publish /clock from bag time (a recorded /clock is then not '
+                        'replayed)')
+    parser.add_argument('--clock-rate', type=float, default=100.0, metavar='HZ',
+                        help='/clock publications per second with --clock (default 100)')
+    parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
+                        help='before playing, wait until every publisher has N subscribers')
+    parser.add_argument('--wait-timeout', type=float, default=10.0, metavar='S',
+                        help='longest wait for those subscribers, then play anyway '
+                        '(default 10)')
+    parser.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
+                        help='wait S seconds before the first message (time for discovery)')
+    parser.add_argument('-q', '--quiet', action='store_true',
+                        help='no progress line and no summary')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``replay`` from the command line; return the exit status."""
+    import rclpy
+    from rclpy.utilities import remove_ros_args
+
+    if argv is None:
+        argv = sys.argv[1:]
+    try:
+        own_args = remove_ros_args(['replay', *argv])[1:]
+    except Exception as exc:
+        # rclpy's parse errors (RCLInvalidROSArgsError, UnknownROSArgsError) have no common
+        # base class but Exception.
+        print(f"replay: error: --ros-args: {' '.join(str(exc).split())}", file=sys.stderr)
+        return EXIT_USAGE
+    args = build_parser().parse_args(own_args)
+    player = None
+    try:
+        rclpy.init(args=['replay', *argv])
+        player = Player(
+            args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,
+            exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
+            clock_rate=args.clock_rate, wait_subscribers=args.wait_for_subscribers,
+            wait_timeout=args.wait_timeout, delay=args.delay,
+            progress=None if args.quiet else sys.stderr)
+        result = player.play()
+    except (BagError, ReplayError) as exc:
+        status = EXIT_USAGE if player is None else EXIT_FAILURE
+        print(f'replay: error: {exc}', file=sys.stderr)
+        return status
+    except KeyboardInterrupt:
+        return 0
+    except Exception:
+        # Ctrl-C while the bag is opened shuts the context down under rclpy's signal handler:
+        # creating the publishers then fails. That is the user stopping, not a fault.
+        if rclpy.ok():
+            raise
+        return 0
+    finally:
+        if player is not None:
+            player.destroy_node()
+        rclpy.try_shutdown()
+    if not args.quiet:
+        how = 'stopped' if result.interrupted else 'done'
+        clock = f', {result.clock_ticks} /clock' if args.clock else ''
+        print(f'[replay] {how}: {_count(result.total, "message")} on '
+              f'{_count(len(result.published), "topic")}{clock} in '
+              f'{_count(result.passes, "pass", "passes")}', file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
