@@ -29,7 +29,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
-from flock_swarm.sim import RunLog, build_summary, jsonable, simulate
+from flock_swarm.sim import RunLog, build_summary, ensure_writable, jsonable, simulate
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
 EXIT_VERIFY_FAILED = 1
@@ -790,10 +790,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _check_writable(out: Path) -> None:
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / '.write_test'
-        probe.write_text('')
-        probe.unlink()
+        ensure_writable(out)
     except OSError as exc:
         raise AnalyzeError(f'--out: cannot write to {out}: {exc.strerror or exc}') from None
 

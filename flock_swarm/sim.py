@@ -265,6 +265,18 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
     tmp.replace(out / 'summary.json')
 
 
+def ensure_writable(out: Path) -> None:
+    """Create ``out`` if needed and check that files can be written there.
+
+    :param out: a directory.
+    :raises OSError: when it cannot be created or written.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / '.write_test'
+    probe.write_text('')
+    probe.unlink()
+
+
 def jsonable(value):
     """Return a JSON-serialisable form of NumPy values (``inf`` becomes ``null``)."""
     if isinstance(value, np.ndarray):
@@ -316,10 +328,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     out = args.out if args.out is not None else Path('out') / sc.name
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / '.write_test'
-        probe.write_text('')
-        probe.unlink()
+        ensure_writable(out)
     except OSError as exc:
         print(f'sim: error: --out: cannot write to {out}: {exc.strerror}', file=sys.stderr)
         return EXIT_USAGE
