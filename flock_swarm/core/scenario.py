@@ -238,7 +238,8 @@ def parse_scenario(data: Any) -> Scenario:
 def _parse_law(section: dict, dim: int) -> Protocol:
     if 'name' not in section:
         raise ScenarioError('protocol.name', f'missing (expected one of: {", ".join(PROTOCOLS)})')
-    cls = PROTOCOLS.get(section['name'])
+    # A list or mapping here is not hashable: check the type before the lookup.
+    cls = PROTOCOLS.get(section['name']) if isinstance(section['name'], str) else None
     if cls is None:
         raise ScenarioError('protocol.name', f'unknown protocol {section["name"]!r} '
                             f'(expected one of: {", ".join(PROTOCOLS)})')

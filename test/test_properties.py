@@ -1,0 +1,247 @@
+"""Bad input, property-based: scenario files through ``sim``, ROS parameters through the nodes.
+
+The property (issue 6): every generated input either runs, and then everything it wrote is
+finite, or stops with exit status 2 and exactly one line naming the offending key; never a
+traceback. Scenario files are mutations of the real presets in ``config/`` (wrong types,
+out-of-range numbers, NaN and infinities, missing and unknown keys, wrong vector lengths,
+huge values, strings where numbers go), shortened to a few steps and fed to
+:func:`flock_swarm.sim.main` in-process. ROS parameters are generated
+``parameter_overrides`` of the world, leader and agent nodes, built in a per-test
+``rclpy.Context`` on the test's own domain id.
+
+Generated numbers are either plainly invalid or cheap to run: a *valid* but expensive value
+(a step of a microsecond, a hundred thousand agents) is a long run, not bad input, so the
+strategies below draw moderate numbers on a coarse grid and the huge ones far beyond every
+limit.
+"""
+
+import contextlib
+import copy
+import datetime
+import io
+import json
+import math
+import re
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import strategies as st
+
+from flock_swarm import sim
+from flock_swarm.core.scenario import TOP_KEYS
+from flock_swarm.scenarios import load_mapping, preset_names
+
+#: Steps every generated run is cut to (the property is about input, not long runs).
+SHORT_STEPS = 3
+#: Names an error line may start with besides the scenario's own top-level keys.
+CLI_KEYS = ('scenario', '<scenario>', '--seed', '--set', '--out')
+#: ``sim: error: KEY: reason``; KEY is a dotted path with optional ``[index]`` parts.
+ERROR_LINE = re.compile(r'^sim: error: (?P<key>[^\s:]+): \S.*$')
+
+#: Budgets: the whole file stays under about a minute on two cores.
+SIM_EXAMPLES = 160
+
+
+def short(data: dict) -> dict:
+    """Return a preset mapping cut to :data:`SHORT_STEPS` steps, every step recorded."""
+    out = copy.deepcopy(data)
+    out['duration'] = SHORT_STEPS * out['dt']
+    out['record_every'] = 1
+    return out
+
+
+BASES = {name: short(load_mapping(name)) for name in preset_names()}
+
+
+# --------------------------------------------------------------------------------------------
+# Strategies
+
+
+#: Numbers out of every range, or not numbers at all though they parse as numbers elsewhere.
+SPECIAL_NUMBERS = st.sampled_from([
+    0, -1, -1.0, 0.0, -0.5, 1e300, -1e300, 1e15, -1e15, 10 ** 30, -(10 ** 30), 2 ** 63,
+    10 ** 400, float('nan'), float('inf'), float('-inf'), 1e-300, 5e-324, -5e-324])
+#: Moderate numbers on a grid of 1/8: in and out of every parameter's range, never a tiny step.
+MODERATE_NUMBERS = st.one_of(st.integers(-1000, 1000),
+                             st.integers(-8000, 8000).map(lambda k: k / 8))
+#: Values of the wrong type: strings (also ones that read like numbers), lists, mappings,
+#: booleans, null, YAML timestamps and binary.
+WRONG_TYPES = st.one_of(
+    st.sampled_from(['1.0', '1e3', 'nan', '.inf', 'abc', '', 'true', '[1, 2]', 'null']),
+    st.text(max_size=6),
+    st.booleans(), st.none(),
+    st.lists(st.one_of(MODERATE_NUMBERS, SPECIAL_NUMBERS), max_size=4),
+    st.dictionaries(st.sampled_from(['x', 'r', 'model']), MODERATE_NUMBERS, max_size=2),
+    st.just(datetime.date(2001, 12, 14)), st.just(b'\x00\xff'))
+BAD_VALUES = st.one_of(SPECIAL_NUMBERS, MODERATE_NUMBERS, WRONG_TYPES)
+#: Keys no schema has, plus keys that belong to another section or protocol.
+UNKNOWN_KEYS = st.one_of(st.sampled_from(['gain', 'radius', 'c3', 'A', 'params', 'name',
+                                          'n_agents', 'position']),
+                         st.text(min_size=1, max_size=6))
+
+
+def paths(node, prefix=()):
+    """Yield the path (tuple of keys and indices) of every value inside ``node``."""
+    if prefix:
+        yield prefix
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from paths(value, prefix + (key,))
+    elif isinstance(node, list):
+        for k, value in enumerate(node):
+            yield from paths(value, prefix + (k,))
+
+
+def parent_of(data, path):
+    """Return the container holding ``path`` and the key or index of it there."""
+    node = data
+    for part in path[:-1]:
+        node = node[part]
+    return node, path[-1]
+
+
+@st.composite
+def mutated_scenarios(draw):
+    """Draw a preset and apply one to three mutations; return ``(name, mapping, log)``."""
+    name = draw(st.sampled_from(sorted(BASES)))
+    data = copy.deepcopy(BASES[name])
+    log = []
+    for _ in range(draw(st.integers(1, 3))):
+        where = draw(st.sampled_from(sorted(paths(data), key=repr)))
+        parent, key = parent_of(data, where)
+        value = parent[key]
+        ops = ['replace', 'delete']
+        if isinstance(value, list):
+            ops.append('lengthen')
+        if isinstance(value, dict):
+            ops.append('unknown')
+        op = draw(st.sampled_from(ops))
+        if op == 'replace':
+            parent[key] = draw(BAD_VALUES)
+        elif op == 'delete':
+            del parent[key]
+        elif op == 'lengthen':
+            value.append(copy.deepcopy(value[-1]) if value else draw(MODERATE_NUMBERS))
+        else:
+            value[draw(UNKNOWN_KEYS)] = draw(BAD_VALUES)
+        log.append((op, where))
+    return name, data, log
+
+
+# --------------------------------------------------------------------------------------------
+# Running sim and judging the outcome
+
+
+def run_sim(text: str, extra: list[str] = ()) -> tuple[int, str, Path,
+                                                       tempfile.TemporaryDirectory]:
+    """Run ``sim`` in-process on scenario text; return status, stderr, output dir, tmp dir.
+
+    Warnings are printed to the captured stderr as the command line would show them.
+    """
+    tmp = tempfile.TemporaryDirectory(prefix='flock_prop_')
+    path = Path(tmp.name) / 'scenario.yaml'
+    path.write_text(text)
+    out = Path(tmp.name) / 'out'
+    err, std = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std), \
+            warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        status = sim.main([str(path), '--out', str(out), '--quiet', *extra])
+    text_err = err.getvalue() + ''.join(
+        warnings.formatwarning(w.message, w.category, w.filename, w.lineno) for w in caught)
+    return status, text_err, out, tmp
+
+
+def numbers_in(value, where='summary'):
+    """Yield ``(where, number)`` for every number inside a JSON value."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return
+    if isinstance(value, (int, float)):
+        yield where, value
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            yield from numbers_in(item, f'{where}.{key}')
+    elif isinstance(value, list):
+        for k, item in enumerate(value):
+            yield from numbers_in(item, f'{where}[{k}]')
+
+
+def assert_outputs_finite(out: Path) -> None:
+    """Assert that ``summary.json`` and ``timeseries.npz`` hold only finite numbers."""
+    summary = json.loads((out / 'summary.json').read_text())
+    for where, number in numbers_in(summary):
+        assert math.isfinite(number), f'{where} = {number}'
+    with np.load(out / 'timeseries.npz') as series:
+        for name in series.files:
+            arr = series[name]
+            if np.issubdtype(arr.dtype, np.number):
+                assert np.isfinite(arr).all(), f'timeseries {name} is not finite'
+
+
+def assert_one_line_error(status: int, err: str, prog: str = 'sim') -> str:
+    """Assert a usage error: status 2 and one line ``PROG: error: KEY: reason``; return KEY."""
+    assert status == 2, f'exit status {status}, stderr: {err!r}'
+    assert 'Traceback' not in err, err
+    assert err.endswith('\n') and err.count('\n') == 1 and '\r' not in err, \
+        f'expected exactly one line, got {err!r}'
+    match = ERROR_LINE.match(err.rstrip('\n').replace(f'{prog}: ', 'sim: ', 1))
+    assert match, f'not "{prog}: error: KEY: reason": {err!r}'
+    key = match['key']
+    root = re.split(r'[.\[]', key, maxsplit=1)[0]
+    assert root in TOP_KEYS or key in CLI_KEYS, f'{key!r} names no scenario key: {err!r}'
+    return key
+
+
+def assert_runs_or_names_key(text: str, extra: list[str] = ()) -> None:
+    """The property, for one scenario text (and extra ``sim`` arguments)."""
+    status, err, out, tmp = run_sim(text, extra)
+    with tmp:
+        if status == 0:
+            assert err == '', f'a successful quiet run printed {err!r}'
+            assert_outputs_finite(out)
+        else:
+            assert_one_line_error(status, err)
+
+
+def dump(data) -> str:
+    """Return ``data`` as YAML text (block style, as the presets are written)."""
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+
+
+# --------------------------------------------------------------------------------------------
+# Regressions: what the properties below found, one case per fix
+
+#: A value that deletes its key in :func:`changed`.
+DELETE = object()
+
+
+def changed(name: str, changes: dict) -> dict:
+    """Return preset ``name`` (shortened) with ``{dotted.path: value}`` applied.
+
+    A numeric path part indexes a list; the value :data:`DELETE` removes the key.
+    """
+    data = copy.deepcopy(BASES[name])
+    for dotted, value in changes.items():
+        path = tuple(int(part) if part.isdigit() else part for part in dotted.split('.'))
+        parent, key = parent_of(data, path)
+        if value is DELETE:
+            del parent[key]
+        else:
+            parent[key] = value
+    return data
+
+
+@pytest.mark.parametrize('name, changes, key', [
+    # TypeError: unhashable type (the protocol table was indexed with a list or mapping).
+    ('demo', {'protocol.name': []}, 'protocol.name'),
+    ('su2009_fig7', {'protocol.name': {'x': 1}}, 'protocol.name'),
+])
+def test_regression(name, changes, key):
+    """Each input once broke the property (a traceback); now it names its key."""
+    status, err, out, tmp = run_sim(dump(changed(name, changes)))
+    with tmp:
+        assert assert_one_line_error(status, err) == key
