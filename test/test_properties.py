@@ -245,3 +245,18 @@ def test_regression(name, changes, key):
     status, err, out, tmp = run_sim(dump(changed(name, changes)))
     with tmp:
         assert assert_one_line_error(status, err) == key
+
+
+@pytest.mark.parametrize('text, extra, key', [
+    # ValueError, AttributeError, RecursionError from PyYAML's constructors and composer.
+    ('n_agents: 1' + '0' * 5000 + '\n', [], 'scenario'),
+    ('dt: !!int abc\n', [], 'scenario'),
+    ('dt: !!timestamp 2001-13-45\n', [], 'scenario'),
+    ('dt: ' + '[' * 2000 + ']' * 2000 + '\n', [], 'scenario'),
+    (None, ['--set', 'dt=!!float abc'], '--set'),
+])
+def test_regression_yaml(text, extra, key):
+    """Malformed YAML, in the file or in ``--set``: one line naming the file or the option."""
+    status, err, out, tmp = run_sim(dump(BASES['demo']) if text is None else text, extra)
+    with tmp:
+        assert assert_one_line_error(status, err) == key

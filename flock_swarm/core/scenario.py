@@ -483,8 +483,15 @@ def parse_yaml(text: str) -> Any:
 
     :param text: YAML text.
     :return: the parsed value.
+    :raises yaml.YAMLError: on any malformed document.
     """
-    return yaml.load(text, Loader=ScenarioLoader)
+    try:
+        return yaml.load(text, Loader=ScenarioLoader)
+    except (ValueError, TypeError, AttributeError, OverflowError, RecursionError) as exc:
+        # PyYAML's constructors raise these instead of a YAMLError for malformed tagged
+        # scalars (``!!int abc``, ``!!timestamp 2001-13-45``), integers past Python's
+        # 4300-digit conversion limit and nesting deeper than the interpreter's stack.
+        raise yaml.YAMLError(f'{type(exc).__name__}: {exc}') from None
 
 
 def parse_value(text: str) -> Any:
@@ -496,7 +503,8 @@ def parse_value(text: str) -> Any:
     try:
         return parse_yaml(text)
     except yaml.YAMLError as exc:
-        raise ScenarioError('--set', f'cannot parse value {text!r}: {exc.problem}') from None
+        why = getattr(exc, 'problem', None) or exc
+        raise ScenarioError('--set', f'cannot parse value {text!r}: {why}') from None
 
 
 def apply_override(data: dict, assignment: str) -> dict:
