@@ -239,6 +239,9 @@ def changed(name: str, changes: dict) -> dict:
     # TypeError: unhashable type (the protocol table was indexed with a list or mapping).
     ('demo', {'protocol.name': []}, 'protocol.name'),
     ('su2009_fig7', {'protocol.name': {'x': 1}}, 'protocol.name'),
+    # OverflowError: an integer beyond the float range converted to float.
+    ('su2009_fig2', {'protocol.eps': 10 ** 400}, 'protocol.eps'),
+    ('demo', {'leader.velocity.1': -(10 ** 309)}, 'leader.velocity[1]'),
 ])
 def test_regression(name, changes, key):
     """Each input once broke the property (a traceback); now it names its key."""

@@ -36,10 +36,16 @@ INFORMED_SELECT = ('all', 'random', 'first', 'ids', 'pseudo_leaders')
 # --------------------------------------------------------------------------------------------
 # Low-level checks
 
+#: The largest float; a YAML integer beyond it cannot be converted (OverflowError).
+_FLOAT_MAX = int(np.finfo(float).max)
+
 
 def _number(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ScenarioError(key, f'expected a number, got {value!r}')
+    if isinstance(value, int) and abs(value) > _FLOAT_MAX:
+        raise ScenarioError(key, f'must be finite, got an integer of {value.bit_length()} bits '
+                            '(beyond the float range)')
     if not math.isfinite(value):
         raise ScenarioError(key, f'must be finite, got {value!r}')
     return float(value)
