@@ -242,6 +242,10 @@ def changed(name: str, changes: dict) -> dict:
     # OverflowError: an integer beyond the float range converted to float.
     ('su2009_fig2', {'protocol.eps': 10 ** 400}, 'protocol.eps'),
     ('demo', {'leader.velocity.1': -(10 ** 309)}, 'leader.velocity[1]'),
+    # TypeError: not JSON serialisable (a date or binary value written to scenario.json).
+    ('su2009_fig7', {'description': datetime.date(2001, 12, 14)}, 'description'),
+    ('demo', {'name': b'\x00\xff'}, 'name'),
+    ('os2003_sink', {'informed.count': datetime.date(2001, 12, 14)}, 'informed.count'),
 ])
 def test_regression(name, changes, key):
     """Each input once broke the property (a traceback); now it names its key."""

@@ -80,6 +80,17 @@ def _matrix(value: Any, key: str, rows: int, cols: int) -> np.ndarray:
     return np.array([_vector(row, f'{key}[{k}]', cols) for k, row in enumerate(value)])
 
 
+def _text(value: Any, key: str, default: str) -> str:
+    # Numbers and booleans read as text (``name: 2009``); dates, binary and containers would
+    # not survive the scenario's JSON copies (scenario.json, the bag's metadata).
+    if value is None:
+        return default
+    if not isinstance(value, (str, int, float)) or (isinstance(value, float)
+                                                    and not math.isfinite(value)):
+        raise ScenarioError(key, f'expected text, got {value!r}'[:200])
+    return str(value)
+
+
 def _mapping(value: Any, key: str) -> dict:
     if value is None:
         return {}
@@ -191,7 +202,7 @@ def parse_scenario(data: Any) -> Scenario:
     for key in ('dim', 'n_agents', 'dt', 'duration', 'protocol', 'leader'):
         if key not in data:
             raise ScenarioError(key, 'missing required key')
-    name = str(data.get('name', 'unnamed'))
+    name = _text(data.get('name'), 'name', 'unnamed')
     dim = _integer(data['dim'], 'dim')
     if dim not in (2, 3):
         raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
@@ -235,7 +246,8 @@ def parse_scenario(data: Any) -> Scenario:
     _only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
     eta_tol = _positive(metrics.get('eta_tolerance', 0.1), 'metrics.eta_tolerance')
     coll = _positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
-    return Scenario(name, str(data.get('description', '')), str(data.get('reference', '')),
+    return Scenario(name, _text(data.get('description'), 'description', ''),
+                    _text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
                     intrinsic, eta_tol, coll, data)
@@ -336,21 +348,19 @@ def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
 def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
     _only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
     select = _choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
+    # Every value given is validated, also those the selection does not use: the scenario is
+    # recorded as run (scenario.json, the bag's metadata), so it must hold only sound values.
     count = fraction = None
     ids: tuple[int, ...] = ()
-    if select in ('random', 'first'):
-        if ('count' in section) == ('fraction' in section):
-            raise ScenarioError('informed.count', f'give exactly one of count or fraction '
-                                f'for select: {select}')
-        if 'count' in section:
-            count = _integer(section['count'], 'informed.count')
-            if not 0 <= count <= n:
-                raise ScenarioError('informed.count', f'must be in [0, {n}], got {count}')
-        else:
-            fraction = _number(section['fraction'], 'informed.fraction')
-            if not 0.0 <= fraction <= 1.0:
-                raise ScenarioError('informed.fraction', f'must be in [0, 1], got {fraction}')
-    elif select == 'ids':
+    if 'count' in section:
+        count = _integer(section['count'], 'informed.count')
+        if not 0 <= count <= n:
+            raise ScenarioError('informed.count', f'must be in [0, {n}], got {count}')
+    if 'fraction' in section:
+        fraction = _number(section['fraction'], 'informed.fraction')
+        if not 0.0 <= fraction <= 1.0:
+            raise ScenarioError('informed.fraction', f'must be in [0, 1], got {fraction}')
+    if 'ids' in section or select == 'ids':
         raw = section.get('ids')
         if not isinstance(raw, (list, tuple)):
             raise ScenarioError('informed.ids', f'expected a list of agent ids, got {raw!r}')
@@ -361,7 +371,15 @@ def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
                                     f'got {v}')
         if len(set(ids)) != len(ids):
             raise ScenarioError('informed.ids', 'duplicate agent ids')
-    elif select == 'pseudo_leaders' and law.name != 'zhou_pseudo_leader':
+    if select in ('random', 'first'):
+        if (count is None) == (fraction is None):
+            raise ScenarioError('informed.count', f'give exactly one of count or fraction '
+                                f'for select: {select}')
+    else:
+        count = fraction = None
+    if select != 'ids':
+        ids = ()
+    if select == 'pseudo_leaders' and law.name != 'zhou_pseudo_leader':
         raise ScenarioError('informed.select', 'pseudo_leaders needs protocol '
                             'zhou_pseudo_leader (it uses w and alpha)')
     reselect = section.get('reselect', False)
