@@ -33,6 +33,7 @@ setup(
             'swarm = flock_swarm.runner:main',
             'leader = flock_swarm.nodes.leader:main',
             'agent = flock_swarm.nodes.agent:main',
+            'agents = flock_swarm.nodes.agent:container_main',
             'world = flock_swarm.nodes.world:main',
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',

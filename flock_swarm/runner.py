@@ -58,7 +58,10 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                    step_timeout: float = 2.0, executor: str = 'events',
                    progress=None, timeout: float | None = None, agents=None,
                    world_params: dict | None = None, realtime_factor: float = 1.0) -> dict:
-    """Run world, leader and every agent in this process on one executor.
+    """Run world, leader and the agents in this process on one executor.
+
+    The agents are hosted by one agent node (a container: one subscription per odometry
+    topic for all of them), as ``ros2 run flock_swarm agents`` hosts them.
 
     :param scenario: the resolved scenario file.
     :param out: the output directory.
@@ -68,7 +71,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     :param executor: ``single`` (SingleThreadedExecutor) or ``events`` (EventsExecutor).
     :param progress: callback for progress lines.
     :param timeout: wall-clock limit [s] of the whole run (``None``: none).
-    :param agents: ids of the agents to start (``None``: all); the others stay absent.
+    :param agents: ids of the agents to host (``None``: all); the others stay absent.
     :param world_params: further parameters of the world node.
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :return: the summary.
@@ -79,6 +82,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     from rclpy.parameter import Parameter
 
     from flock_swarm.nodes.agent import AgentNode
+    from flock_swarm.nodes.common import make_executor
     from flock_swarm.nodes.leader import LeaderNode
     from flock_swarm.nodes.world import WorldNode
 
@@ -94,15 +98,13 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
         world = WorldNode(progress=progress, context=context, parameter_overrides=params(
             dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))))
         nodes.append(world)
-        started_agents = list(range(sc.n_agents)) if agents is None else list(agents)
+        hosted = list(range(sc.n_agents)) if agents is None else list(agents)
         nodes.append(LeaderNode(context=context, parameter_overrides=params(
-            dict(base, expect_subscribers=len(started_agents) + 1))))
-        for i in started_agents:
-            nodes.append(AgentNode(node_name=f'agent_{i}', context=context,
-                                   parameter_overrides=params(dict(base, agent_id=i))))
+            dict(base, expect_subscribers=2))))
+        nodes.append(AgentNode(node_name='agents', context=context, parameter_overrides=params(
+            dict(base, agent_ids=[int(i) for i in hosted]))))
         if executor == 'events':
-            from rclpy.experimental import EventsExecutor
-            ex = EventsExecutor(context=context)
+            ex = make_executor(context)
         else:
             ex = SingleThreadedExecutor(context=context)
         for node in nodes:
@@ -137,8 +139,12 @@ def executable(name: str) -> list[str]:
 
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
-                  log=None, realtime_factor: float = 1.0) -> dict:
-    """Run world, leader and every agent as separate OS processes (the ``ros2 run`` executables).
+                  log=None, realtime_factor: float = 1.0, container: bool = False,
+                  world_params: dict | None = None) -> dict:
+    """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
+
+    Every agent gets its own process (``agent``, as on real robots), or with ``container``
+    all agents share one (``agents``).
 
     :param scenario: the resolved scenario file.
     :param out: the output directory.
@@ -148,6 +154,8 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param timeout: wall-clock limit [s] of the whole run.
     :param log: file object receiving the agents' and leader's output (default: discarded).
     :param realtime_factor: realtime mode: simulated seconds per wall second.
+    :param container: host every agent in one ``agents`` process.
+    :param world_params: further parameters of the world node.
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
@@ -164,12 +172,13 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     sink = log if log is not None else subprocess.DEVNULL
     others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
                                stderr=sink)]
-    for i in range(sc.n_agents):
-        others.append(subprocess.Popen(
-            executable('agent') + ros_args(dict(base, agent_id=i)), env=env, stdout=sink,
-            stderr=sink))
+    hosts = [executable('agents') + ros_args(base)] if container else [
+        executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
+    for command in hosts:
+        others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
     world = subprocess.Popen(executable('world') + ros_args(
-        dict(base, out_dir=str(out), step_timeout=step_timeout)), env=env)
+        dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
+        env=env)
     try:
         world.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -202,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO_ros)')
     parser.add_argument('--processes', action='store_true',
                         help='run every node as its own OS process (default: one process)')
+    parser.add_argument('--container', action='store_true',
+                        help='with --processes: host all agents in one process (`agents`)')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep')
     parser.add_argument('--domain-id', type=int,
                         default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
@@ -214,6 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='executor of the one-process run (events: rclpy.experimental.'
                         'EventsExecutor, about twice as fast here)')
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
+    parser.add_argument('--no-record', action='store_true',
+                        help='do not write the bag (summary and time series are still written)')
     return parser
 
 
@@ -229,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
                                 f'must be > 0, got {args.realtime_factor}')
         if args.step_timeout <= 0:
             raise ScenarioError('--step-timeout', f'must be > 0, got {args.step_timeout}')
+        if args.container and not args.processes:
+            raise ScenarioError('--container', 'goes with --processes (a one-process run '
+                                'always hosts the agents in one container node)')
         name = Path(args.scenario).stem
         out = args.out if args.out is not None else Path('out') / f'{name}_ros'
         if (out / 'bag').exists() and any((out / 'bag').iterdir()):
@@ -242,16 +258,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f'swarm: error: --out: {exc}', file=sys.stderr)
         return EXIT_USAGE
     sc = parse_scenario(parse_yaml(scenario.read_text()))
-    layout = 'separate processes' if args.processes else 'one process'
+    if not args.processes:
+        layout = 'one process (agents in one container node)'
+    elif args.container:
+        layout = 'three processes (agents in one container process)'
+    else:
+        layout = 'separate processes (one per agent)'
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
+    world_params = {'record': False} if args.no_record else None
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
-                                realtime_factor=args.realtime_factor)
+                                realtime_factor=args.realtime_factor,
+                                container=args.container, world_params=world_params)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                  args.executor, progress=say,
-                                 realtime_factor=args.realtime_factor)
+                                 realtime_factor=args.realtime_factor,
+                                 world_params=world_params)
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
         return 1
@@ -264,7 +288,8 @@ def main(argv: list[str] | None = None) -> int:
         f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
         f'collisions = {summary["collisions"]}, missed commands = '
         f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
-    say(f'[swarm] wrote {out}/bag, {out}/summary.json, {out}/timeseries.npz'
+    say('[swarm] wrote ' + ('' if args.no_record else f'{out}/bag, ')
+        + f'{out}/summary.json, {out}/timeseries.npz'
         + ('' if args.no_plots else f', {out}/trajectories.png, {out}/metrics.png'))
     return 0 if summary['status'] == 'completed' else 1
 

@@ -80,7 +80,7 @@ def test_absent_agent_gets_zero_commands_and_is_counted(tmp_path, ros_domain):
         tmp_path, ros_domain, 'demo', ['n_agents=4', 'informed.count=2', 'duration=0.2',
                                        'record_every=1'],
         agents=[0, 1, 3], step_timeout=0.2,
-        world_params={'start_timeout': 2.0, 'expect_subscribers': 3})
+        world_params={'start_timeout': 2.0, 'expect_subscribers': 1})
     steps = sc.steps + 1
     assert summary['status'] == 'completed'
     assert summary['missed_commands_per_agent'] == [0, 0, steps, 0]
@@ -147,8 +147,12 @@ def test_bag_of_a_ros_run(tmp_path, ros_domain):
         assert_allclose(ros['q'], again['q'], rtol=0, atol=1e-9)
 
 
-def test_separate_processes(tmp_path, ros_domain):
-    """World, leader and agents as OS processes (the ros2 run executables), own domain id."""
+@pytest.mark.parametrize('container', [False, True], ids=['agent-per-process', 'container'])
+def test_separate_processes(tmp_path, ros_domain, container):
+    """World, leader and agents as OS processes (the ros2 run executables), own domain id.
+
+    The agents run one per process (``agent``, as on robots) or all in one (``agents``).
+    """
     out = tmp_path / 'procs'
     scenario = resolve_scenario('demo', [
         'n_agents=3', 'protocol.name=su_accel', 'informed={select: all}',
@@ -156,7 +160,7 @@ def test_separate_processes(tmp_path, ros_domain):
         None, out)
     with open(tmp_path / 'nodes.log', 'w') as log:
         summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
-                                log=log)
+                                log=log, container=container)
     assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
     assert summary['missed_commands'] == 0
     assert summary['velocity_mismatch_max'] < 0.2 and summary['collisions'] == 0
@@ -247,6 +251,50 @@ def test_agent_id_out_of_range(ros_domain):
     assert res.returncode == 2
     assert res.stderr.strip() == 'agent: error: agent_id: must be in [0, 29] ' \
         '(n_agents = 30), got 30'
+
+
+@pytest.mark.parametrize('agent_ids, message', [
+    ('0-3,2', "agent_ids: lists an agent twice: '0-3,2'"),
+    ('5-2', "agent_ids: empty range '5-2'"),
+    ('0,x', "agent_ids: expected ids and ranges such as '0-9,12', got '0,x'"),
+    ('[0, 30]', 'agent_ids: must be in [0, 29] (n_agents = 30), got 30'),
+])
+def test_container_bad_agent_ids(ros_domain, agent_ids, message):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    res = subprocess.run(executable('agents') + ['--ros-args', '-p', 'scenario:=demo', '-p',
+                                                 f'agent_ids:={agent_ids}'],
+                         env=env, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert res.stderr.strip() == f'agents: error: {message}'
+
+
+def test_two_containers_split_the_swarm(tmp_path, ros_domain):
+    """Agents split over two ``agents`` containers (ranges): the run is still sim's run."""
+    out = tmp_path / 'split'
+    scenario = resolve_scenario('demo', ['n_agents=6', 'informed.count=2', 'duration=1',
+                                         'record_every=1'], None, out)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
+    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs += [subprocess.Popen(executable('agents') + ros_args
+                               + ['-p', f'agent_ids:={ids}', '-r', f'__node:=agents_{k}'],
+                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+              for k, ids in enumerate(['0-2', '3,4,5'])]
+    try:
+        world = subprocess.run(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
+                               env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    finally:
+        for proc in procs:
+            proc.send_signal(signal.SIGINT)
+        for proc in procs:
+            proc.wait(timeout=30)
+    assert world.returncode == 0, world.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
 
 
 def test_realtime_mode_flies_on_wall_clock_timers(tmp_path, ros_domain):

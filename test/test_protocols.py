@@ -1,7 +1,8 @@
 """Unit tests of the flocking laws in ``flock_swarm.core.protocols``.
 
-The agent node calls :func:`local_control` and the simulator :func:`swarm_control`; the first
-block of tests checks that both give the same input for every law, the rest checks the laws
+The agent node calls :func:`group_control`, the simulator :func:`swarm_control`, and a robot
+that only has its neighbours' states :func:`local_control`; the first block of tests checks
+that all three give the same input for every law, the rest checks the laws
 against the papers (antisymmetry, invariances, hand-computed two-agent cases, navigation terms).
 """
 
@@ -100,6 +101,21 @@ def test_local_control_equals_swarm_control(name, dim, seed):
                                agents.subset(np.array([i])), DT)
         assert u_i.shape == (dim,)
         assert_allclose(u_i, u[i], rtol=1e-12, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('name, dim', LAW_DIMS)
+def test_group_control_is_swarm_control_of_the_group(name, dim, seed):
+    """The rows an agent node (one id) or a container (many) computes are sim's, bit for bit."""
+    law, q, p, edges, leader, agents = make_swarm(name, dim, seed)
+    u = pr.swarm_control(law, q, p, edges, leader, agents, DT)
+    rng = np.random.default_rng(seed)
+    n = q.shape[0]
+    for ids in (np.array([0]), np.array([n - 1]), np.sort(rng.choice(n, 7, replace=False)),
+                np.arange(n)):
+        u_group = pr.group_control(law, ids, q, p, edges, leader, agents.subset(ids), DT)
+        assert u_group.shape == (ids.size, dim)
+        assert_array_equal(u_group, u[ids])
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,10 +11,13 @@ over edges) and a single agent that only knows its neighbours:
     virtual leader and the per-agent data (informed flag, gains, adaptive state).
 
 :func:`swarm_control` evaluates a law on an undirected edge list (each pair once, using
-antisymmetry where the law has it); :func:`local_control` evaluates it for one agent and a
-list of neighbours, as the agent node does. Both call the same ``pair`` and ``combine``.
+antisymmetry where the law has it); :func:`group_control` evaluates it for a subset of the
+agents (the one agent of an agent node, or the agents a container hosts) from the edges
+that touch them; :func:`local_control` evaluates it for one agent and a list of its
+neighbours' states. All three call the same ``pair`` and ``combine``.
 """
 
+import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -22,7 +25,7 @@ import numpy as np
 
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.graphs import EdgeList, within_radius
+from flock_swarm.core.graphs import EdgeList
 
 
 @dataclass
@@ -455,6 +458,34 @@ def swarm_control(law: Protocol, q: np.ndarray, p: np.ndarray, edges: EdgeList,
     return law.combine(q, p, pair_sums(law, q, p, edges), leader, agents, dt)
 
 
+def group_control(law: Protocol, ids: np.ndarray, q: np.ndarray, p: np.ndarray,
+                  edges: EdgeList, leader: LeaderState, group: AgentData,
+                  dt: float) -> np.ndarray:
+    """Return the control input of the agents ``ids`` only (agent nodes and containers).
+
+    Only the edges that touch ``ids`` are evaluated, in the order :func:`swarm_control`
+    sums them, so each row equals the corresponding row of :func:`swarm_control` on the
+    whole graph: what an agent computes is what the simulator computes for it.
+
+    :param law: the law.
+    :param ids: the agents to control (ascending, distinct), shape ``(m,)``.
+    :param q: positions of every agent, shape ``(n, dim)``.
+    :param p: velocities of every agent, shape ``(n, dim)``.
+    :param edges: the interaction graph of the whole swarm (as :func:`swarm_control`).
+    :param leader: the virtual leader's state as these agents know it.
+    :param group: per-agent data of ``ids`` (``agents.subset(ids)``).
+    :param dt: the step.
+    :return: ``u`` of ``ids``, shape ``(m, dim)``.
+    """
+    hosted = np.zeros(q.shape[0], dtype=bool)
+    hosted[ids] = True
+    touch = hosted[edges.i] | hosted[edges.j]
+    near = dataclasses.replace(edges, i=edges.i[touch], j=edges.j[touch],
+                               weight=edges.weight[touch])
+    s = pair_sums(law, q, p, near)[ids]
+    return law.combine(q[ids], p[ids], s, leader, group, dt)
+
+
 def local_control(law: Protocol, q_self: np.ndarray, p_self: np.ndarray,
                   q_nb: np.ndarray, p_nb: np.ndarray, w_nb: np.ndarray,
                   leader: LeaderState, agent: AgentData, dt: float) -> np.ndarray:
@@ -497,31 +528,3 @@ def advance_adaptive(law: Protocol, q: np.ndarray, p: np.ndarray, leader: Leader
     rate = law.adaptive_rate(q, p, leader, agents)
     if rate is not None and agents.adaptive is not None:
         agents.adaptive += dt * rate
-
-
-def local_neighbours(law: Protocol, i: int, q: np.ndarray,
-                     weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Return agent ``i``'s neighbours (ascending ids) and edge weights, as the swarm sees them.
-
-    The same rule as the simulator's graph: the fixed weight matrix when there is one (every
-    other agent, with weight ``W_ij``, for laws acting on all pairs), otherwise the r-disk
-    neighbourhood (:func:`~flock_swarm.core.graphs.within_radius`), scaled by ``w`` for laws
-    acting on all pairs.
-
-    :param law: the law.
-    :param i: the agent.
-    :param q: positions of every agent, shape ``(n, dim)``.
-    :param weights: the fixed weight matrix, or ``None``.
-    :return: ``(ids, weights)``.
-    """
-    n = q.shape[0]
-    others = np.concatenate((np.arange(i), np.arange(i + 1, n)))
-    if weights is not None:
-        w = weights[i, others]
-        keep = np.ones(others.size, dtype=bool) if law.all_pairs else w > 0
-        return others[keep], w[keep]
-    diff = q[others] - q[i]
-    near = within_radius(np.einsum('ek,ek->e', diff, diff), law.radius, law.strict_radius)
-    if law.all_pairs:
-        return others, law.w * near.astype(float)
-    return others[near], np.ones(int(near.sum()))

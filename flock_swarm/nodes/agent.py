@@ -1,68 +1,125 @@
-"""The agent node: one robot computing its acceleration from its neighbours and the leader.
+"""The agent node: robots computing their accelerations from their neighbours and the leader.
 
-It subscribes to the odometry of every agent (one topic per agent, as real robots would
-broadcast it), selects the neighbours within ``r`` (or the scenario's fixed graph), adds the
-leader's state if informed, and calls the same law function as ``sim``
-(:func:`flock_swarm.core.protocols.local_control`). The command is stamped with the odometry
-stamp it answers. Adaptive state (Zhou's gain ``h_i``) lives here.
+An agent node subscribes to the odometry of every agent (one topic per agent, as real robots
+would broadcast it), selects the neighbours within ``r`` (or the scenario's fixed graph), adds
+the leader's state if informed, and calls the same law functions as ``sim``
+(:func:`flock_swarm.core.protocols.group_control`). Each command is stamped with the
+odometry stamp it answers. Adaptive state (Zhou's gain ``h_i``) lives here.
+
+One node hosts one agent (``ros2 run flock_swarm agent --ros-args -p agent_id:=3``, the
+robot's own process) or many (``ros2 run flock_swarm agents``, a container): the hosted
+agents share one subscription per odometry topic and one evaluation of the law per step, so
+a step costs ``N`` odometry deliveries per container instead of ``N`` per agent. Each hosted
+agent still publishes on its own ``agent_<i>/cmd_accel``.
 """
 
 import re
 import sys
 from dataclasses import dataclass, field
+from typing import Any, Sequence
 
 import numpy as np
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.protocols import advance_adaptive, local_control, local_neighbours
+from flock_swarm.core.protocols import advance_adaptive, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
-from flock_swarm.core.scenario import Scenario, all_pairs_weights, realize
+from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                       StepClock, accel_vector, cmd_topic, declare,
                                       declare_common, load_scenario, make_accel, odom_topic,
                                       odometry_state, run_node, timer_period)
+from flock_swarm.sim import interaction_graph, static_graph
+
+AGENT_PARAMS = COMMON_PARAMS | {'agent_id', 'agent_ids'}
 
 
 @dataclass
 class StepInputs:
-    """What an agent has received for one step."""
+    """What the hosted agents have received for one step."""
 
     odom: dict = field(default_factory=dict)
     leader_odom: tuple | None = None
     leader_accel: np.ndarray | None = None
 
+    def complete(self, n_agents: int) -> bool:
+        """Return whether every agent's odometry and the leader's state are in."""
+        return (len(self.odom) == n_agents and self.leader_odom is not None
+                and self.leader_accel is not None)
+
+    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState]:
+        """Return ``(q, p, leader)`` of a complete set of inputs."""
+        q = np.array([self.odom[j][0] for j in range(n_agents)])
+        p = np.array([self.odom[j][1] for j in range(n_agents)])
+        return q, p, LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel)
+
+
+def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
+    """Return the ascending ids a node hosts from its ``agent_ids`` parameter.
+
+    :param spec: ``''`` (just ``agent_id``), ``'all'``, a string of ids and ranges such as
+        ``'0-9,12'``, or a list of integers.
+    :param agent_id: the ``agent_id`` parameter.
+    :param n_agents: the swarm's size.
+    :return: the ids.
+    :raises ScenarioError: on a malformed, repeated or out-of-range id.
+    """
+    if isinstance(spec, str):
+        text = spec.strip()
+        if text == '':
+            ids = [agent_id]
+        elif text == 'all':
+            ids = list(range(n_agents))
+        else:
+            ids = []
+            for part in text.split(','):
+                m = re.fullmatch(r'\s*(\d+)\s*(?:-\s*(\d+)\s*)?', part)
+                if m is None:
+                    raise ScenarioError('agent_ids', f'expected ids and ranges such as '
+                                        f"'0-9,12', got {spec!r}")
+                lo, hi = int(m.group(1)), int(m.group(2) or m.group(1))
+                if hi < lo:
+                    raise ScenarioError('agent_ids', f'empty range {part.strip()!r}')
+                ids += range(lo, hi + 1)
+    elif isinstance(spec, (list, tuple, np.ndarray)) and all(
+            isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in spec):
+        ids = [int(x) for x in spec]
+    else:
+        raise ScenarioError('agent_ids', f'expected a string or an integer array, got {spec!r}')
+    if not ids:
+        raise ScenarioError('agent_ids', 'hosts no agent')
+    bad = [i for i in ids if not 0 <= i < n_agents]
+    if bad:
+        key = 'agent_id' if isinstance(spec, str) and spec.strip() == '' else 'agent_ids'
+        raise ScenarioError(key, f'must be in [0, {n_agents - 1}] (n_agents = {n_agents}), '
+                            f'got {bad[0]}')
+    if len(set(ids)) != len(ids):
+        raise ScenarioError('agent_ids', f'lists an agent twice: {spec!r}')
+    return np.array(sorted(ids), dtype=np.intp)
+
 
 class AgentController:
-    """The decision logic of agent ``i`` (no ROS): collect a step's inputs, answer it once.
+    """The decision logic of the agents ``ids`` (no ROS): collect a step's inputs, answer once.
 
     :ivar answered: the last step answered (``-1`` before the first).
     """
 
-    def __init__(self, sc: Scenario, agent_id: int) -> None:
-        """Create the controller of agent ``agent_id`` of scenario ``sc``."""
-        if not 0 <= agent_id < sc.n_agents:
-            raise ScenarioError('agent_id', f'must be in [0, {sc.n_agents - 1}] '
-                                f'(n_agents = {sc.n_agents}), got {agent_id}')
+    def __init__(self, sc: Scenario, ids: Sequence[int]) -> None:
+        """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``."""
         self.sc = sc
-        self.i = agent_id
-        real = realize(sc)
-        self.weights = real.adjacency
+        self.ids = np.asarray(ids, dtype=np.intp)
+        self.real = realize(sc)
+        self.static = static_graph(sc, self.real)
         # The whole swarm's law data: re-selecting pseudo-leaders needs everybody's flags.
-        self.swarm = real.agents
+        self.swarm = self.real.agents
         self.reselector = Reselector(sc.law) if sc.informed.reselect and \
-            self.weights is None else None
+            self.static is None else None
         self.pending: dict[int, StepInputs] = {}
         self.answered = -1
-
-    @property
-    def informed(self) -> bool:
-        """Return whether this agent currently gets the leader's information."""
-        return bool(self.swarm.informed[self.i])
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered)."""
@@ -73,58 +130,60 @@ class AgentController:
     def ready(self, k: int) -> bool:
         """Return whether step ``k`` has every agent's odometry and the leader's state."""
         box = self.pending.get(k)
-        return (box is not None and len(box.odom) == self.sc.n_agents
-                and box.leader_odom is not None and box.leader_accel is not None)
+        return box is not None and box.complete(self.sc.n_agents)
 
     def answer(self, k: int) -> np.ndarray:
-        """Compute the command of step ``k`` from its complete inputs, advance adaptive state.
+        """Compute the commands of step ``k`` from its complete inputs, advance adaptive state.
 
         :param k: the step (must be :meth:`ready`).
-        :return: ``u_i``.
+        :return: ``u`` of the hosted agents, shape ``(m, dim)``.
         """
         box = self.pending.pop(k)
         for old in [s for s in self.pending if s < k]:
             del self.pending[old]
         self.answered = k
-        q = np.array([box.odom[j][0] for j in range(self.sc.n_agents)])
-        p = np.array([box.odom[j][1] for j in range(self.sc.n_agents)])
-        leader = LeaderState(box.leader_odom[0], box.leader_odom[1], box.leader_accel)
-        return self.command(q, p, leader)
+        return self.command(*box.swarm(self.sc.n_agents))
 
     def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState) -> np.ndarray:
-        """Return ``u_i`` for the swarm state ``(q, p)`` and advance the adaptive gain."""
-        law, i = self.sc.law, self.i
+        """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains."""
+        law, ids = self.sc.law, self.ids
+        edges = interaction_graph(self.sc, self.real, q, self.static)
         if self.reselector is not None:
-            edges = all_pairs_weights(q.shape[0], None, q, law) if law.all_pairs \
-                else disk_graph(q, law.radius, law.strict_radius)
             self.reselector.update(self.swarm, edges)
-        ids, w = local_neighbours(law, i, q, self.weights)
-        own = self.swarm.subset(np.array([i]))
-        u = local_control(law, q[i], p[i], q[ids], p[ids], w, leader, own, self.sc.dt)
-        if own.adaptive is not None:
-            advance_adaptive(law, q[i:i + 1], p[i:i + 1], leader, own, self.sc.dt)
-            self.swarm.adaptive[i] = own.adaptive[0]
+        group = self.swarm.subset(ids)
+        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
+        if group.adaptive is not None:
+            advance_adaptive(law, q[ids], p[ids], leader, group, self.sc.dt)
+            self.swarm.adaptive[ids] = group.adaptive
         return u
 
 
 class AgentNode(Node):
-    """Agent ``agent_id``: odometry of all agents and the leader in, ``cmd_accel`` out."""
+    """Hosts agents (one by default): odometry of all agents and the leader in, commands out."""
 
-    def __init__(self, **kwargs) -> None:
-        """Create the node; ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace...)."""
+    def __init__(self, default_agent_ids: str = '', **kwargs) -> None:
+        """Create the node.
+
+        :param default_agent_ids: the ``agent_ids`` default (``'all'`` for the container).
+        :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
+        """
         kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         name = kwargs.pop('node_name', None)
         super().__init__(name or 'agent', **kwargs)
         declare_common(self)
         agent_id = declare(self, 'agent_id', 0, 'index i of this agent (0-based)')
-        if not isinstance(agent_id, int):
+        if not isinstance(agent_id, int) or isinstance(agent_id, bool):
             raise ScenarioError('agent_id', f'expected an integer, got {agent_id!r}')
-        sc = load_scenario(self, COMMON_PARAMS | {'agent_id'})
+        spec = declare(self, 'agent_ids', default_agent_ids,
+                       "agents this node hosts: '' (agent_id alone), 'all', ids and ranges "
+                       "such as '0-9,12', or an integer array")
+        sc = load_scenario(self, AGENT_PARAMS)
         self.scenario = sc
-        self.controller = AgentController(sc, agent_id)
+        self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents))
         self.clock = StepClock(sc.dt)
         self.lockstep = self.get_parameter('mode').value == 'lockstep'
-        self.cmd_pub = self.create_publisher(AccelStamped, cmd_topic(agent_id), LOCKSTEP_QOS)
+        self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
+                         for i in self.controller.ids]
         for j in range(sc.n_agents):
             self.create_subscription(Odometry, odom_topic(j),
                                      lambda msg, j=j: self.on_odom(j, msg), LOCKSTEP_QOS)
@@ -133,7 +192,11 @@ class AgentNode(Node):
                                  LOCKSTEP_QOS)
         self.latest: StepInputs = StepInputs()
         self.latest_stamp = None
-        self.outbox: list[AccelStamped] = []
+        self.cmd_msgs = [make_accel(np.zeros(sc.dim), self.clock.stamp(0))
+                         for _ in self.controller.ids]
+        self.outbox: list[tuple[int, bytes]] = []
+        self.sent: list[tuple[int, bytes]] = []
+        self.repeated = -1
         if self.lockstep:
             self.create_timer(0.01, self.flush)
         else:
@@ -143,8 +206,7 @@ class AgentNode(Node):
         """Store agent ``j``'s odometry for its step."""
         state = odometry_state(msg, self.scenario.dim)
         self.latest.odom[j] = state
-        if j == self.controller.i:
-            self.latest_stamp = msg.header.stamp
+        self.latest_stamp = msg.header.stamp
         self.stash(msg.header.stamp, lambda box: box.odom.__setitem__(j, state))
 
     def on_leader_odom(self, msg: Odometry) -> None:
@@ -166,35 +228,46 @@ class AgentNode(Node):
             box = self.controller.inputs(k)
             if box is not None:
                 store(box)
-                self.try_answer(k)
+                if self.controller.ready(k):
+                    self.publish_commands(self.controller.answer(k), self.clock.stamp(k))
+            elif k == self.controller.answered and self.repeated != k:
+                # The world offers a stalled step again: our commands may have been lost.
+                self.repeated = k
+                self.outbox.extend(self.sent)
+                self.flush()
 
-    def try_answer(self, k: int) -> None:
-        """Publish the command of step ``k`` once its inputs are complete."""
-        if self.controller.ready(k):
-            u = self.controller.answer(k)
-            self.outbox.append(make_accel(u, self.clock.stamp(k)))
-            self.flush()
+    def publish_commands(self, u: np.ndarray, stamp) -> None:
+        """Queue one command per hosted agent and send what the world can receive.
+
+        Commands are queued serialised, so one message per agent can be reused.
+        """
+        self.sent = [(row, serialize_message(make_accel(a, stamp, msg)))
+                     for row, (a, msg) in enumerate(zip(u.tolist(), self.cmd_msgs))]
+        self.outbox.extend(self.sent)
+        self.flush()
 
     def flush(self) -> None:
-        """Publish queued commands once the world's subscription is matched.
+        """Publish queued commands whose topic the world's subscription has matched.
 
         A command published before the match would be lost and cost the world a timeout.
         """
-        if self.outbox and self.cmd_pub.get_subscription_count() > 0:
-            for msg in self.outbox:
-                self.cmd_pub.publish(msg)
-            self.outbox.clear()
+        if not self.outbox:
+            return
+        waiting = []
+        for row, msg in self.outbox:
+            pub = self.cmd_pubs[row]
+            if pub.get_subscription_count() > 0:
+                pub.publish(msg)
+            else:
+                waiting.append((row, msg))
+        self.outbox = waiting
 
     def on_timer(self) -> None:
         """Realtime mode: answer with the latest known states (zero-order hold)."""
-        latest, n = self.latest, self.scenario.n_agents
-        if len(latest.odom) < n or latest.leader_odom is None or latest.leader_accel is None:
+        if not self.latest.complete(self.scenario.n_agents):
             return
-        q = np.array([latest.odom[j][0] for j in range(n)])
-        p = np.array([latest.odom[j][1] for j in range(n)])
-        leader = LeaderState(latest.leader_odom[0], latest.leader_odom[1], latest.leader_accel)
-        u = self.controller.command(q, p, leader)
-        self.cmd_pub.publish(make_accel(u, self.latest_stamp))
+        u = self.controller.command(*self.latest.swarm(self.scenario.n_agents))
+        self.publish_commands(u, self.latest_stamp)
 
 
 def main(args: list[str] | None = None) -> int:
@@ -206,6 +279,16 @@ def main(args: list[str] | None = None) -> int:
     found = [m.group(1) for a in argv for m in [re.search(r'^agent_id:=(\d+)$', a)] if m]
     name = f'agent_{found[-1]}' if found else 'agent'
     return run_node('agent', lambda: AgentNode(node_name=name), args)
+
+
+def container_main(args: list[str] | None = None) -> int:
+    """Run a container hosting many agents (``ros2 run flock_swarm agents``).
+
+    It hosts every agent of the scenario unless ``-p agent_ids:='0-49'`` says otherwise; the
+    node is named ``agents``.
+    """
+    return run_node('agents', lambda: AgentNode(default_agent_ids='all', node_name='agents'),
+                    args)
 
 
 if __name__ == '__main__':

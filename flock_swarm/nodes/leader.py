@@ -16,9 +16,9 @@ from rosgraph_msgs.msg import Clock
 
 from flock_swarm.core.dynamics import VirtualLeader
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
-                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, declare,
-                                      declare_common, load_scenario, make_accel, make_odometry,
-                                      run_node, timer_period)
+                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
+                                      declare, declare_common, load_scenario, make_accel,
+                                      make_odometry, run_node, timer_period)
 
 
 LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout'}
@@ -39,9 +39,9 @@ class LeaderNode(Node):
         self.target = -1
         # Lockstep: hold the first tick until every agent and the world have matched the
         # leader's topics, so nobody misses step 0 (bounded by start_timeout).
-        self.expect = declare(self, 'expect_subscribers', sc.n_agents + 1,
+        self.expect = declare(self, 'expect_subscribers', -1,
                               'subscribers each leader topic must have before the first tick '
-                              'is answered (agents + world)')
+                              'is answered (-1: the world plus one per node hosting agents)')
         self.start_timeout = declare(self, 'start_timeout', 30.0,
                                      'seconds to wait for expect_subscribers')
         self.matched = False
@@ -68,10 +68,14 @@ class LeaderNode(Node):
         if self.target < 0:
             return
         if not self.matched:
+            need = self.expect
+            if need < 0:
+                hosts = agent_hosts(self, self.scenario.n_agents)
+                need = None if hosts is None else hosts + 1
             counts = (self.odom_pub.get_subscription_count(),
                       self.accel_pub.get_subscription_count())
             waited = time.monotonic() - self.t0
-            if min(counts) < self.expect and waited < self.start_timeout:
+            if (need is None or min(counts) < need) and waited < self.start_timeout:
                 return
             self.matched = True
             self.retry.cancel()

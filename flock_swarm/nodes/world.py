@@ -25,6 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
@@ -36,11 +37,15 @@ from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
-                                      TELEMETRY_QOS, StepClock, accel_vector, cmd_topic,
-                                      declare, declare_common, load_scenario, make_odometry,
-                                      odom_topic, odometry_state, run_node, timer_period)
+                                      TELEMETRY_QOS, StepClock, accel_vector, agent_hosts,
+                                      cmd_topic, declare, declare_common, load_scenario,
+                                      make_odometry, odom_topic, odometry_state, run_node,
+                                      timer_period)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
 from flock_swarm.sim import RunLog, SimResult, build_summary, jsonable, write_outputs
+
+#: Seconds after which a stalled lockstep step is offered again (see ``resend_step``).
+RESEND_PERIOD = 0.5
 
 WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
                                 'marker_every', 'metrics_every', 'expect_subscribers'}
@@ -72,7 +77,7 @@ class WorldNode(Node):
         self.metrics_every = declare(self, 'metrics_every', 10, 'publish metrics every N steps')
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
                                           'subscribers each odometry topic must have before '
-                                          'the start (-1: n_agents)')
+                                          'the start (-1: one per node hosting agents)')
         for key, value, ok in (('step_timeout', self.step_timeout, self.step_timeout > 0),
                                ('start_timeout', self.start_timeout, self.start_timeout >= 0),
                                ('marker_every', self.marker_every, self.marker_every >= 1),
@@ -102,6 +107,8 @@ class WorldNode(Node):
         self.started = False
         self.status = 'running'
         self.deadline = 0.0
+        self.resend_at = 0.0
+        self.resends = 0
         self.t_wall0 = time.monotonic()
         self.t_last_progress = self.t_wall0
         self.metrics_now: dict = {}
@@ -110,22 +117,16 @@ class WorldNode(Node):
         self.clock_pub = self._publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self._publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(n)]
+        self.odom_msgs = [make_odometry(self.q[i], self.p[i], self.clock.stamp(0),
+                                        f'agent_{i}') for i in range(n)]
         self.marker_pub = self._publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
         self.metrics_pub = self._publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
-        self.cmd_topics = []
-        for i in range(n):
-            sub = self.create_subscription(AccelStamped, cmd_topic(i),
-                                           lambda msg, i=i: self.on_command(i, msg),
-                                           LOCKSTEP_QOS)
-            self.cmd_topics.append(sub.topic_name)
-            self._record_topic(sub.topic_name, AccelStamped, LOCKSTEP_QOS)
-        sub = self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, LOCKSTEP_QOS)
-        self.leader_odom_topic = sub.topic_name
-        self._record_topic(sub.topic_name, Odometry, LOCKSTEP_QOS)
-        sub = self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel,
-                                       LOCKSTEP_QOS)
-        self.leader_accel_topic = sub.topic_name
-        self._record_topic(sub.topic_name, AccelStamped, LOCKSTEP_QOS)
+        self.cmd_topics = [self._subscribe(AccelStamped, cmd_topic(i),
+                                           lambda msg, k, i=i: self.on_command(i, msg, k))
+                           for i in range(n)]
+        self.leader_odom_topic = self._subscribe(Odometry, LEADER_ODOM, self.on_leader_odom)
+        self.leader_accel_topic = self._subscribe(AccelStamped, LEADER_ACCEL,
+                                                  self.on_leader_accel)
         if self.lockstep:
             self.timer = self.create_timer(0.01, self.on_lockstep_timer)
         else:
@@ -175,20 +176,35 @@ class WorldNode(Node):
         return pub
 
     def _publish(self, pub, msg, t_ns: int) -> None:
-        pub.publish(msg)
+        # Serialised once: the same bytes go to DDS and to the bag.
+        data = serialize_message(msg)
+        pub.publish(data)
         if self.bag is not None:
-            self.bag.write(pub.topic_name, msg, t_ns)
+            self.bag.write_serialized(pub.topic_name, data, t_ns)
 
-    def _record_received(self, topic: str, msg, t_ns: int) -> None:
-        if self.bag is not None:
-            self.bag.write(topic, msg, t_ns)
+    def _subscribe(self, msg_type, topic: str, handler) -> str:
+        """Subscribe to ``topic``; record each message as received, then hand it on.
+
+        The subscription takes the serialised bytes, so the bag stores what came over the
+        wire without serialising it again; ``handler(msg, k)`` gets the decoded message and
+        the step of its stamp. Return the resolved topic name.
+        """
+        def on_data(data: bytes) -> None:
+            msg = deserialize_message(data, msg_type)
+            k = self.clock.step_of(msg.header.stamp)
+            if self.bag is not None:
+                self.bag.write_serialized(name, data, self.clock.ns(max(k, 0)))
+            handler(msg, k)
+
+        name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
+                                        raw=True).topic_name
+        self._record_topic(name, msg_type, LOCKSTEP_QOS)
+        return name
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def on_command(self, i: int, msg: AccelStamped) -> None:
-        """Store agent ``i``'s command (lockstep: for its stamp's step; realtime: held)."""
-        k = self.clock.step_of(msg.header.stamp)
-        self._record_received(self.cmd_topics[i], msg, self.clock.ns(max(k, 0)))
+    def on_command(self, i: int, msg: AccelStamped, k: int) -> None:
+        """Store agent ``i``'s command (lockstep: for its stamp's step ``k``; realtime: held)."""
         u = accel_vector(msg, self.scenario.dim)
         if not np.isfinite(u).all():
             self.get_logger().warning(f'agent {i} sent a non-finite command at step {k}; '
@@ -201,17 +217,13 @@ class WorldNode(Node):
         else:
             self.held[i] = u
 
-    def on_leader_odom(self, msg: Odometry) -> None:
-        """Store the leader's position and velocity."""
-        k = self.clock.step_of(msg.header.stamp)
-        self._record_received(self.leader_odom_topic, msg, self.clock.ns(max(k, 0)))
+    def on_leader_odom(self, msg: Odometry, k: int) -> None:
+        """Store the leader's position and velocity of step ``k``."""
         self.leader_odom[k] = odometry_state(msg, self.scenario.dim)
         self._maybe_finish()
 
-    def on_leader_accel(self, msg: AccelStamped) -> None:
-        """Store the leader's acceleration."""
-        k = self.clock.step_of(msg.header.stamp)
-        self._record_received(self.leader_accel_topic, msg, self.clock.ns(max(k, 0)))
+    def on_leader_accel(self, msg: AccelStamped, k: int) -> None:
+        """Store the leader's acceleration of step ``k``."""
         self.leader_accel[k] = accel_vector(msg, self.scenario.dim)
         self._maybe_finish()
 
@@ -219,11 +231,15 @@ class WorldNode(Node):
 
     def ready_to_start(self) -> bool:
         """Return whether every agent and the leader are discovered and subscribed."""
-        n = self.scenario.n_agents
-        need = n if self.expect_subscribers < 0 else self.expect_subscribers
+        if self.expect_subscribers < 0:
+            need = agent_hosts(self, self.scenario.n_agents)
+            if need is None:
+                return False
+        else:
+            need = self.expect_subscribers
+            if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
+                return False
         if any(pub.get_subscription_count() < need for pub in self.odom_pubs):
-            return False
-        if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
             return False
         return (self.count_publishers(self.leader_odom_topic) >= 1
                 and self.clock_pub.get_subscription_count() >= 1)
@@ -244,6 +260,24 @@ class WorldNode(Node):
             return
         if now >= self.deadline:
             self.finish_step(timed_out=True)
+        elif now >= self.resend_at:
+            self.resend_step()
+
+    def resend_step(self) -> None:
+        """Publish the current step's ``/clock`` and odometry again (not recorded again).
+
+        DDS drops a sample that reaches a reader before the reader has matched its writer,
+        and a reliable writer repairs it only at its next heartbeat (3 s in Fast DDS), so a
+        stalled step is offered again every ``RESEND_PERIOD`` until its timeout: the leader
+        answers a repeated tick, and agents repeat the commands they already sent.
+        """
+        self.resends += 1
+        self.resend_at = time.monotonic() + RESEND_PERIOD
+        stamp = self.clock.stamp(self.k)
+        self.clock_pub.publish(Clock(clock=stamp))
+        for pub, msg in zip(self.odom_pubs, self.odom_msgs):
+            msg.header.stamp = stamp
+            pub.publish(msg)
 
     def begin_step(self) -> None:
         """Publish ``/clock`` and every odometry for the current step."""
@@ -251,9 +285,15 @@ class WorldNode(Node):
         stamp = self.clock.stamp(k)
         self.commands = {}
         self.deadline = time.monotonic() + self.step_timeout
+        self.resend_at = time.monotonic() + RESEND_PERIOD
+        self.publish_states(stamp, t_ns)
+
+    def publish_states(self, stamp, t_ns: int) -> None:
+        """Publish ``/clock`` and every agent's odometry (reusing one message per agent)."""
         self._publish(self.clock_pub, Clock(clock=stamp), t_ns)
-        for i, pub in enumerate(self.odom_pubs):
-            self._publish(pub, make_odometry(self.q[i], self.p[i], stamp, f'agent_{i}'), t_ns)
+        for pub, msg, q, p in zip(self.odom_pubs, self.odom_msgs, self.q.tolist(),
+                                  self.p.tolist()):
+            self._publish(pub, make_odometry(q, p, stamp, '', msg), t_ns)
 
     def _maybe_finish(self) -> None:
         if (self.lockstep and self.started and not self.done
@@ -348,9 +388,7 @@ class WorldNode(Node):
             del self.leader_odom[old]
         for old in [s for s in self.leader_accel if s < k - 10]:
             del self.leader_accel[old]
-        self._publish(self.clock_pub, Clock(clock=stamp), t_ns)
-        for i, pub in enumerate(self.odom_pubs):
-            self._publish(pub, make_odometry(self.q[i], self.p[i], stamp, f'agent_{i}'), t_ns)
+        self.publish_states(stamp, t_ns)
         u = self.held.copy()
         self.started = True
         self.observe(u, [])
@@ -396,6 +434,7 @@ class WorldNode(Node):
             'mode': self.get_parameter('mode').value,
             'missed_commands': int(self.missed.sum()),
             'missed_commands_per_agent': [int(x) for x in self.missed],
+            'resent_steps': self.resends,
             'leader_missed': self.leader_missed,
             'wall_time_s': round(time.monotonic() - self.t_wall0, 3),
             'bag': str(self.out / 'bag') if self.bag is not None else None,
