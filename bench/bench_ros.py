@@ -1,0 +1,370 @@
+"""Benchmark of the lockstep ROS pipeline against its messaging floor, recording and memory.
+
+    python bench/bench_ros.py [--sizes 5 10 20 50 100] [--layouts one container processes]
+                              [--steps 300] [--json out/bench/ros.json]
+
+For each layout and N it runs, in fresh processes and one after the other:
+
+``pipeline``
+    world + leader + N agents (``swarm demo`` at the demo's density, lockstep, recording on):
+    steps per second from the world's own clock (``steps / wall_time_s``, start-up and
+    discovery excluded) and the real-time factor ``steps dt / wall``.
+``no-record``
+    the same run with ``record:=false``.
+``floor``
+    the same publish/subscribe pattern, with the same message types, QoS, executor
+    (EventsExecutor) and process layout, but empty callbacks: a world publishing ``/clock``
+    and N odometry messages per step and waiting for N commands and the leader's two
+    messages; a leader answering each tick; agent hosts answering once they have every
+    odometry and the leader's state. Messages are built once and reused.
+
+Layouts: ``one`` (every node in one process, the agents in one container node),
+``container`` (three processes: world | leader | agents container), ``processes`` (world,
+leader and one process per agent, like ``ros2 run flock_swarm agent`` on robots).
+
+Targets (issue 5): pipeline >= 70 % of the floor's steps/s at every N; N = 100 in one
+process >= 20 steps/s; recording costs <= 10 % (pipeline against no-record). The memory check
+(``--memory``) runs the one-process pipeline for S and 10 S steps and compares peak RSS
+(target: < 1.2x).
+"""
+
+import argparse
+import json
+import math
+import os
+import platform
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
+DENSITY = 30 / 400.0
+#: Wall-clock bound of one benchmark run.
+RUN_TIMEOUT = 900.0
+#: Domain id of the benchmark runs (isolated from the test suite's 1-200).
+DOMAIN = 220
+
+
+def scenario_overrides(n: int, steps: int) -> list[str]:
+    """Return the ``--set`` overrides of the demo at ``n`` agents and ``steps`` steps."""
+    side = math.sqrt(n / DENSITY)
+    return [f'n_agents={n}', f'informed.count={max(1, n // 3)}',
+            f'initial.position_box=[[0, {side:.3f}], [0, {side:.3f}]]',
+            f'duration={steps * 0.02:.2f}', 'record_every=10']
+
+
+# ----------------------------------------------------------------------------------------------
+# The messaging floor: the pipeline's topics and messages, empty callbacks
+
+#: Seconds after which the floor's world offers a stalled step again (as the world node does).
+RESEND_PERIOD = 0.5
+#: Steps before the floor's clock starts (discovery settles, first samples repaired).
+WARMUP = 10
+
+
+def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int], context):
+    """Return the floor's nodes for one process and its shared state.
+
+    :param role: ``one`` (all), ``world``, ``leader`` or ``agents``.
+    :param n: number of agents.
+    :param steps: steps to time (after ``WARMUP``).
+    :param hosts: processes hosting agents (subscribers the world waits for).
+    :param agent_ids: the agents this process hosts (role ``one`` or ``agents``).
+    :param context: the rclpy context.
+    """
+    from geometry_msgs.msg import AccelStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+
+    from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
+                                          LOCKSTEP_QOS, cmd_topic, odom_topic)
+    nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
+                        'started': False, 'stall': 0.0}
+
+    if role in ('one', 'world'):
+        world = Node('floor_world', context=context)
+        clock_pub = world.create_publisher(Clock, CLOCK, CLOCK_QOS)
+        odom_pubs = [world.create_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
+                     for i in range(n)]
+        odom_msgs = [Odometry() for _ in range(n)]
+        clock_msg = Clock()
+
+        def tick():
+            state['stall'] = time.monotonic() + RESEND_PERIOD
+            clock_msg.clock.sec = state['step']
+            clock_pub.publish(clock_msg)
+            for pub, msg in zip(odom_pubs, odom_msgs):
+                msg.header.stamp.sec = state['step']
+                pub.publish(msg)
+
+        def arrived(msg, kind):
+            if msg.header.stamp.sec != state['step']:
+                return
+            state[kind] += 1
+            if state['cmds'] >= n and state['leader'] >= 2:
+                state['cmds'] = state['leader'] = 0
+                state['step'] += 1
+                if state['step'] == WARMUP:
+                    state['t0'] = time.perf_counter()
+                if state['step'] == WARMUP + steps:
+                    state['t1'] = time.perf_counter()
+                else:
+                    tick()
+
+        for i in range(n):
+            world.create_subscription(AccelStamped, cmd_topic(i),
+                                      lambda m: arrived(m, 'cmds'), LOCKSTEP_QOS)
+        world.create_subscription(Odometry, LEADER_ODOM, lambda m: arrived(m, 'leader'),
+                                  LOCKSTEP_QOS)
+        world.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: arrived(m, 'leader'),
+                                  LOCKSTEP_QOS)
+
+        def on_timer():
+            if state['started']:
+                if state['t1'] is None and time.monotonic() > state['stall']:
+                    state['cmds'] = state['leader'] = 0
+                    tick()
+                return
+            if all(p.get_subscription_count() >= hosts for p in odom_pubs) \
+                    and clock_pub.get_subscription_count() >= 1 \
+                    and all(world.count_publishers(f'/{cmd_topic(i)}') for i in range(n)) \
+                    and world.count_publishers(f'/{LEADER_ODOM}'):
+                state['started'] = True
+                tick()
+
+        world.create_timer(0.01, on_timer)
+        nodes.append(world)
+
+    if role in ('one', 'leader'):
+        leader = Node('floor_leader', context=context)
+        l_odom = leader.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
+        l_accel = leader.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
+        l_msgs = (Odometry(), AccelStamped())
+
+        def on_clock(msg):
+            l_msgs[0].header.stamp = l_msgs[1].header.stamp = msg.clock
+            l_odom.publish(l_msgs[0])
+            l_accel.publish(l_msgs[1])
+
+        leader.create_subscription(Clock, CLOCK, on_clock, CLOCK_QOS)
+        nodes.append(leader)
+
+    if role in ('one', 'agents'):
+        host = Node('floor_agents', context=context)
+        pubs = [host.create_publisher(AccelStamped, cmd_topic(i), LOCKSTEP_QOS)
+                for i in agent_ids]
+        cmd_msgs = [AccelStamped() for _ in agent_ids]
+        box = {'step': -1, 'odom': 0, 'leader': 0}
+
+        def got(msg, kind):
+            if msg.header.stamp.sec != box['step']:
+                box.update(step=msg.header.stamp.sec, odom=0, leader=0)
+            box[kind] += 1
+            if box['odom'] == n and box['leader'] == 2:
+                for pub, cmd in zip(pubs, cmd_msgs):
+                    cmd.header.stamp = msg.header.stamp
+                    pub.publish(cmd)
+
+        for j in range(n):
+            host.create_subscription(Odometry, odom_topic(j), lambda m: got(m, 'odom'),
+                                     LOCKSTEP_QOS)
+        host.create_subscription(Odometry, LEADER_ODOM, lambda m: got(m, 'leader'),
+                                 LOCKSTEP_QOS)
+        host.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: got(m, 'leader'),
+                                 LOCKSTEP_QOS)
+        nodes.append(host)
+    return nodes, state
+
+
+def run_floor_role(args) -> int:
+    """Run the floor's nodes of one process (``--role``); the world prints its steps/s."""
+    import rclpy
+    from rclpy.context import Context
+
+    from flock_swarm.nodes.common import make_executor
+    context = Context()
+    rclpy.init(context=context, domain_id=args.domain)
+    ids = list(range(args.n)) if args.agent_ids is None else args.agent_ids
+    nodes, state = floor_nodes(args.role, args.n, args.steps, args.hosts, ids, context)
+    ex = make_executor(context)
+    for node in nodes:
+        ex.add_node(node)
+    deadline = time.monotonic() + RUN_TIMEOUT
+    try:
+        while context.ok() and time.monotonic() < deadline and state['t1'] is None:
+            ex.spin_once(timeout_sec=0.05)
+    except KeyboardInterrupt:
+        pass
+    if state['t1'] is not None:
+        print(json.dumps({'steps_per_s': args.steps / (state['t1'] - state['t0'])}),
+              flush=True)
+    ex.shutdown()
+    for node in nodes:
+        node.destroy_node()
+    rclpy.try_shutdown(context=context)
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------
+# Orchestration
+
+
+def _env() -> dict:
+    return dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN),
+                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+
+
+def _stop(procs: list) -> None:
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    for proc in procs:
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def floor(layout: str, n: int, steps: int) -> float:
+    """Return the floor's steps/s for a layout."""
+    me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
+          '--domain', str(DOMAIN)]
+    if layout == 'one':
+        out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
+                             text=True, timeout=RUN_TIMEOUT, env=_env())
+        return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
+    hosts = [['--agent-ids'] + [str(i) for i in range(n)]] if layout == 'container' else [
+        ['--agent-ids', str(i)] for i in range(n)]
+    procs = [subprocess.Popen(me + ['--role', 'leader'], env=_env())]
+    procs += [subprocess.Popen(me + ['--role', 'agents'] + ids, env=_env()) for ids in hosts]
+    try:
+        out = subprocess.run(me + ['--role', 'world', '--hosts', str(len(hosts))],
+                             capture_output=True, text=True, timeout=RUN_TIMEOUT, env=_env())
+    finally:
+        _stop(procs)
+    return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
+
+
+def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> list[str]:
+    """Return the ``swarm`` command of a pipeline run."""
+    cmd = [sys.executable, '-m', 'flock_swarm.runner', 'demo', '--out', str(out), '--no-plots',
+           '--domain-id', str(DOMAIN)]
+    for item in scenario_overrides(n, steps):
+        cmd += ['--set', item]
+    if layout == 'container':
+        cmd += ['--processes', '--container']
+    elif layout == 'processes':
+        cmd += ['--processes']
+    if not record:
+        cmd.append('--no-record')
+    return cmd
+
+
+def pipeline(layout: str, n: int, steps: int, record: bool) -> dict:
+    """Run the pipeline once; return steps/s, real-time factor and the child's peak RSS."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / 'run'
+        proc = subprocess.Popen(swarm_command(layout, n, steps, out, record), env=_env(),
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        summary = json.loads((out / 'summary.json').read_text())
+    if summary['status'] != 'completed' or summary['missed_commands']:
+        raise RuntimeError(f'{layout} N={n}: {summary["status"]}, '
+                           f'{summary["missed_commands"]} missed commands')
+    rate = summary['steps'] / summary['wall_time_s']
+    return {'steps_per_s': rate, 'rtf': rate * summary['dt'],
+            'peak_rss_mib': usage.ru_maxrss / 1024.0}
+
+
+def machine() -> dict:
+    """Return a description of this machine."""
+    cpu = ''
+    try:
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.startswith('model name'):
+                cpu = line.split(':', 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {'cpus': os.cpu_count(), 'cpu_model': cpu, 'python': platform.python_version(),
+            'platform': platform.platform(), 'load_average': os.getloadavg()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark (or one floor process with ``--role``)."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--sizes', type=int, nargs='+', default=[5, 10, 20, 50, 100])
+    parser.add_argument('--layouts', nargs='+', default=['one', 'container', 'processes'],
+                        choices=['one', 'container', 'processes'])
+    parser.add_argument('--steps', type=int, default=300, help='steps per run')
+    parser.add_argument('--max-process-agents', type=int, default=100,
+                        help='largest N run in the one-process-per-agent layout')
+    parser.add_argument('--memory', action='store_true',
+                        help='also compare peak RSS of S and 10 S steps (one process)')
+    parser.add_argument('--json', type=Path, help='write the results here')
+    parser.add_argument('--role', choices=['one', 'world', 'leader', 'agents'],
+                        help=argparse.SUPPRESS)
+    parser.add_argument('--n', type=int, help=argparse.SUPPRESS)
+    parser.add_argument('--hosts', type=int, default=1, help=argparse.SUPPRESS)
+    parser.add_argument('--agent-ids', type=int, nargs='+', help=argparse.SUPPRESS)
+    parser.add_argument('--domain', type=int, default=DOMAIN, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.role is not None:
+        return run_floor_role(args)
+    print(f'# bench_ros: {" ".join(sys.argv)}', flush=True)
+    info = machine()
+    print(f'# machine: {info}', flush=True)
+    rows = []
+    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"pipeline":>9} {"ratio":>6} {"no-rec":>7} '
+          f'{"rec cost":>8} {"RTF":>6}  [steps/s]', flush=True)
+    for layout in args.layouts:
+        for n in args.sizes:
+            if layout == 'processes' and n > args.max_process_agents:
+                continue
+            steps = args.steps if layout != 'processes' else max(50, args.steps * 10 // n)
+            fl = floor(layout, n, steps)
+            full = pipeline(layout, n, steps, record=True)
+            bare = pipeline(layout, n, steps, record=False)
+            row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl,
+                   'pipeline': full['steps_per_s'], 'rtf': full['rtf'],
+                   'no_record': bare['steps_per_s'],
+                   'ratio': full['steps_per_s'] / fl,
+                   'recording_cost': 1.0 - full['steps_per_s'] / bare['steps_per_s']}
+            rows.append(row)
+            print(f'{layout:>10} {n:>4} {fl:8.1f} {row["pipeline"]:9.1f} {row["ratio"]:6.2f} '
+                  f'{row["no_record"]:7.1f} {100 * row["recording_cost"]:7.1f}% '
+                  f'{row["rtf"]:6.2f}', flush=True)
+    checks = [(f'{r["layout"]} N={r["n"]}: pipeline >= 70% of floor', r['ratio'] >= 0.7)
+              for r in rows]
+    checks += [(f'{r["layout"]} N={r["n"]}: recording costs <= 10%',
+                r['recording_cost'] <= 0.10) for r in rows]
+    checks += [(f'one N=100: >= 20 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 20)
+               for r in rows if r['layout'] == 'one' and r['n'] == 100]
+    memory = None
+    if args.memory:
+        short = pipeline('one', 30, args.steps, record=True)
+        long = pipeline('one', 30, 10 * args.steps, record=True)
+        memory = {'steps': args.steps, 'short_mib': short['peak_rss_mib'],
+                  'long_mib': long['peak_rss_mib'],
+                  'ratio': long['peak_rss_mib'] / short['peak_rss_mib']}
+        print(f'memory (one process, N = 30): {args.steps} steps {short["peak_rss_mib"]:.0f} '
+              f'MiB, {10 * args.steps} steps {long["peak_rss_mib"]:.0f} MiB peak RSS: '
+              f'{memory["ratio"]:.3f}x', flush=True)
+        checks.append(('10x longer run peaks < 1.2x memory', memory['ratio'] < 1.2))
+    for name, ok in checks:
+        print(f'{"PASS" if ok else "FAIL"}  {name}', flush=True)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({'machine': info, 'rows': rows, 'memory': memory,
+                                         'checks': checks}, indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
