@@ -270,6 +270,9 @@ def changed(name: str, changes: dict) -> dict:
     ('su2009_fig7', {'description': datetime.date(2001, 12, 14)}, 'description'),
     ('demo', {'name': b'\x00\xff'}, 'name'),
     ('os2003_sink', {'informed.count': datetime.date(2001, 12, 14)}, 'informed.count'),
+    # ValueError from scipy's KD-tree: squared distances of 1e300 m overflow.
+    ('demo', {'leader.position.1': 1e300}, 'leader.position[1]'),
+    ('os2003_sink', {'initial.position_box.1.1': -1e300}, 'initial.position_box[1][1]'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),

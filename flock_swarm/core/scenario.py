@@ -38,6 +38,11 @@ INFORMED_SELECT = ('all', 'random', 'first', 'ids', 'pseudo_leaders')
 
 #: The largest float; a YAML integer beyond it cannot be converted (OverflowError).
 _FLOAT_MAX = int(np.finfo(float).max)
+#: The largest magnitude of any scenario number (positions in m, velocities in m/s, gains,
+#: radii). Finite but huge values overflow float64 in the laws' squares and pair sums
+#: (``||q_i - q_j||^2`` of 1e300 is inf) long before they mean anything physical; 1e12 keeps
+#: squares, products and sums over a million agents far inside the float range.
+MAX_MAGNITUDE = 1e12
 
 
 def _number(value: Any, key: str) -> float:
@@ -48,6 +53,8 @@ def _number(value: Any, key: str) -> float:
                             '(beyond the float range)')
     if not math.isfinite(value):
         raise ScenarioError(key, f'must be finite, got {value!r}')
+    if abs(value) > MAX_MAGNITUDE:
+        raise ScenarioError(key, f'magnitude must be <= {MAX_MAGNITUDE:g}, got {value!r}')
     return float(value)
 
 
