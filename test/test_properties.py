@@ -273,6 +273,9 @@ def changed(name: str, changes: dict) -> dict:
     # ValueError from scipy's KD-tree: squared distances of 1e300 m overflow.
     ('demo', {'leader.position.1': 1e300}, 'leader.position[1]'),
     ('os2003_sink', {'initial.position_box.1.1': -1e300}, 'initial.position_box[1][1]'),
+    # ValueError from NumPy: 'Maximum allowed dimension exceeded' (10^15 agents).
+    ('jadbabaie2003_leader', {'n_agents': 10 ** 15}, 'n_agents'),
+    ('demo', {'n_agents': 1e300}, 'n_agents'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),

@@ -43,6 +43,9 @@ _FLOAT_MAX = int(np.finfo(float).max)
 #: (``||q_i - q_j||^2`` of 1e300 is inf) long before they mean anything physical; 1e12 keeps
 #: squares, products and sums over a million agents far inside the float range.
 MAX_MAGNITUDE = 1e12
+#: The most agents a scenario may have: ten times the largest swarm the simulator is
+#: benchmarked on (bench/bench_sim.py); beyond it NumPy refuses the arrays or memory runs out.
+MAX_AGENTS = 1_000_000
 
 
 def _number(value: Any, key: str) -> float:
@@ -214,8 +217,8 @@ def parse_scenario(data: Any) -> Scenario:
     if dim not in (2, 3):
         raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
     n = _integer(data['n_agents'], 'n_agents')
-    if n < 1:
-        raise ScenarioError('n_agents', f'must be >= 1, got {n}')
+    if not 1 <= n <= MAX_AGENTS:
+        raise ScenarioError('n_agents', f'must be in [1, {MAX_AGENTS}], got {n}')
     dt = _positive(data['dt'], 'dt')
     duration = _positive(data['duration'], 'duration')
     if duration < dt:
