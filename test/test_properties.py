@@ -276,6 +276,10 @@ def changed(name: str, changes: dict) -> dict:
     # ValueError from NumPy: 'Maximum allowed dimension exceeded' (10^15 agents).
     ('jadbabaie2003_leader', {'n_agents': 10 ** 15}, 'n_agents'),
     ('demo', {'n_agents': 1e300}, 'n_agents'),
+    # OverflowError: steps = round(duration / dt) of an infinite quotient.
+    ('demo', {'dt': 5e-324}, 'dt'),
+    ('su2009_fig6', {'dt': 1e-300, 'duration': 1e12}, 'dt'),
+    ('demo', {'duration': 1e12}, 'duration'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),

@@ -46,6 +46,10 @@ MAX_MAGNITUDE = 1e12
 #: The most agents a scenario may have: ten times the largest swarm the simulator is
 #: benchmarked on (bench/bench_sim.py); beyond it NumPy refuses the arrays or memory runs out.
 MAX_AGENTS = 1_000_000
+#: The shortest step [s]: the ROS nodes stamp step ``k`` with ``k dt`` in whole nanoseconds.
+MIN_DT = 1e-9
+#: The longest run [s]: the seconds of a ROS stamp (builtin_interfaces/Time.sec) are int32.
+MAX_DURATION = 2 ** 31 - 1
 
 
 def _number(value: Any, key: str) -> float:
@@ -220,7 +224,13 @@ def parse_scenario(data: Any) -> Scenario:
     if not 1 <= n <= MAX_AGENTS:
         raise ScenarioError('n_agents', f'must be in [1, {MAX_AGENTS}], got {n}')
     dt = _positive(data['dt'], 'dt')
+    if dt < MIN_DT:
+        raise ScenarioError('dt', f'must be >= {MIN_DT:g} s (ROS stamps count whole '
+                            f'nanoseconds), got {dt!r}')
     duration = _positive(data['duration'], 'duration')
+    if duration > MAX_DURATION:
+        raise ScenarioError('duration', f'must be <= {MAX_DURATION} s (ROS stamps count '
+                            f'seconds in 32 bits), got {duration!r}')
     if duration < dt:
         raise ScenarioError('duration', f'must be >= dt ({dt}), got {duration}')
     seed = _integer(data.get('seed', 0), 'seed')
