@@ -280,6 +280,8 @@ def changed(name: str, changes: dict) -> dict:
     ('demo', {'dt': 5e-324}, 'dt'),
     ('su2009_fig6', {'dt': 1e-300, 'duration': 1e12}, 'dt'),
     ('demo', {'duration': 1e12}, 'duration'),
+    # summary.json held min_pair_distance = Infinity (not JSON) for a single agent.
+    ('su2009_fig5', {'n_agents': 1}, 'n_agents'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),

@@ -221,8 +221,10 @@ def parse_scenario(data: Any) -> Scenario:
     if dim not in (2, 3):
         raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
     n = _integer(data['n_agents'], 'n_agents')
-    if not 1 <= n <= MAX_AGENTS:
-        raise ScenarioError('n_agents', f'must be in [1, {MAX_AGENTS}], got {n}')
+    # Two at least: the closest approach, collisions and graph components of summary.json are
+    # pair metrics, and with one agent they have no finite value to write.
+    if not 2 <= n <= MAX_AGENTS:
+        raise ScenarioError('n_agents', f'must be in [2, {MAX_AGENTS}], got {n}')
     dt = _positive(data['dt'], 'dt')
     if dt < MIN_DT:
         raise ScenarioError('dt', f'must be >= {MIN_DT:g} s (ROS stamps count whole '
