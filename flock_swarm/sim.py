@@ -288,9 +288,29 @@ def jsonable(value):
     raise TypeError(f'not JSON serialisable: {type(value).__name__}')
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line naming the option, like scenario errors.
+
+    ``sim: error: --seed: invalid int value: 'x'`` instead of argparse's usage block followed
+    by ``sim: error: argument --seed: ...``; exit status 2 as argparse's.
+    """
+
+    def error(self, message: str):
+        """Print ``PROG: error: OPTION: reason (see PROG --help)`` and exit with status 2."""
+        required = 'the following arguments are required: '
+        unknown = 'unrecognized arguments: '
+        if message.startswith('argument '):
+            message = message[len('argument '):]
+        elif message.startswith(required):
+            message = f'{message[len(required):]}: required'
+        elif message.startswith(unknown):
+            message = f'{message[len(unknown):]}: unrecognized argument(s)'
+        self.exit(EXIT_USAGE, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``sim``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='sim', description='Run a flocking scenario with the reference simulator.')
     parser.add_argument('scenario', help='preset name (see --list) or path to a YAML file')
     parser.add_argument('--set', dest='overrides', action='append', default=[],
@@ -314,7 +334,11 @@ def main(argv: list[str] | None = None) -> int:
         from flock_swarm.scenarios import preset_names
         print('\n'.join(preset_names()))
         return 0
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        # --help, or an argument error already printed: the status, as for every other error.
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     from flock_swarm.scenarios import load
     try:
         sc = load(args.scenario, args.overrides, args.seed)

@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 from flock_swarm import sim
 from flock_swarm.core.errors import one_line
-from flock_swarm.core.scenario import TOP_KEYS
+from flock_swarm.core.scenario import TOP_KEYS, parse_yaml
 from flock_swarm.scenarios import load_mapping, preset_names
 
 #: Steps every generated run is cut to (the property is about input, not long runs).
@@ -222,13 +222,19 @@ def assert_one_line_error(status: int, err: str, data=None, prog: str = 'sim') -
 
 def assert_runs_or_names_key(data, extra: list[str] = ()) -> None:
     """The property, for one scenario mapping (and extra ``sim`` arguments)."""
-    status, err, out, tmp = run_sim(dump(data), extra)
+    text = dump(data)
+    status, err, out, tmp = run_sim(text, extra)
     with tmp:
         if status == 0:
             assert err == '', f'a successful quiet run printed {err!r}'
             assert_outputs_finite(out)
         else:
-            assert_one_line_error(status, err, data)
+            # The keys as sim read them: YAML may turn a key such as '1e100' into a number.
+            try:
+                read = parse_yaml(text)
+            except yaml.YAMLError:
+                read = None
+            assert_one_line_error(status, err, read)
 
 
 def dump(data) -> str:
@@ -301,9 +307,13 @@ def test_regression(name, changes, key):
     ('dt: !!timestamp 2001-13-45\n', [], 'scenario'),
     ('dt: ' + '[' * 2000 + ']' * 2000 + '\n', [], 'scenario'),
     (None, ['--set', 'dt=!!float abc'], '--set'),
+    # argparse's usage block before its error line (and SystemExit out of main()).
+    (None, ['--seed', 'abc'], '--seed'),
+    (None, ['--seed', '1.5'], '--seed'),
+    (None, ['--set'], '--set'),
 ])
-def test_regression_yaml(text, extra, key):
-    """Malformed YAML, in the file or in ``--set``: one line naming the file or the option."""
+def test_regression_cli(text, extra, key):
+    """Malformed YAML or arguments: one line naming the file or the option, status 2."""
     status, err, out, tmp = run_sim(dump(BASES['demo']) if text is None else text, extra)
     with tmp:
         assert assert_one_line_error(status, err) == key
