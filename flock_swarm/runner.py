@@ -54,14 +54,17 @@ def node_parameters(scenario: Path, mode: str, realtime_factor: float) -> dict:
     return {'scenario': str(scenario), 'mode': mode, 'realtime_factor': float(realtime_factor)}
 
 
-def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
-                   step_timeout: float = 2.0, executor: str = 'events',
-                   progress=None, timeout: float | None = None, agents=None,
-                   world_params: dict | None = None, realtime_factor: float = 1.0) -> dict:
-    """Run world, leader and the agents in this process on one executor.
+class InProcessSwarm:
+    """World, leader and the agents in this process on one executor (a launch-free script).
 
     The agents are hosted by one agent node (a container: one subscription per odometry
-    topic for all of them), as ``ros2 run flock_swarm agents`` hosts them.
+    topic for all of them), as ``ros2 run flock_swarm agents`` hosts them. Use it as a
+    context manager; tests reach the nodes (``world``, ``leader``, ``agents``), add or remove
+    nodes, and spin until a condition holds::
+
+        with InProcessSwarm(scenario, out, domain_id=7) as swarm:
+            swarm.spin_until(lambda: swarm.world.k >= 100, timeout=60)
+            swarm.remove(swarm.leader)
 
     :param scenario: the resolved scenario file.
     :param out: the output directory.
@@ -70,60 +73,129 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     :param step_timeout: the world's per-step timeout [s].
     :param executor: ``single`` (SingleThreadedExecutor) or ``events`` (EventsExecutor).
     :param progress: callback for progress lines.
-    :param timeout: wall-clock limit [s] of the whole run (``None``: none).
     :param agents: ids of the agents to host (``None``: all); the others stay absent.
     :param world_params: further parameters of the world node.
     :param realtime_factor: realtime mode: simulated seconds per wall second.
-    :return: the summary.
+    :param agent_params: further parameters of the agents' node.
     """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
-    from flock_swarm.nodes.agent import AgentNode
-    from flock_swarm.nodes.common import make_executor
-    from flock_swarm.nodes.leader import LeaderNode
-    from flock_swarm.nodes.world import WorldNode
+    def __init__(self, scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                 step_timeout: float = 2.0, executor: str = 'events', progress=None,
+                 agents=None, world_params: dict | None = None, realtime_factor: float = 1.0,
+                 agent_params: dict | None = None) -> None:
+        """Create the context, the nodes and the executor."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
 
-    def params(values: dict) -> list:
-        return [Parameter(k, value=v) for k, v in values.items()]
+        from flock_swarm.nodes.common import make_executor
+        from flock_swarm.nodes.world import WorldNode
 
-    sc = parse_scenario(parse_yaml(scenario.read_text()))
-    base = node_parameters(scenario, mode, realtime_factor)
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    nodes = []
-    try:
-        world = WorldNode(progress=progress, context=context, parameter_overrides=params(
-            dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))))
-        nodes.append(world)
-        hosted = list(range(sc.n_agents)) if agents is None else list(agents)
-        nodes.append(LeaderNode(context=context, parameter_overrides=params(
-            dict(base, expect_subscribers=2))))
-        nodes.append(AgentNode(node_name='agents', context=context, parameter_overrides=params(
-            dict(base, agent_ids=[int(i) for i in hosted]))))
-        if executor == 'events':
-            ex = make_executor(context)
-        else:
-            ex = SingleThreadedExecutor(context=context)
-        for node in nodes:
-            ex.add_node(node)
-        started = time.monotonic()
+        self.scenario = parse_scenario(parse_yaml(scenario.read_text()))
+        self.base = node_parameters(scenario, mode, realtime_factor)
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.nodes = []
+        self.executor = make_executor(self.context) if executor == 'events' \
+            else SingleThreadedExecutor(context=self.context)
         try:
-            while context.ok() and not world.done:
-                ex.spin_once(timeout_sec=0.1)
-                if timeout is not None and time.monotonic() - started > timeout:
-                    raise TimeoutError(f'the run did not finish within {timeout:g} s')
+            self.world = self.add(WorldNode(
+                progress=progress, context=self.context, parameter_overrides=self.parameters(
+                    out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))))
+            self.leader = self.add_leader()
+            hosted = range(self.scenario.n_agents) if agents is None else agents
+            self.agents = self.add_agents([int(i) for i in hosted], 'agents',
+                                          **(agent_params or {}))
+        except BaseException:
+            self.close()
+            raise
+
+    def parameters(self, **values) -> list:
+        """Return the common node parameters plus ``values`` as rclpy parameters."""
+        from rclpy.parameter import Parameter
+        return [Parameter(k, value=v) for k, v in dict(self.base, **values).items()]
+
+    def add(self, node):
+        """Spin ``node`` with the others; return it."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def add_leader(self):
+        """Start a leader node (again, after :meth:`remove`); return it."""
+        from flock_swarm.nodes.leader import LeaderNode
+        return self.add(LeaderNode(context=self.context,
+                                   parameter_overrides=self.parameters(expect_subscribers=2)))
+
+    def add_agents(self, ids: list[int], name: str, **params):
+        """Start an agent node hosting ``ids``; return it."""
+        from flock_swarm.nodes.agent import AgentNode
+        return self.add(AgentNode(node_name=name, context=self.context,
+                                  parameter_overrides=self.parameters(agent_ids=ids, **params)))
+
+    def remove(self, node) -> None:
+        """Stop spinning ``node`` (a process that died, as the others see it).
+
+        It is destroyed with the others by :meth:`close`: an executor may still hold events
+        of a node it has just let go.
+        """
+        self.executor.remove_node(node)
+
+    def spin_until(self, condition, timeout: float | None) -> None:
+        """Spin until ``condition()`` holds or the world is done.
+
+        :raises TimeoutError: after ``timeout`` seconds (``None``: no limit).
+        """
+        started = time.monotonic()
+        while self.context.ok() and not self.world.done and not condition():
+            self.executor.spin_once(timeout_sec=0.1)
+            if timeout is not None and time.monotonic() - started > timeout:
+                raise TimeoutError(f'the run did not get there within {timeout:g} s')
+
+    def summary(self) -> dict:
+        """Return the world's summary (after the world finished or :meth:`close`)."""
+        return self.world.result.summary if hasattr(self.world, 'result') else {}
+
+    def close(self) -> None:
+        """Let the world write what it recorded; destroy every node and the context."""
+        import rclpy
+        world = getattr(self, 'world', None)
+        if world is not None:
+            world.close()
+        self.executor.shutdown()
+        for node in self.nodes:
+            node.destroy_node()
+        self.nodes = []
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> 'InProcessSwarm':
+        """Return the swarm."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Close the swarm."""
+        self.close()
+
+
+def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                   step_timeout: float = 2.0, executor: str = 'events',
+                   progress=None, timeout: float | None = None, agents=None,
+                   world_params: dict | None = None, realtime_factor: float = 1.0) -> dict:
+    """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
+
+    :param timeout: wall-clock limit [s] of the whole run (``None``: none).
+    :return: the summary.
+
+    The other parameters are :class:`InProcessSwarm`'s.
+    """
+    with InProcessSwarm(scenario, out, mode, domain_id, step_timeout, executor, progress,
+                        agents, world_params, realtime_factor) as swarm:
+        try:
+            swarm.spin_until(lambda: False, timeout)
         except KeyboardInterrupt:
             pass
-        world.close()
-        ex.shutdown()
-        return world.result.summary if hasattr(world, 'result') else {}
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        swarm.world.close()
+        return swarm.summary()
 
 
 def executable(name: str) -> list[str]:

@@ -30,7 +30,8 @@ pytestmark = pytest.mark.ros
 #: Wall-clock bound of one recording (a hung run fails instead of blocking the suite).
 RUN_TIMEOUT = 120.0
 #: Keys of the world's summary that describe the process, not the run.
-PROCESS_KEYS = {'wall_time_s', 'bag', 'resent_steps'}
+PROCESS_KEYS = {'wall_time_s', 'bag', 'resent_steps', 'rejected_messages', 'leader_events',
+                'duplicate_agent_ids', 'bag_error'}
 #: The figures of every analysis.
 FIGURES = ('trajectories.png', 'snapshots.png', 'velocity_mismatch.png', 'com_error.png',
            'min_distance.png', 'components.png', 'eta.png')

@@ -229,6 +229,10 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
     ({}, ['-p', 'step_timeout:=0.0'], 'step_timeout'),
     ({}, ['-p', 'mode:=warp'], 'mode'),
     ({}, ['-p', 'colour:=red'], 'colour'),
+    # An output directory that cannot be created: a file stands in the way.
+    ({}, ['-p', 'out_dir:=/proc/version/run'], 'out_dir'),
+    ({}, ['-p', 'max_abs_accel:=0.0'], 'max_abs_accel'),
+    ({}, ['-p', 'staleness:=-1.0'], 'staleness'),
 ])
 def test_world_bad_configuration_is_one_line_exit_2(tmp_path, ros_domain, extra_env, args,
                                                     key):

@@ -118,6 +118,25 @@ def test_group_control_is_swarm_control_of_the_group(name, dim, seed):
         assert_array_equal(u_group, u[ids])
 
 
+@pytest.mark.parametrize('name, dim', LAW_DIMS)
+def test_lost_leader_is_the_uninformed_law(name, dim):
+    """``leader=None`` (an agent that lost the leader) drops exactly the navigational terms."""
+    law, q, p, edges, leader, agents = make_swarm(name, dim, 3)
+    u = pr.swarm_control(law, q, p, edges, None, agents, DT)
+    if name == 'jadbabaie_leader':
+        # Eq. (38) without agent 0: the same as a leader too far away to be a neighbour.
+        far = LeaderState(q.max(axis=0) + 10 * law.radius, leader.p, leader.a)
+        assert_array_equal(u, pr.swarm_control(law, q, p, edges, far, agents, DT))
+    else:
+        assert_array_equal(u, pr.pair_sums(law, q, p, edges))
+    if name in ('su_informed', 'su_informed_accel'):
+        nobody = AgentData(np.zeros_like(agents.informed))
+        assert_allclose(u, pr.swarm_control(law, q, p, edges, leader, nobody, DT),
+                        rtol=0, atol=1e-12)
+    rate = law.adaptive_rate(q, p, None, agents)
+    assert rate is None or not rate.any()
+
+
 # --------------------------------------------------------------------------------------------
 # (b), (c) pairwise antisymmetry, translation and Galilean invariance
 

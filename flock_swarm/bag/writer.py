@@ -416,6 +416,19 @@ class BagWriter:
         self._add_metadata(ROSBAG2_METADATA_RECORD,
                            {'serialized_metadata': dump_yaml(self.bag_metadata())})
 
+    def abandon(self) -> None:
+        """Stop recording without finishing the bag (after a write failed, say a full disk).
+
+        The file is closed as it is: its complete chunks stay readable (:class:`BagReader`
+        recovers them and says so), and no ``metadata.yaml`` claims the bag complete.
+
+        :raises OSError: if even closing the file fails; the chunks on disk are unaffected.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self._file.close()
+
     def close(self) -> None:
         """Finish the MCAP file (summary and indexes) and write ``metadata.yaml``.
 

@@ -73,12 +73,16 @@ class Protocol:
         """Return the contribution of ``j`` to ``i`` for each directed edge."""
         raise NotImplementedError
 
-    def combine(self, q: np.ndarray, p: np.ndarray, s: np.ndarray, leader: LeaderState,
-                agents: AgentData, dt: float) -> np.ndarray:
-        """Return the control input of each agent."""
+    def combine(self, q: np.ndarray, p: np.ndarray, s: np.ndarray,
+                leader: LeaderState | None, agents: AgentData, dt: float) -> np.ndarray:
+        """Return the control input of each agent.
+
+        ``leader=None`` means the leader's state is not known (a lost leader): every agent
+        then applies the law of an uninformed agent, without any navigational term.
+        """
         raise NotImplementedError
 
-    def adaptive_rate(self, q: np.ndarray, p: np.ndarray, leader: LeaderState,
+    def adaptive_rate(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
                       agents: AgentData) -> np.ndarray | None:
         """Return ``d/dt`` of the adaptive gains, or ``None`` for a law without any."""
         return None
@@ -148,6 +152,8 @@ class SuParams(Protocol):
 
     def combine(self, q, p, s, leader, agents, dt):
         """Add the navigational feedback of [Su09] eq. (7), (10), (33) or Section V.C."""
+        if leader is None:
+            return s
         nav = -self.c1 * (q - leader.q) - self.c2 * (p - leader.p)
         if self.feedforward:
             nav = nav + leader.a
@@ -239,6 +245,8 @@ class OlfatiSaber2003Sink(Protocol):
 
     def combine(self, q, p, s, leader, agents, dt):
         """Add the sink PD term ``-c1 (q_i - q_d) - c2 (p_i - p_d)`` ([OS03] eq. (40))."""
+        if leader is None:
+            return s
         return s - self.c1 * (q - leader.q) - self.c2 * (p - leader.p)
 
 
@@ -294,11 +302,15 @@ class ZhouPseudoLeader(Protocol):
 
     def combine(self, q, p, s, leader, agents, dt):
         """Add ``u3 = -h_i (v_i - v_l)`` for pseudo-leaders ([Zhou12] eq. (4))."""
+        if leader is None:
+            return s
         gain = np.where(agents.informed, agents.adaptive, 0.0)
         return s - gain[:, None] * (p - leader.p)
 
     def adaptive_rate(self, q, p, leader, agents):
         """Return ``h_i' = k ||v_i - v_l||^2`` for pseudo-leaders, ``0`` otherwise."""
+        if leader is None:
+            return np.zeros(q.shape[0])
         err = p - leader.p
         return np.where(agents.informed, self.k * np.einsum('nk,nk->n', err, err), 0.0)
 
@@ -350,7 +362,7 @@ class YuPinningObserver(Protocol):
 
     def combine(self, q, p, s, leader, agents, dt):
         """Add ``-D_i H_i (r_i - r_o) - D~_i H~_i (v_i - v_o)`` ([Yu10] eq. (7))."""
-        if agents.nav_gains is None:
+        if agents.nav_gains is None or leader is None:
             return s
         pos = np.einsum('nab,nb->na', agents.nav_gains[:, 0], q - leader.q)
         vel = np.einsum('nab,nb->na', agents.nav_gains[:, 1], p - leader.p)
@@ -391,9 +403,13 @@ class JadbabaieLeader(Protocol):
 
     def combine(self, q, p, s, leader, agents, dt):
         """Average ``theta_i``, the neighbours' and (when within ``r``) ``theta_0``; eq. (38)."""
-        gap = q - leader.q
-        b = (np.einsum('nk,nk->n', gap, gap) <= self.r * self.r).astype(float)
-        theta = (heading(p) + s[:, 0] + b * heading(leader.p[None, :])) / (1.0 + s[:, 1] + b)
+        if leader is None:
+            b, theta_0 = np.zeros(q.shape[0]), 0.0
+        else:
+            gap = q - leader.q
+            b = (np.einsum('nk,nk->n', gap, gap) <= self.r * self.r).astype(float)
+            theta_0 = heading(leader.p[None, :])
+        theta = (heading(p) + s[:, 0] + b * theta_0) / (1.0 + s[:, 1] + b)
         target = self.speed * np.stack((np.cos(theta), np.sin(theta)), axis=-1)
         return (target - p) / dt
 
@@ -459,7 +475,7 @@ def swarm_control(law: Protocol, q: np.ndarray, p: np.ndarray, edges: EdgeList,
 
 
 def group_control(law: Protocol, ids: np.ndarray, q: np.ndarray, p: np.ndarray,
-                  edges: EdgeList, leader: LeaderState, group: AgentData,
+                  edges: EdgeList, leader: LeaderState | None, group: AgentData,
                   dt: float) -> np.ndarray:
     """Return the control input of the agents ``ids`` only (agent nodes and containers).
 
@@ -472,7 +488,8 @@ def group_control(law: Protocol, ids: np.ndarray, q: np.ndarray, p: np.ndarray,
     :param q: positions of every agent, shape ``(n, dim)``.
     :param p: velocities of every agent, shape ``(n, dim)``.
     :param edges: the interaction graph of the whole swarm (as :func:`swarm_control`).
-    :param leader: the virtual leader's state as these agents know it.
+    :param leader: the virtual leader's state as these agents know it (``None``: lost, the
+        uninformed law for all of them).
     :param group: per-agent data of ``ids`` (``agents.subset(ids)``).
     :param dt: the step.
     :return: ``u`` of ``ids``, shape ``(m, dim)``.
@@ -511,7 +528,7 @@ def local_control(law: Protocol, q_self: np.ndarray, p_self: np.ndarray,
     return law.combine(q_self[None], p_self[None], s, leader, agent, dt)[0]
 
 
-def advance_adaptive(law: Protocol, q: np.ndarray, p: np.ndarray, leader: LeaderState,
+def advance_adaptive(law: Protocol, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
                      agents: AgentData, dt: float) -> None:
     """Advance adaptive gains in place by one explicit step (sampled like ``u``).
 

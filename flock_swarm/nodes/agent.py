@@ -15,6 +15,7 @@ agent still publishes on its own ``agent_<i>/cmd_accel``.
 
 import re
 import sys
+import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -30,12 +31,13 @@ from flock_swarm.core.protocols import advance_adaptive, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                      StepClock, accel_vector, cmd_topic, declare,
+                                      StepClock, accel_vector, claimants, cmd_topic, declare,
                                       declare_common, load_scenario, make_accel, odom_topic,
                                       odometry_state, run_node, timer_period)
+from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.sim import interaction_graph, static_graph
 
-AGENT_PARAMS = COMMON_PARAMS | {'agent_id', 'agent_ids'}
+AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout'}
 
 
 @dataclass
@@ -46,16 +48,22 @@ class StepInputs:
     leader_odom: tuple | None = None
     leader_accel: np.ndarray | None = None
 
-    def complete(self, n_agents: int) -> bool:
-        """Return whether every agent's odometry and the leader's state are in."""
-        return (len(self.odom) == n_agents and self.leader_odom is not None
-                and self.leader_accel is not None)
+    def has_odometry(self, n_agents: int) -> bool:
+        """Return whether every agent's odometry is in."""
+        return len(self.odom) == n_agents
 
-    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState]:
-        """Return ``(q, p, leader)`` of a complete set of inputs."""
+    @property
+    def has_leader(self) -> bool:
+        """Return whether the leader's state (odometry and acceleration) is in."""
+        return self.leader_odom is not None and self.leader_accel is not None
+
+    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
+        """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
         q = np.array([self.odom[j][0] for j in range(n_agents)])
         p = np.array([self.odom[j][1] for j in range(n_agents)])
-        return q, p, LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel)
+        leader = LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel) \
+            if self.has_leader else None
+        return q, p, leader
 
 
 def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
@@ -127,15 +135,11 @@ class AgentController:
             return None
         return self.pending.setdefault(k, StepInputs())
 
-    def ready(self, k: int) -> bool:
-        """Return whether step ``k`` has every agent's odometry and the leader's state."""
-        box = self.pending.get(k)
-        return box is not None and box.complete(self.sc.n_agents)
-
     def answer(self, k: int) -> np.ndarray:
-        """Compute the commands of step ``k`` from its complete inputs, advance adaptive state.
+        """Compute the commands of step ``k`` from its inputs, advance adaptive state.
 
-        :param k: the step (must be :meth:`ready`).
+        :param k: the step (every agent's odometry in; without the leader's state the
+            uninformed law applies).
         :return: ``u`` of the hosted agents, shape ``(m, dim)``.
         """
         box = self.pending.pop(k)
@@ -144,7 +148,7 @@ class AgentController:
         self.answered = k
         return self.command(*box.swarm(self.sc.n_agents))
 
-    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState) -> np.ndarray:
+    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None) -> np.ndarray:
         """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains."""
         law, ids = self.sc.law, self.ids
         edges = interaction_graph(self.sc, self.real, q, self.static)
@@ -182,6 +186,14 @@ class AgentNode(Node):
         self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents))
         self.clock = StepClock(sc.dt)
         self.lockstep = self.get_parameter('mode').value == 'lockstep'
+        self.leader_timeout = declare(
+            self, 'leader_timeout', 1.0, 'seconds without the leader state (lockstep: for a '
+            'step whose odometry is complete) before the agents apply the uninformed law, '
+            'until it returns; below the world step_timeout')
+        if isinstance(self.leader_timeout, bool) or \
+                not isinstance(self.leader_timeout, (int, float)) or self.leader_timeout <= 0:
+            raise ScenarioError('leader_timeout', f'must be > 0, got {self.leader_timeout!r}')
+        self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
                          for i in self.controller.ids]
         for j in range(sc.n_agents):
@@ -197,44 +209,111 @@ class AgentNode(Node):
         self.outbox: list[tuple[int, bytes]] = []
         self.sent: list[tuple[int, bytes]] = []
         self.repeated = -1
+        self.leader_lost = False
+        self.leader_seen_at = time.monotonic()
+        self.waiting_since: float | None = None
+        self.duplicates: set[int] = set()
+        self.create_timer(1.0, self.check_claims)
         if self.lockstep:
-            self.create_timer(0.01, self.flush)
+            self.create_timer(0.01, self.on_lockstep_timer)
         else:
             self.create_timer(timer_period(self, sc.dt), self.on_timer)
 
+    # -- inputs -------------------------------------------------------------------------------
+
     def on_odom(self, j: int, msg: Odometry) -> None:
-        """Store agent ``j``'s odometry for its step."""
+        """Check and store agent ``j``'s odometry for its step."""
+        k = self.check_odometry(odom_topic(j), msg, f'agent_{j}')
+        if k is None:
+            return
         state = odometry_state(msg, self.scenario.dim)
         self.latest.odom[j] = state
         self.latest_stamp = msg.header.stamp
-        self.stash(msg.header.stamp, lambda box: box.odom.__setitem__(j, state))
+        self.stash(k, lambda box: box.odom.__setitem__(j, state))
+
+    def check_odometry(self, topic: str, msg: Odometry, child: str) -> int | None:
+        """Return the step of an acceptable odometry message, or ``None`` (rejected)."""
+        pos, vel, lim = msg.pose.pose.position, msg.twist.twist.linear, self.guard.limits
+        return self.guard.check(topic, msg.header.stamp, msg.header.frame_id,
+                                (((pos.x, pos.y, pos.z), lim.position),
+                                 ((vel.x, vel.y, vel.z), lim.velocity)),
+                                (msg.child_frame_id, child))
 
     def on_leader_odom(self, msg: Odometry) -> None:
-        """Store the leader's position and velocity for its step."""
+        """Check and store the leader's position and velocity for its step."""
+        k = self.check_odometry(LEADER_ODOM, msg, 'leader')
+        if k is None:
+            return
+        self.leader_heard(k)
         state = odometry_state(msg, self.scenario.dim)
         self.latest.leader_odom = state
-        self.stash(msg.header.stamp, lambda box: setattr(box, 'leader_odom', state))
+        self.stash(k, lambda box: setattr(box, 'leader_odom', state))
 
     def on_leader_accel(self, msg: AccelStamped) -> None:
-        """Store the leader's acceleration ``f_gamma`` for its step."""
+        """Check and store the leader's acceleration ``f_gamma`` for its step."""
+        lin = msg.accel.linear
+        k = self.guard.check(LEADER_ACCEL, msg.header.stamp, msg.header.frame_id,
+                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),))
+        if k is None:
+            return
+        self.leader_heard(k)
         a = accel_vector(msg, self.scenario.dim)
         self.latest.leader_accel = a
-        self.stash(msg.header.stamp, lambda box: setattr(box, 'leader_accel', a))
+        self.stash(k, lambda box: setattr(box, 'leader_accel', a))
 
-    def stash(self, stamp, store) -> None:
-        """Lockstep: put an input into the buffer of its stamp's step, answer if complete."""
-        if self.lockstep:
-            k = self.clock.step_of(stamp)
-            box = self.controller.inputs(k)
-            if box is not None:
-                store(box)
-                if self.controller.ready(k):
-                    self.publish_commands(self.controller.answer(k), self.clock.stamp(k))
-            elif k == self.controller.answered and self.repeated != k:
-                # The world offers a stalled step again: our commands may have been lost.
-                self.repeated = k
-                self.outbox.extend(self.sent)
-                self.flush()
+    # -- the leader lost and found --------------------------------------------------------------
+
+    def leader_heard(self, k: int) -> None:
+        """Note a leader message of step ``k``; a lost leader is back."""
+        self.leader_seen_at = time.monotonic()
+        if self.leader_lost:
+            self.leader_lost = False
+            self.get_logger().info(f'leader back at step {k}: informed agents track it again')
+
+    def lose_leader(self, k: int) -> None:
+        """Switch to the uninformed law (logged once per loss)."""
+        if not self.leader_lost:
+            self.leader_lost = True
+            self.get_logger().warning(
+                f'no leader state for {self.leader_timeout:g} s at step {k}: the uninformed '
+                'law applies until it returns')
+
+    # -- lockstep -------------------------------------------------------------------------------
+
+    def stash(self, k: int, store) -> None:
+        """Lockstep: put an input into the buffer of step ``k``, answer if complete."""
+        if not self.lockstep:
+            return
+        box = self.controller.inputs(k)
+        if box is not None:
+            store(box)
+            self.try_answer(k)
+        elif k == self.controller.answered and self.repeated != k:
+            # The world offers a stalled step again: our commands may have been lost.
+            self.repeated = k
+            self.outbox.extend(self.sent)
+            self.flush()
+
+    def try_answer(self, k: int) -> None:
+        """Answer step ``k`` once every odometry is in, and the leader's state or its timeout."""
+        box = self.controller.pending.get(k)
+        if box is None or not box.has_odometry(self.scenario.n_agents):
+            return
+        if not box.has_leader and not self.leader_lost:
+            now = time.monotonic()
+            if self.waiting_since is None:
+                self.waiting_since = now
+            if now - self.waiting_since < self.leader_timeout:
+                return
+            self.lose_leader(k)
+        self.waiting_since = None
+        self.publish_commands(self.controller.answer(k), self.clock.stamp(k))
+
+    def on_lockstep_timer(self) -> None:
+        """Answer a step that waits for the leader once its timeout is over; send the queue."""
+        if self.waiting_since is not None and self.controller.pending:
+            self.try_answer(max(self.controller.pending))
+        self.flush()
 
     def publish_commands(self, u: np.ndarray, stamp) -> None:
         """Queue one command per hosted agent and send what the world can receive.
@@ -262,12 +341,35 @@ class AgentNode(Node):
                 waiting.append((row, msg))
         self.outbox = waiting
 
+    # -- realtime and housekeeping ---------------------------------------------------------------
+
     def on_timer(self) -> None:
         """Realtime mode: answer with the latest known states (zero-order hold)."""
-        if not self.latest.complete(self.scenario.n_agents):
+        latest = self.latest
+        if not latest.has_odometry(self.scenario.n_agents):
             return
-        u = self.controller.command(*self.latest.swarm(self.scenario.n_agents))
-        self.publish_commands(u, self.latest_stamp)
+        q, p, leader = latest.swarm(self.scenario.n_agents)
+        if leader is not None and time.monotonic() - self.leader_seen_at > self.leader_timeout:
+            self.lose_leader(self.clock.step_of(self.latest_stamp))
+        if self.leader_lost:
+            leader = None
+        self.publish_commands(self.controller.command(q, p, leader), self.latest_stamp)
+
+    def check_claims(self) -> None:
+        """Report another node publishing commands for one of our agents (a duplicate id)."""
+        me = (self.get_namespace(), self.get_name())
+        for i in self.controller.ids:
+            others = [f'{ns.rstrip("/")}/{name}' for ns, name in claimants(self, int(i))
+                      if (ns, name) != me]
+            if others and i not in self.duplicates:
+                self.duplicates.add(int(i))
+                self.get_logger().error(f'agent_id {i} is also claimed by {", ".join(others)}: '
+                                        'two nodes command the same agent')
+
+    def close(self) -> None:
+        """Log what was rejected (called on shutdown)."""
+        if self.guard.rejected:
+            self.get_logger().warning(f'rejected inputs: {self.guard.counts()}')
 
 
 def main(args: list[str] | None = None) -> int:

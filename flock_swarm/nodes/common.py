@@ -228,6 +228,12 @@ def agent_hosts(node: Node, n_agents: int) -> int | None:
     return len(hosts)
 
 
+def claimants(node: Node, i: int) -> list[tuple[str, str]]:
+    """Return ``(namespace, name)`` of every node publishing agent ``i``'s commands."""
+    infos = node.get_publishers_info_by_topic(node.resolve_topic_name(cmd_topic(i)))
+    return sorted({(info.node_namespace, info.node_name) for info in infos})
+
+
 def make_executor(context=None):
     """Return the executor every node and runner spins: rclpy's ``EventsExecutor``.
 

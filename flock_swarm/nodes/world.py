@@ -38,17 +38,19 @@ from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
                                       TELEMETRY_QOS, StepClock, accel_vector, agent_hosts,
-                                      cmd_topic, declare, declare_common, load_scenario,
+                                      claimants, cmd_topic, declare, declare_common, load_scenario,
                                       make_odometry, odom_topic, odometry_state, run_node,
                                       timer_period)
+from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
 from flock_swarm.sim import RunLog, SimResult, build_summary, jsonable, write_outputs
 
 #: Seconds after which a stalled lockstep step is offered again (see ``resend_step``).
 RESEND_PERIOD = 0.5
 
-WORLD_PARAMS = COMMON_PARAMS | {'out_dir', 'record', 'step_timeout', 'start_timeout',
-                                'marker_every', 'metrics_every', 'expect_subscribers'}
+WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
+    'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
+    'expect_subscribers', 'staleness'}
 
 
 class WorldNode(Node):
@@ -78,10 +80,15 @@ class WorldNode(Node):
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
                                           'subscribers each odometry topic must have before '
                                           'the start (-1: one per node hosting agents)')
+        self.staleness = declare(self, 'staleness', 0.5,
+                                 'realtime: seconds a held command (or the leader state) '
+                                 'stays valid; an older command counts as missing (zero), '
+                                 'an older leader state as lost')
         for key, value, ok in (('step_timeout', self.step_timeout, self.step_timeout > 0),
                                ('start_timeout', self.start_timeout, self.start_timeout >= 0),
                                ('marker_every', self.marker_every, self.marker_every >= 1),
-                               ('metrics_every', self.metrics_every, self.metrics_every >= 1)):
+                               ('metrics_every', self.metrics_every, self.metrics_every >= 1),
+                               ('staleness', self.staleness, self.staleness > 0)):
             if not ok:
                 raise ScenarioError(key, f'invalid value {value!r}')
         sc = self.scenario = load_scenario(self, WORLD_PARAMS)
@@ -102,6 +109,15 @@ class WorldNode(Node):
                                        np.zeros(sc.dim))
         self.missed = np.zeros(n, dtype=int)
         self.leader_missed = 0
+        self.leader_lost = False
+        self.leader_events: list[list] = []
+        self.leader_seen_at = -np.inf
+        self.held_at = np.full(n, -np.inf)
+        self.stale_agents: set[int] = set()
+        self.duplicates: set[int] = set()
+        self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
+        self.bag_error: str | None = None
+        self.last_missing: set[int] = set()
         self.log = RunLog.for_scenario(sc)
         self.done = False
         self.started = False
@@ -122,8 +138,9 @@ class WorldNode(Node):
         self.marker_pub = self._publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
         self.metrics_pub = self._publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
         self.cmd_topics = [self._subscribe(AccelStamped, cmd_topic(i),
-                                           lambda msg, k, i=i: self.on_command(i, msg, k))
+                                           lambda msg, i=i: self.on_command(i, msg))
                            for i in range(n)]
+        self.create_timer(1.0, self.check_claims)
         self.leader_odom_topic = self._subscribe(Odometry, LEADER_ODOM, self.on_leader_odom)
         self.leader_accel_topic = self._subscribe(AccelStamped, LEADER_ACCEL,
                                                   self.on_leader_accel)
@@ -179,22 +196,45 @@ class WorldNode(Node):
         # Serialised once: the same bytes go to DDS and to the bag.
         data = serialize_message(msg)
         pub.publish(data)
-        if self.bag is not None:
-            self.bag.write_serialized(pub.topic_name, data, t_ns)
+        self._write(pub.topic_name, data, t_ns)
+
+    def _write(self, topic: str, data: bytes, t_ns: int) -> None:
+        if self.bag is None:
+            return
+        try:
+            self.bag.write_serialized(topic, data, t_ns)
+        except OSError as exc:
+            self.recording_failed(exc)
+
+    def recording_failed(self, exc: OSError) -> None:
+        """Stop the run cleanly when the bag cannot be written (a full disk, say).
+
+        The bag is left as it is on disk: every chunk completed before the failure is
+        readable (``analyze`` says how much it recovered), and no ``metadata.yaml`` claims it
+        complete. The run ends with status ``recording_failed``.
+        """
+        self.bag_error = f'{exc.strerror or exc} ({self.out / "bag"})'
+        self.get_logger().error(f'recording failed: {self.bag_error}; stopping the run, the '
+                                'bag keeps every chunk written before')
+        bag, self.bag = self.bag, None
+        try:
+            bag.abandon()
+        except OSError:
+            pass
+        self.finish('recording_failed')
 
     def _subscribe(self, msg_type, topic: str, handler) -> str:
         """Subscribe to ``topic``; record each message as received, then hand it on.
 
         The subscription takes the serialised bytes, so the bag stores what came over the
-        wire without serialising it again; ``handler(msg, k)`` gets the decoded message and
-        the step of its stamp. Return the resolved topic name.
+        wire (faulty messages included) without serialising it again; ``handler(msg)`` gets
+        the decoded message. Return the resolved topic name.
         """
         def on_data(data: bytes) -> None:
             msg = deserialize_message(data, msg_type)
             k = self.clock.step_of(msg.header.stamp)
-            if self.bag is not None:
-                self.bag.write_serialized(name, data, self.clock.ns(max(k, 0)))
-            handler(msg, k)
+            self._write(name, data, self.clock.ns(max(k, 0)))
+            handler(msg)
 
         name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
                                         raw=True).topic_name
@@ -203,29 +243,82 @@ class WorldNode(Node):
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def on_command(self, i: int, msg: AccelStamped, k: int) -> None:
-        """Store agent ``i``'s command (lockstep: for its stamp's step ``k``; realtime: held)."""
-        u = accel_vector(msg, self.scenario.dim)
-        if not np.isfinite(u).all():
-            self.get_logger().warning(f'agent {i} sent a non-finite command at step {k}; '
-                                      'ignored')
+    def on_command(self, i: int, msg: AccelStamped) -> None:
+        """Check and store agent ``i``'s command (lockstep: for the current step; realtime:
+        held)."""
+        lin, topic = msg.accel.linear, self.cmd_topics[i]
+        k = self.guard.check(topic, msg.header.stamp, msg.header.frame_id,
+                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
+                             window=self.window())
+        if k is None:
             return
-        if self.lockstep:
-            if k == self.k and self.started and not self.done:
-                self.commands[i] = u
-                self._maybe_finish()
-        else:
+        u = accel_vector(msg, self.scenario.dim)
+        if not self.lockstep:
             self.held[i] = u
+            self.held_at[i] = time.monotonic()
+        elif not self.started or self.done:
+            return
+        elif k == self.k:
+            self.commands[i] = u
+            self._maybe_finish()
+        elif i in self.last_missing:
+            # The step just closed went without this command: it came too late. (A repeated
+            # command for that step, after the world re-offered it, is no fault.)
+            self.guard.reject(topic, 'late', f'a command for step {k} at step {self.k}')
 
-    def on_leader_odom(self, msg: Odometry, k: int) -> None:
-        """Store the leader's position and velocity of step ``k``."""
-        self.leader_odom[k] = odometry_state(msg, self.scenario.dim)
-        self._maybe_finish()
+    def window(self) -> tuple[int, int] | None:
+        """Return the steps whose inputs the world accepts now (lockstep: the open step and
+        the one just closed; realtime: any)."""
+        return (self.k - 1, self.k) if self.lockstep else None
 
-    def on_leader_accel(self, msg: AccelStamped, k: int) -> None:
-        """Store the leader's acceleration of step ``k``."""
-        self.leader_accel[k] = accel_vector(msg, self.scenario.dim)
-        self._maybe_finish()
+    def on_leader_odom(self, msg: Odometry) -> None:
+        """Check and store the leader's position and velocity of its step."""
+        pos, vel, lim = msg.pose.pose.position, msg.twist.twist.linear, self.guard.limits
+        k = self.guard.check(self.leader_odom_topic, msg.header.stamp, msg.header.frame_id,
+                             (((pos.x, pos.y, pos.z), lim.position),
+                              ((vel.x, vel.y, vel.z), lim.velocity)),
+                             (msg.child_frame_id, 'leader'), self.window())
+        if k is not None:
+            self.leader_heard(k)
+            self.leader_odom[k] = odometry_state(msg, self.scenario.dim)
+            self._maybe_finish()
+
+    def on_leader_accel(self, msg: AccelStamped) -> None:
+        """Check and store the leader's acceleration of its step."""
+        lin = msg.accel.linear
+        k = self.guard.check(self.leader_accel_topic, msg.header.stamp, msg.header.frame_id,
+                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
+                             window=self.window())
+        if k is not None:
+            self.leader_heard(k)
+            self.leader_accel[k] = accel_vector(msg, self.scenario.dim)
+            self._maybe_finish()
+
+    def leader_heard(self, k: int) -> None:
+        """Note a leader message; a lost leader is back (logged, recorded in the metrics)."""
+        self.leader_seen_at = time.monotonic()
+        if self.leader_lost and self.started:
+            self.leader_lost = False
+            self.leader_events.append([self.k, 'back'])
+            self.get_logger().info(f'leader back at step {self.k} (its state of step {k})')
+
+    def lose_leader(self) -> None:
+        """Note that the leader is gone (logged, recorded in the metrics)."""
+        if not self.leader_lost:
+            self.leader_lost = True
+            self.leader_events.append([self.k, 'lost'])
+            self.get_logger().warning(f'leader lost at step {self.k}: steps go on without '
+                                      'waiting for it')
+
+    def check_claims(self) -> None:
+        """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
+        for i in range(self.scenario.n_agents):
+            nodes = claimants(self, i)
+            if len(nodes) > 1 and i not in self.duplicates:
+                self.duplicates.add(i)
+                names = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
+                self.get_logger().error(f'agent {i} is claimed by {len(nodes)} nodes ({names}): '
+                                        'a duplicate agent_id')
 
     # -- lockstep -----------------------------------------------------------------------------
 
@@ -298,7 +391,8 @@ class WorldNode(Node):
     def _maybe_finish(self) -> None:
         if (self.lockstep and self.started and not self.done
                 and len(self.commands) == self.scenario.n_agents
-                and self.k in self.leader_odom and self.k in self.leader_accel):
+                and (self.leader_lost
+                     or (self.k in self.leader_odom and self.k in self.leader_accel))):
             self.finish_step(timed_out=False)
 
     def finish_step(self, timed_out: bool) -> None:
@@ -314,10 +408,10 @@ class WorldNode(Node):
             self.get_logger().warning(
                 f'step {k}: no command from agent(s) {missing} within {self.step_timeout:g} s; '
                 'zero command applied')
+        self.last_missing = set(missing)
         if leader_missing:
             self.leader_missed += 1
-            self.get_logger().warning(f'step {k}: no leader state within '
-                                      f'{self.step_timeout:g} s')
+            self.lose_leader()
         else:
             q_l, p_l = self.leader_odom.pop(k)
             self.last_leader = LeaderState(q_l, p_l, self.leader_accel.pop(k))
@@ -349,16 +443,20 @@ class WorldNode(Node):
             self._publish(self.marker_pub, swarm_markers(
                 self.q, self.p, leader.q, self.real.agents.informed, edges, stamp, FRAME,
                 0.1 * law.radius), t_ns)
-        if k % self.metrics_every == 0 or missing or last:
+        event = bool(self.leader_events) and self.leader_events[-1][0] == k
+        if k % self.metrics_every == 0 or missing or last or event:
             if not self.metrics_now:
                 self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
                                                 law.radius, law.strict_radius)
             values = dict(self.metrics_now, step=k, missed_commands=int(self.missed.sum()),
                           missed_this_step=json.dumps(missing),
-                          leader_missed=self.leader_missed)
+                          leader_missed=self.leader_missed,
+                          leader='lost' if self.leader_lost else 'ok',
+                          rejected_messages=json.dumps(self.guard.counts()))
+            problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
+                + (['leader lost'] if self.leader_lost else [])
             self._publish(self.metrics_pub, metrics_message(
-                values, stamp, WARN if missing else OK,
-                f'{len(missing)} missing command(s)' if missing else 'ok'), t_ns)
+                values, stamp, WARN if problems else OK, ', '.join(problems) or 'ok'), t_ns)
         self._progress()
         if last:
             self.finish('completed')
@@ -388,12 +486,32 @@ class WorldNode(Node):
             del self.leader_odom[old]
         for old in [s for s in self.leader_accel if s < k - 10]:
             del self.leader_accel[old]
+        now = time.monotonic()
+        if not self.started:
+            # Staleness counts from the first step, not from the node's construction.
+            self.held_at[:] = now
+            self.leader_seen_at = max(self.leader_seen_at, now)
+        if now - self.leader_seen_at > self.staleness:
+            self.lose_leader()
         self.publish_states(stamp, t_ns)
         u = self.held.copy()
+        stale = np.flatnonzero(now - self.held_at > self.staleness)
+        u[stale] = 0.0
+        self.missed[stale] += 1
+        self.note_stale({int(i) for i in stale})
         self.started = True
-        self.observe(u, [])
+        self.observe(u, [int(i) for i in stale])
         if not self.done:
             self.advance(u)
+
+    def note_stale(self, stale: set[int]) -> None:
+        """Realtime: log agents whose held command went stale (zero from now) or came back."""
+        for i in sorted(stale - self.stale_agents):
+            self.get_logger().warning(f'step {self.k}: agent {i} sent no command for '
+                                      f'{self.staleness:g} s; zero command until it does')
+        for i in sorted(self.stale_agents - stale):
+            self.get_logger().info(f'step {self.k}: agent {i} commands again')
+        self.stale_agents = stale
 
     def _progress(self) -> None:
         now = time.monotonic()
@@ -434,20 +552,33 @@ class WorldNode(Node):
             'mode': self.get_parameter('mode').value,
             'missed_commands': int(self.missed.sum()),
             'missed_commands_per_agent': [int(x) for x in self.missed],
+            'rejected_messages': self.guard.counts(),
+            'leader_events': self.leader_events,
+            'duplicate_agent_ids': sorted(self.duplicates),
+            'bag_error': self.bag_error,
             'resent_steps': self.resends,
             'leader_missed': self.leader_missed,
             'wall_time_s': round(time.monotonic() - self.t_wall0, 3),
-            'bag': str(self.out / 'bag') if self.bag is not None else None,
+            'bag': str(self.out / 'bag') if self.record else None,
         })
         self.result = SimResult(summary, series)
         self.close_bag()
-        write_outputs(self.result, self.out, self.scenario)
+        try:
+            write_outputs(self.result, self.out, self.scenario)
+        except OSError as exc:
+            self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
+                                    f'{exc.strerror or exc}')
 
     def close_bag(self) -> None:
         """Finalise the bag (MCAP summary and metadata.yaml)."""
         if self.bag is not None:
-            self.bag.close()
-            self.bag = None
+            bag, self.bag = self.bag, None
+            try:
+                bag.close()
+            except OSError as exc:
+                self.bag_error = f'{exc.strerror or exc} ({self.out / "bag"})'
+                self.get_logger().error(f'cannot finalise the bag: {self.bag_error}; its '
+                                        'complete chunks stay readable')
 
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``)."""
@@ -458,8 +589,21 @@ class WorldNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the world node (``ros2 run flock_swarm world``); it exits after the last step."""
-    return run_node('world', lambda: WorldNode(), args, until=lambda node: node.done)
+    """Run the world node (``ros2 run flock_swarm world``); it exits after the last step.
+
+    The exit status is 2 for invalid configuration, 1 when recording failed, else 0.
+    """
+    built = []
+
+    def factory() -> WorldNode:
+        built.append(WorldNode())
+        return built[0]
+
+    status = run_node('world', factory, args, until=lambda node: node.done)
+    if status == 0 and built and (built[0].status == 'recording_failed'
+                                  or built[0].bag_error):
+        return 1
+    return status
 
 
 if __name__ == '__main__':

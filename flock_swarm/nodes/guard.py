@@ -1,0 +1,136 @@
+"""Input checks of the nodes: a message that must not reach a command is rejected and counted.
+
+Every odometry, leader state and command a node receives passes :meth:`InputGuard.check`
+first. It is rejected (counted by reason, the first of each kind per topic logged) when
+
+- its ``header.frame_id`` is not the fixed frame ``world``, or an odometry's
+  ``child_frame_id`` is not the one of its topic (``agent_<j>`` on ``agent_<j>/odom``,
+  ``leader`` on ``leader/odom``): a message meant for somebody else;
+- a value is NaN or infinite, or beyond the absurd-magnitude limits (:class:`Limits`);
+- its stamp is not a step of the simulation clock (``t_k = k dt`` exactly), or is older
+  than the last accepted stamp on the same topic (stale or out of order). The same stamp
+  again is accepted: the world re-offers a stalled lockstep step.
+
+Reasons (the keys of :meth:`InputGuard.counts`): ``frame``, ``non_finite``, ``magnitude``,
+``off_grid_stamp``, ``stale_stamp``; the world adds ``late`` (a command for a step it has
+already closed) and ``future`` (for a step it has not opened).
+"""
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+from builtin_interfaces.msg import Time
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.nodes.common import FRAME, StepClock, declare
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Largest plausible magnitudes; anything beyond is a fault, not a state.
+
+    :ivar position: largest ``|q|`` component [m].
+    :ivar velocity: largest ``|p|`` component [m/s].
+    :ivar accel: largest ``|u|`` or ``|f_gamma|`` component [m/s^2].
+    """
+
+    position: float = 1e6
+    velocity: float = 1e4
+    accel: float = 1e6
+
+
+def declare_limits(node) -> Limits:
+    """Declare the ``max_abs_position``, ``max_abs_velocity``, ``max_abs_accel`` parameters."""
+    default = Limits()
+    values = {}
+    for key, field, what in (('max_abs_position', 'position', 'm'),
+                             ('max_abs_velocity', 'velocity', 'm/s'),
+                             ('max_abs_accel', 'accel', 'm/s^2')):
+        value = declare(node, key, getattr(default, field),
+                        f'inputs with a component beyond this [{what}] are rejected')
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or value <= 0:
+            raise ScenarioError(key, f'must be a finite number > 0, got {value!r}')
+        values[field] = float(value)
+    return Limits(**values)
+
+
+LIMIT_PARAMS = {'max_abs_position', 'max_abs_velocity', 'max_abs_accel'}
+
+
+class InputGuard:
+    """Checks received messages; counts and logs what it rejects.
+
+    :ivar rejected: rejections by reason.
+    """
+
+    def __init__(self, clock: StepClock, limits: Limits, warn: Callable[[str], None]) -> None:
+        """Create the guard.
+
+        :param clock: the simulation clock (stamps must be its steps).
+        :param limits: the magnitude limits.
+        :param warn: logs one line (the first rejection of each reason on each topic).
+        """
+        self.clock = clock
+        self.limits = limits
+        self.warn = warn
+        self.rejected: Counter = Counter()
+        self.latest: dict[str, int] = {}
+        self._told: set[tuple[str, str]] = set()
+
+    def check(self, topic: str, stamp: Time, frame_id: str,
+              values: Iterable[tuple[Iterable[float], float]],
+              child: tuple[str, str] | None = None,
+              window: tuple[int, int] | None = None) -> int | None:
+        """Return the step of an acceptable message, or ``None`` (rejected and counted).
+
+        :param topic: the topic it came on.
+        :param stamp: its ``header.stamp``.
+        :param frame_id: its ``header.frame_id``.
+        :param values: ``(components, limit)`` pairs to check for finiteness and magnitude.
+        :param child: ``(child_frame_id, expected)`` for odometry.
+        :param window: ``(first, last)`` steps acceptable now (the world's lockstep: the
+            step just closed and the open one); outside it the message is ``late`` or
+            ``future``, and does not move the topic's latest stamp.
+        """
+        fault = None
+        if frame_id != FRAME:
+            fault = ('frame', f'frame_id {frame_id!r}, not {FRAME!r}')
+        elif child is not None and child[0] != child[1]:
+            fault = ('frame', f'child_frame_id {child[0]!r}, not {child[1]!r}')
+        else:
+            for components, limit in values:
+                components = list(components)
+                if not all(math.isfinite(x) for x in components):
+                    fault = ('non_finite', 'a NaN or infinite value')
+                    break
+                if any(abs(x) > limit for x in components):
+                    fault = ('magnitude', f'a value beyond {limit:g}')
+                    break
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        k = self.clock.step_of(stamp)
+        if fault is None and ns != self.clock.ns(k):
+            fault = ('off_grid_stamp', f'stamp {ns} ns is not a step of dt = {self.clock.dt:g} s')
+        if fault is None and window is not None and not window[0] <= k <= window[1]:
+            fault = ('late', f'stamp of step {k} before step {window[0]}') if k < window[0] \
+                else ('future', f'stamp of step {k} after step {window[1]}')
+        if fault is None and k < self.latest.get(topic, -1):
+            fault = ('stale_stamp', f'stamp of step {k} after step {self.latest[topic]}')
+        if fault is not None:
+            self.reject(topic, *fault)
+            return None
+        self.latest[topic] = k
+        return k
+
+    def reject(self, topic: str, kind: str, detail: str) -> None:
+        """Count a rejection of ``kind`` on ``topic``; log the first of each kind per topic."""
+        self.rejected[kind] += 1
+        if (topic, kind) not in self._told:
+            self._told.add((topic, kind))
+            self.warn(f'rejected a message on {topic}: {detail} (further ones are counted)')
+
+    def counts(self) -> dict[str, int]:
+        """Return the rejections by reason (for the summary)."""
+        return dict(sorted(self.rejected.items()))

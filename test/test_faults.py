@@ -1,0 +1,361 @@
+"""Faults: lost agents, a lost leader, killed processes, full disks and faulty messages.
+
+Every case runs the real nodes on real DDS (each test its own domain id): in one process
+(:class:`flock_swarm.runner.InProcessSwarm`, where a test can remove and restart nodes) or
+as the ``ros2 run`` executables in their own processes.
+"""
+
+import json
+import math
+import os
+import re
+import shutil
+import signal
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+import yaml
+from geometry_msgs.msg import AccelStamped
+from nav_msgs.msg import Odometry
+from numpy.testing import assert_allclose, assert_array_equal
+from rclpy.node import Node
+
+from flock_swarm.analyze import main as analyze_main
+from flock_swarm.bag import BagReader
+from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.protocols import swarm_control
+from flock_swarm.core.scenario import parse_scenario, realize
+from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock, make_accel, make_odometry
+from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.sim import interaction_graph, simulate, static_graph
+
+pytestmark = pytest.mark.ros
+
+#: Wall-clock bound of one run (a hung run fails instead of blocking the suite).
+RUN_TIMEOUT = 120.0
+
+
+def scenario_of(tmp_path, overrides, preset='demo'):
+    """Resolve a scenario into ``tmp_path/run``; return ``(path, scenario, out)``."""
+    out = tmp_path / 'run'
+    path = resolve_scenario(preset, overrides, None, out)
+    return path, parse_scenario(yaml.safe_load(path.read_text())), out
+
+
+def wait_for(condition, timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.05)
+
+
+# ----------------------------------------------------------------------------------------------
+# Faulty messages never reach a command
+
+
+class FaultyPublisher(Node):
+    """Publishes, every 10 ms, one faulty message of each kind on the swarm's topics."""
+
+    def __init__(self, world, **kwargs) -> None:
+        """Create the node; ``world`` tells it the current step."""
+        super().__init__('faulty', **kwargs)
+        self.world = world
+        self.clock = world.clock
+        self.odom = self.create_publisher(Odometry, 'agent_0/odom', LOCKSTEP_QOS)
+        self.leader = self.create_publisher(Odometry, 'leader/odom', LOCKSTEP_QOS)
+        self.cmd = self.create_publisher(AccelStamped, 'agent_1/cmd_accel', LOCKSTEP_QOS)
+        self.sent = 0
+        self.create_timer(0.01, self.publish_faults)
+
+    def publish_faults(self) -> None:
+        """Send one message per fault, stamped around the world's current step."""
+        k = self.world.k
+        good_q, good_p = [1.0, 2.0], [0.1, 0.2]
+        now, old = self.clock.stamp(k), self.clock.stamp(max(k - 5, 0))
+        off_grid = self.clock.stamp(k)
+        off_grid.nanosec += 1
+        faults = [
+            make_odometry([math.nan, 0.0], good_p, now, 'agent_0'),
+            make_odometry([1e9, 0.0], good_p, now, 'agent_0'),
+            make_odometry(good_q, [math.inf, 0.0], now, 'agent_0'),
+            make_odometry(good_q, good_p, now, 'agent_7'),
+            make_odometry(good_q, good_p, off_grid, 'agent_0'),
+        ]
+        wrong_frame = make_odometry(good_q, good_p, now, 'agent_0')
+        wrong_frame.header.frame_id = 'map'
+        faults.append(wrong_frame)
+        if k >= 6:
+            faults.append(make_odometry(good_q, good_p, old, 'agent_0'))
+        for msg in faults:
+            self.odom.publish(msg)
+        self.leader.publish(make_odometry([math.nan, 0.0], good_p, now, 'leader'))
+        self.leader.publish(make_odometry(good_q, good_p, now, 'agent_0'))
+        self.cmd.publish(make_accel([math.nan, 0.0], now))
+        self.cmd.publish(make_accel([1e12, 0.0], now))
+        self.cmd.publish(make_accel([0.5, 0.5], self.clock.stamp(k + 3)))
+        self.sent += 1
+
+
+def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=2',
+                                           'record_every=1'])
+    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+        faulty = swarm.add(FaultyPublisher(swarm.world, context=swarm.context))
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        assert faulty.sent > 20
+        agent_rejections = swarm.agents.guard.counts()
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    # Nothing faulty reached a command: the run is the simulator's run.
+    ref = simulate(sc).series
+    with np.load(out / 'timeseries.npz') as ros:
+        for name in ('q', 'p', 'u'):
+            assert_allclose(ros[name], ref[name], rtol=0, atol=1e-9, err_msg=name)
+    for kind in ('non_finite', 'magnitude', 'frame', 'off_grid_stamp', 'stale_stamp'):
+        assert agent_rejections.get(kind, 0) > 0, (kind, agent_rejections)
+    world_rejections = summary['rejected_messages']
+    for kind in ('non_finite', 'magnitude', 'frame', 'future'):
+        assert world_rejections.get(kind, 0) > 0, (kind, world_rejections)
+    # The faulty messages were recorded as received (nothing received is lost).
+    counts = BagReader(out / 'bag').message_counts()
+    assert counts['/agent_1/cmd_accel'] > sc.steps + 1
+
+
+def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=1000'])
+    with InProcessSwarm(path, out, domain_id=ros_domain,
+                        world_params={'record': False}) as swarm:
+        twin = swarm.add_agents([1], 'agent_1')
+        # Claims are checked once a second by every node.
+        swarm.spin_until(lambda: twin.duplicates and swarm.agents.duplicates
+                         and swarm.world.duplicates, RUN_TIMEOUT)
+        assert twin.duplicates == {1} and swarm.agents.duplicates == {1}
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['duplicate_agent_ids'] == [1]
+
+
+# ----------------------------------------------------------------------------------------------
+# The leader disappears and comes back
+
+
+def test_lost_leader_fallback_and_return(tmp_path, ros_domain):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=5', 'informed.count=2', 'duration=20',
+                                           'record_every=1', 'protocol.name=su_informed'])
+    with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=1.0,
+                        agent_params={'leader_timeout': 0.2}) as swarm:
+        swarm.spin_until(lambda: swarm.world.k >= 50, RUN_TIMEOUT)
+        swarm.remove(swarm.leader)
+        swarm.spin_until(lambda: swarm.world.leader_lost and swarm.world.k >= 150, RUN_TIMEOUT)
+        swarm.leader = swarm.add_leader()
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    (lost_at, lost), (back_at, back) = summary['leader_events']
+    assert (lost, back) == ('lost', 'back') and 50 <= lost_at < 150 <= back_at < sc.steps
+    real = realize(sc)
+    static = static_graph(sc, real)
+    with np.load(out / 'timeseries.npz') as ros:
+        q, p, u = ros['q'], ros['p'], ros['u']
+        leader = [LeaderState(ros['leader_q'][s], ros['leader_p'][s], ros['leader_a'][s])
+                  for s in range(q.shape[0])]
+        for s in (lost_at + 2, back_at - 2):
+            # While it is lost, every agent applies the uninformed law.
+            edges = interaction_graph(sc, real, q[s], static)
+            assert_allclose(u[s], swarm_control(sc.law, q[s], p[s], edges, None, real.agents,
+                                                sc.dt), rtol=0, atol=1e-9)
+        for s in (back_at + 2, sc.steps):
+            # Back: the informed agents track the (caught-up) leader again.
+            edges = interaction_graph(sc, real, q[s], static)
+            assert_allclose(u[s], swarm_control(sc.law, q[s], p[s], edges, leader[s],
+                                                real.agents, sc.dt), rtol=0, atol=1e-9)
+    # The restarted leader caught up with the clock: its state is the model's at t_k.
+    ref = simulate(sc).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['leader_q'][-1], ref['leader_q'][-1], rtol=0, atol=1e-9)
+    # Both transitions are in the bag's /swarm/metrics.
+    states = []
+    for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics']):
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        states.append((int(values['step']), values['leader']))
+    assert (lost_at, 'lost') in states and (back_at, 'ok') in states
+
+
+# ----------------------------------------------------------------------------------------------
+# A lost agent: lockstep (zero after the step timeout), realtime (held, then zero), restart
+
+
+class Lines:
+    """Collects a process's stderr lines in a thread (so waits can look for one)."""
+
+    def __init__(self, stream) -> None:
+        """Start reading ``stream``."""
+        self.lines: list[str] = []
+        self.thread = threading.Thread(target=self._read, args=(stream,), daemon=True)
+        self.thread.start()
+
+    def _read(self, stream) -> None:
+        for line in stream:
+            self.lines.append(line)
+
+    def has(self, text: str) -> bool:
+        """Return whether some line contains ``text``."""
+        return any(text in line for line in list(self.lines))
+
+    def max_step(self) -> int:
+        """Return the latest step a progress line reported (``-1`` before the first)."""
+        steps = [int(m.group(1)) for line in list(self.lines)
+                 for m in [re.search(r' step (\d+)/', line)] if m]
+        return max(steps, default=-1)
+
+
+def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=60'])
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={path}']
+
+    def agent(i):
+        return subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    agents = [agent(i) for i in range(3)]
+    world = subprocess.Popen(executable('world') + ros_args + [
+        '-p', f'out_dir:={out}', '-p', 'step_timeout:=0.3'], env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    log = Lines(world.stderr)
+    restarted = None
+    try:
+        wait_for(lambda: log.max_step() >= 100, 60, 'the world to pass step 100')
+        agents[1].kill()
+        agents[1].wait()
+        wait_for(lambda: log.has('no command from agent(s) [1]'), 30,
+                 'the world to miss agent 1')
+        restarted = agent(1)
+        world.wait(timeout=RUN_TIMEOUT)
+    finally:
+        for proc in procs + agents + [world] + ([restarted] if restarted else []):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+    assert world.returncode == 0, ''.join(log.lines[-20:])
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed'
+    missed = summary['missed_commands_per_agent']
+    assert missed[0] == missed[2] == 0 and 0 < missed[1] < sc.steps // 2
+    # Every missed step is in the log; the restarted agent answered the last step.
+    clock = StepClock(sc.dt)
+    stamps = [clock.step_of(msg.header.stamp)
+              for _, msg in BagReader(out / 'bag').decoded(['/agent_1/cmd_accel'])]
+    assert stamps[-1] == sc.steps
+    assert len(set(stamps)) >= sc.steps + 1 - missed[1]
+
+
+def test_realtime_lost_agent_is_held_then_zeroed(tmp_path, ros_domain):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=6',
+                                           'record_every=1', 'dt=0.02'])
+    with InProcessSwarm(path, out, mode='realtime', domain_id=ros_domain,
+                        world_params={'staleness': 0.3}) as swarm:
+        swarm.spin_until(lambda: swarm.world.k >= 60, RUN_TIMEOUT)
+        killed_at = swarm.world.k
+        swarm.remove(swarm.agents)
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed'
+    with np.load(out / 'timeseries.npz') as ros:
+        u = ros['u']
+    assert np.abs(u[killed_at - 5]).sum() > 0
+    zero = np.flatnonzero(np.abs(u).sum(axis=(1, 2)) == 0)
+    first_zero = zero[zero > killed_at][0]
+    # Held for about the staleness (0.3 s = 15 steps at real time), then zero to the end.
+    assert 5 <= first_zero - killed_at <= 40
+    # (Commands already in flight when the node went may still land in the first steps.)
+    held = u[killed_at + 2:first_zero]
+    assert_array_equal(held, np.broadcast_to(held[0], held.shape))
+    assert (np.abs(u[first_zero:]).sum(axis=(1, 2)) == 0).all()
+    stale_steps = sc.steps + 1 - first_zero
+    for missed in summary['missed_commands_per_agent']:
+        # Plus the steps at the start before the first command arrived.
+        assert stale_steps <= missed <= stale_steps + 25
+
+
+# ----------------------------------------------------------------------------------------------
+# Killed or starved recorder
+
+
+def test_sigkilled_world_bag_is_recovered_by_analyze(tmp_path, ros_domain, capsys):
+    path, sc, out = scenario_of(tmp_path, ['n_agents=2', 'informed.count=1', 'duration=1000'])
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={path}']
+    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+              for i in range(2)]
+    world = subprocess.Popen(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    mcap = out / 'bag' / 'bag_0.mcap'
+    try:
+        wait_for(lambda: mcap.is_file() and mcap.stat().st_size > 300_000, 120,
+                 'the world to record a few chunks')
+        world.send_signal(signal.SIGKILL)
+        world.wait(timeout=30)
+    finally:
+        for proc in procs + [world]:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+    assert not (out / 'bag' / 'metadata.yaml').exists()
+    assert analyze_main([str(out / 'bag'), '--out', str(tmp_path / 'recovered'),
+                         '--no-anim']) == 0
+    err = capsys.readouterr().err
+    assert 'bag_0.mcap was not closed (no summary or footer): read ' in err
+    assert ' complete chunks' in err
+    summary = json.loads((tmp_path / 'recovered' / 'summary.json').read_text())
+    assert summary['status'] == 'truncated' and summary['complete_steps'] > 100
+    # All but at most one chunk (1 MiB uncompressed) of the recorded steps are recovered.
+    per_step = 2 * 716 + 2 * 68 + 716 + 68 + 20
+    counts = BagReader(out / 'bag').message_counts()
+    assert counts['/agent_0/odom'] >= summary['complete_steps']
+    assert summary['complete_steps'] * per_step > mcap.stat().st_size
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 256 KiB tmpfs (as root); skip with the reason where it cannot be mounted."""
+    where = tmp_path / 'small'
+    where.mkdir()
+    if shutil.which('mount') is None or os.geteuid() != 0:
+        pytest.skip('a small tmpfs needs root and mount(8): not available here')
+    res = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=256k', 'tmpfs', str(where)],
+                         capture_output=True, text=True)
+    if res.returncode != 0:
+        pytest.skip(f'cannot mount a tmpfs here: {res.stderr.strip()}')
+    yield where
+    subprocess.run(['umount', '-l', str(where)], check=False)
+
+
+def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_domain):
+    path = resolve_scenario('demo', ['n_agents=4', 'informed.count=2', 'duration=2000'], None,
+                            tmp_path / 'scenario')
+    sc = parse_scenario(yaml.safe_load(path.read_text()))
+    out = small_disk / 'run'
+    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        world = swarm.world
+        assert world.status == 'recording_failed'
+        assert 'No space left on device' in world.bag_error
+        assert 0 < world.k < sc.steps
+    assert not (out / 'bag' / 'metadata.yaml').exists()
+    reader = BagReader(out / 'bag')
+    assert reader.recovered
+    assert reader.message_counts()['/agent_0/odom'] > 10
