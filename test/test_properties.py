@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import strategies as st
+from hypothesis import event, given, settings, strategies as st
 
 from flock_swarm import sim
-from flock_swarm.core.errors import one_line
-from flock_swarm.core.scenario import TOP_KEYS, parse_yaml
+from flock_swarm.core.errors import ScenarioError, one_line
+from flock_swarm.core.scenario import TOP_KEYS, apply_override, parse_yaml
 from flock_swarm.scenarios import load_mapping, preset_names
 
 #: Steps every generated run is cut to (the property is about input, not long runs).
@@ -42,7 +42,8 @@ SHORT_STEPS = 3
 CLI_KEYS = ('scenario', '<scenario>', '--seed', '--set', '--out')
 
 #: Budgets: the whole file stays under about a minute on two cores.
-SIM_EXAMPLES = 160
+SIM_EXAMPLES = 600
+CLI_EXAMPLES = 200
 
 
 def short(data: dict) -> dict:
@@ -77,10 +78,20 @@ WRONG_TYPES = st.one_of(
     st.dictionaries(st.sampled_from(['x', 'r', 'model']), MODERATE_NUMBERS, max_size=2),
     st.just(datetime.date(2001, 12, 14)), st.just(b'\x00\xff'))
 BAD_VALUES = st.one_of(SPECIAL_NUMBERS, MODERATE_NUMBERS, WRONG_TYPES)
+#: A duration: a long valid one is a long run, not bad input, so moderate ones are <= 0.
+BAD_DURATIONS = st.one_of(SPECIAL_NUMBERS, st.integers(-1000, 0), WRONG_TYPES)
+#: Factors for a float of a preset: mostly valid neighbours of the paper's value, so runs
+#: happen too (at most 100 times longer or denser than the shortened preset).
+SCALES = st.sampled_from([-1.0, 0.0, 0.5, 2.0, 10.0, 100.0])
 #: Keys no schema has, plus keys that belong to another section or protocol.
 UNKNOWN_KEYS = st.one_of(st.sampled_from(['gain', 'radius', 'c3', 'A', 'params', 'name',
                                           'n_agents', 'position']),
                          st.text(min_size=1, max_size=6))
+
+
+def bad_values(path: tuple) -> st.SearchStrategy:
+    """Return the strategy of replacement values for the key at ``path``."""
+    return BAD_DURATIONS if path == ('duration',) else BAD_VALUES
 
 
 def paths(node, prefix=()):
@@ -93,6 +104,16 @@ def paths(node, prefix=()):
     elif isinstance(node, list):
         for k, value in enumerate(node):
             yield from paths(value, prefix + (k,))
+
+
+def lookup(data, path):
+    """Return the value at ``path`` inside ``data``, or ``None`` where there is none."""
+    for part in path:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return data
 
 
 def parent_of(data, path):
@@ -118,13 +139,17 @@ def mutated_scenarios(draw):
         parent, key = parent_of(data, where)
         value = parent[key]
         ops = ['replace', 'delete']
+        if isinstance(value, float):
+            ops += ['scale', 'scale']
         if isinstance(value, list):
             ops.append('lengthen')
         if isinstance(value, dict):
             ops.append('unknown')
         op = draw(st.sampled_from(ops))
         if op == 'replace':
-            parent[key] = draw(BAD_VALUES)
+            parent[key] = draw(bad_values(where))
+        elif op == 'scale':
+            parent[key] = value * draw(SCALES)
         elif op == 'delete':
             del parent[key]
         elif op == 'lengthen':
@@ -133,6 +158,47 @@ def mutated_scenarios(draw):
             value[draw(UNKNOWN_KEYS)] = draw(BAD_VALUES)
         log.append((op, where))
     return name, data, log
+
+
+#: ``--set`` value text that is not YAML for a number (a digit string could be a valid, long run).
+RAW_TEXT = st.text(alphabet=st.characters(exclude_categories=('Nd', 'Cs')), max_size=8)
+
+
+@st.composite
+def cli_overrides(draw):
+    """Draw a preset and ``--set`` / ``--seed`` arguments; return ``(name, args)``."""
+    name = draw(st.sampled_from(sorted(BASES)))
+    args = []
+    for _ in range(draw(st.integers(1, 3))):
+        if draw(st.integers(0, 4)) == 0:
+            path = (draw(UNKNOWN_KEYS),)
+        else:
+            path = draw(st.sampled_from(sorted(paths(BASES[name]), key=repr)))
+        base = lookup(BASES[name], path)
+        if isinstance(base, float) and draw(st.booleans()):
+            value = base * draw(SCALES)
+        else:
+            value = draw(bad_values(path))
+        text = draw(st.one_of(
+            st.just(yaml.safe_dump(value, default_flow_style=True).removesuffix('\n...\n')
+                    .rstrip('\n')), RAW_TEXT))
+        args += ['--set', f'{".".join(str(part) for part in path)}={text}']
+    if draw(st.booleans()):
+        seeds = st.one_of(st.integers(0, 2 ** 32), st.integers(-10 ** 30, 10 ** 30), RAW_TEXT)
+        args += ['--seed', str(draw(seeds))]
+    return name, args
+
+
+def read_as_sim(text: str, args: list[str]):
+    """Return the mapping ``sim`` validates: the file with the ``--set`` overrides applied."""
+    try:
+        data = parse_yaml(text)
+        for flag, value in zip(args[::2], args[1::2]):
+            if flag == '--set':
+                data = apply_override(data, value)
+    except (yaml.YAMLError, ScenarioError, TypeError, AttributeError):
+        return data if isinstance(data, dict) else None
+    return data
 
 
 # --------------------------------------------------------------------------------------------
@@ -224,17 +290,14 @@ def assert_runs_or_names_key(data, extra: list[str] = ()) -> None:
     """The property, for one scenario mapping (and extra ``sim`` arguments)."""
     text = dump(data)
     status, err, out, tmp = run_sim(text, extra)
+    event(f'exit status {status}')
     with tmp:
         if status == 0:
             assert err == '', f'a successful quiet run printed {err!r}'
             assert_outputs_finite(out)
         else:
             # The keys as sim read them: YAML may turn a key such as '1e100' into a number.
-            try:
-                read = parse_yaml(text)
-            except yaml.YAMLError:
-                read = None
-            assert_one_line_error(status, err, read)
+            assert_one_line_error(status, err, read_as_sim(text, list(extra)))
 
 
 def dump(data) -> str:
@@ -300,6 +363,18 @@ def test_regression(name, changes, key):
         assert assert_one_line_error(status, err, data) == key
 
 
+@pytest.mark.parametrize('name, changes', [
+    # ValueError from NumPy: uniform(0.0, -0.0) raises 'high - low < 0'.
+    ('os2003_sink', {'initial.velocity_box.1.1': -0.0}),
+])
+def test_regression_runs(name, changes):
+    """Each input once broke the property (a traceback); now it runs, with finite outputs."""
+    status, err, out, tmp = run_sim(dump(changed(name, changes)))
+    with tmp:
+        assert status == 0, err
+        assert_outputs_finite(out)
+
+
 @pytest.mark.parametrize('text, extra, key', [
     # ValueError, AttributeError, RecursionError from PyYAML's constructors and composer.
     ('n_agents: 1' + '0' * 5000 + '\n', [], 'scenario'),
@@ -317,3 +392,32 @@ def test_regression_cli(text, extra, key):
     status, err, out, tmp = run_sim(dump(BASES['demo']) if text is None else text, extra)
     with tmp:
         assert assert_one_line_error(status, err) == key
+
+
+# --------------------------------------------------------------------------------------------
+# Scenario files
+
+
+@pytest.mark.parametrize('name', sorted(BASES))
+def test_every_shortened_preset_runs(name):
+    """The unmutated bases run: the mutations below start from valid scenarios."""
+    status, err, out, tmp = run_sim(dump(BASES[name]))
+    with tmp:
+        assert status == 0, err
+        assert_outputs_finite(out)
+
+
+@settings(derandomize=True, max_examples=SIM_EXAMPLES, deadline=None)
+@given(mutated_scenarios())
+def test_mutated_scenario_runs_or_names_the_key(case):
+    """Mutated presets: run with finite outputs, or exit 2 with one line naming the key."""
+    name, data, log = case
+    assert_runs_or_names_key(data)
+
+
+@settings(derandomize=True, max_examples=CLI_EXAMPLES, deadline=None)
+@given(cli_overrides())
+def test_overrides_and_seed_run_or_name_the_key(case):
+    """``--set`` and ``--seed`` on the presets: the same property, through the command line."""
+    name, args = case
+    assert_runs_or_names_key(BASES[name], args)

@@ -128,7 +128,8 @@ def _choice(value: Any, key: str, options) -> str:
 
 
 def _box(value: Any, key: str, dim: int) -> np.ndarray:
-    box = _matrix(value, key, dim, 2)
+    # + 0.0 turns -0.0 into 0.0: NumPy's uniform(0.0, -0.0) raises 'high - low < 0'.
+    box = _matrix(value, key, dim, 2) + 0.0
     for k in range(dim):
         if box[k, 0] > box[k, 1]:
             raise ScenarioError(f'{key}[{k}]',
