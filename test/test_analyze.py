@@ -31,7 +31,7 @@ pytestmark = pytest.mark.ros
 RUN_TIMEOUT = 120.0
 #: Keys of the world's summary that describe the process, not the run.
 PROCESS_KEYS = {'wall_time_s', 'bag', 'resent_steps', 'rejected_messages', 'leader_events',
-                'duplicate_agent_ids', 'bag_error'}
+                'duplicate_agent_ids', 'bag_error', 'command_latency_ms'}
 #: The figures of every analysis.
 FIGURES = ('trajectories.png', 'snapshots.png', 'velocity_mismatch.png', 'com_error.png',
            'min_distance.png', 'components.png', 'eta.png')

@@ -28,7 +28,8 @@ from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
-from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock, make_accel, make_odometry
+from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,
+                                      make_odometry)
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
 from flock_swarm.sim import interaction_graph, simulate, static_graph
 
@@ -282,10 +283,26 @@ def test_realtime_lost_agent_is_held_then_zeroed(tmp_path, ros_domain):
     held = u[killed_at + 2:first_zero]
     assert_array_equal(held, np.broadcast_to(held[0], held.shape))
     assert (np.abs(u[first_zero:]).sum(axis=(1, 2)) == 0).all()
+    latency = summary['command_latency_ms']
+    assert latency['count'] > 100 and 0 < latency['p50'] <= latency['p99'] <= latency['max']
     stale_steps = sc.steps + 1 - first_zero
     for missed in summary['missed_commands_per_agent']:
         # Plus the steps at the start before the first command arrived.
         assert stale_steps <= missed <= stale_steps + 25
+
+
+def test_latency_histogram_percentiles():
+    rng = np.random.default_rng(5)
+    samples = rng.lognormal(np.log(2e-3), 0.8, 20_000)
+    hist = LatencyHistogram()
+    for x in samples:
+        hist.add(float(x))
+    got = hist.summary_ms()
+    assert got['count'] == samples.size and got['max'] == round(1e3 * samples.max(), 3)
+    for name, q in (('p50', 50), ('p90', 90), ('p99', 99)):
+        exact = 1e3 * np.percentile(samples, q)
+        # Read off bin edges 2.3 % apart.
+        assert exact <= got[name] <= exact * 1.024, name
 
 
 # ----------------------------------------------------------------------------------------------

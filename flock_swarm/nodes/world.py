@@ -37,10 +37,10 @@ from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
-                                      TELEMETRY_QOS, StepClock, accel_vector, agent_hosts,
-                                      claimants, cmd_topic, declare, declare_common, load_scenario,
-                                      make_odometry, odom_topic, odometry_state, run_node,
-                                      timer_period)
+                                      TELEMETRY_QOS, LatencyHistogram, StepClock,
+                                      accel_vector, agent_hosts, claimants, cmd_topic, declare,
+                                      declare_common, load_scenario, make_odometry, odom_topic,
+                                      odometry_state, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
 from flock_swarm.sim import RunLog, SimResult, build_summary, jsonable, write_outputs
@@ -118,6 +118,9 @@ class WorldNode(Node):
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.bag_error: str | None = None
         self.last_missing: set[int] = set()
+        # Realtime: wall time each step's odometry went out, and how long commands took.
+        self.published_at: dict[int, float] = {}
+        self.latency = LatencyHistogram()
         self.log = RunLog.for_scenario(sc)
         self.done = False
         self.started = False
@@ -254,8 +257,12 @@ class WorldNode(Node):
             return
         u = accel_vector(msg, self.scenario.dim)
         if not self.lockstep:
+            now = time.monotonic()
             self.held[i] = u
-            self.held_at[i] = time.monotonic()
+            self.held_at[i] = now
+            sent = self.published_at.get(k)
+            if sent is not None:
+                self.latency.add(now - sent)
         elif not self.started or self.done:
             return
         elif k == self.k:
@@ -494,6 +501,8 @@ class WorldNode(Node):
         if now - self.leader_seen_at > self.staleness:
             self.lose_leader()
         self.publish_states(stamp, t_ns)
+        self.published_at[k] = time.monotonic()
+        self.published_at.pop(k - 100, None)
         u = self.held.copy()
         stale = np.flatnonzero(now - self.held_at > self.staleness)
         u[stale] = 0.0
@@ -556,6 +565,7 @@ class WorldNode(Node):
             'leader_events': self.leader_events,
             'duplicate_agent_ids': sorted(self.duplicates),
             'bag_error': self.bag_error,
+            'command_latency_ms': None if self.lockstep else self.latency.summary_ms(),
             'resent_steps': self.resends,
             'leader_missed': self.leader_missed,
             'wall_time_s': round(time.monotonic() - self.t_wall0, 3),
