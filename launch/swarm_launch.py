@@ -2,9 +2,11 @@
 
 ros2 launch flock_swarm swarm_launch.py scenario:=su2009_fig6
 ros2 launch flock_swarm swarm_launch.py scenario:=demo n_agents:=12 mode:=realtime
+ros2 launch flock_swarm swarm_launch.py scenario:=demo n_agents:=100 container:=true
 
 Arguments: ``scenario`` (preset name or YAML path), ``n_agents`` (0: the scenario's),
-``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and summary.json).
+``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and summary.json),
+``container`` (true: every agent in one ``agents`` process instead of one process each).
 The launch ends when the world has recorded its last step.
 """
 
@@ -22,6 +24,7 @@ def swarm_nodes(context):
     n_agents = int(LaunchConfiguration('n_agents').perform(context))
     mode = LaunchConfiguration('mode').perform(context)
     out_dir = LaunchConfiguration('out_dir').perform(context)
+    container = LaunchConfiguration('container').perform(context).lower() in ('true', '1')
     common = {'scenario': scenario, 'mode': mode}
     if n_agents > 0:
         common['n_agents'] = n_agents
@@ -32,8 +35,12 @@ def swarm_nodes(context):
         Node(package='flock_swarm', executable='leader', name='leader',
              parameters=[common]),
     ]
-    nodes += [Node(package='flock_swarm', executable='agent', name=f'agent_{i}',
-                   parameters=[dict(common, agent_id=i)]) for i in range(n)]
+    if container:
+        nodes.append(Node(package='flock_swarm', executable='agents', name='agents',
+                          parameters=[common]))
+    else:
+        nodes += [Node(package='flock_swarm', executable='agent', name=f'agent_{i}',
+                       parameters=[dict(common, agent_id=i)]) for i in range(n)]
     return nodes
 
 
@@ -48,5 +55,7 @@ def generate_launch_description():
                               description='lockstep or realtime'),
         DeclareLaunchArgument('out_dir', default_value='',
                               description='output directory of the world (bag/, summary)'),
+        DeclareLaunchArgument('container', default_value='false',
+                              description='host every agent in one process (agents)'),
         OpaqueFunction(function=swarm_nodes),
     ])

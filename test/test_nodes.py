@@ -221,6 +221,11 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
     counts = reader.message_counts()
     assert meta['rosbag2_bagfile_information']['message_count'] == sum(counts.values())
     assert counts['/agent_0/odom'] >= summary['steps']
+    # ... and replays: every recorded message is published again (here at 1000x).
+    res = subprocess.run(executable('replay') + [str(out / 'bag'), '--rate', '1000'],
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert f'[replay] done: {sum(counts.values())} messages on ' in res.stderr
 
 
 @pytest.mark.parametrize('extra_env, args, key', [
