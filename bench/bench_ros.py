@@ -33,12 +33,13 @@ import json
 import math
 import os
 import platform
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from flock_swarm.runner import stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
 DENSITY = 30 / 400.0
@@ -218,18 +219,6 @@ def _env() -> dict:
                 ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
 
-def _stop(procs: list) -> None:
-    for proc in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-    for proc in procs:
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def floor(layout: str, n: int, steps: int) -> float:
     """Return the floor's steps/s for a layout."""
     me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
@@ -246,7 +235,7 @@ def floor(layout: str, n: int, steps: int) -> float:
         out = subprocess.run(me + ['--role', 'world', '--hosts', str(len(hosts))],
                              capture_output=True, text=True, timeout=RUN_TIMEOUT, env=_env())
     finally:
-        _stop(procs)
+        stop(procs, timeout=20)
     return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
 
 

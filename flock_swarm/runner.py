@@ -209,6 +209,19 @@ def executable(name: str) -> list[str]:
     return [sys.executable, '-m', f'flock_swarm.nodes.{name}']
 
 
+def stop(procs: list, timeout: float = 10.0) -> None:
+    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    for proc in procs:
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   log=None, realtime_factor: float = 1.0, container: bool = False,
@@ -258,15 +271,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         world.wait(timeout=30)
         raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
     finally:
-        for proc in others:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in others:
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop(others)
     summary = out / 'summary.json'
     return json.loads(summary.read_text()) if summary.is_file() else {}
 

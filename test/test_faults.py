@@ -30,8 +30,9 @@ from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,
                                       make_odometry)
-from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.sim import interaction_graph, simulate, static_graph
+from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
 
@@ -240,14 +241,7 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
         restarted = agent(1)
         world.wait(timeout=RUN_TIMEOUT)
     finally:
-        for proc in procs + agents + [world] + ([restarted] if restarted else []):
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+        stop(procs + agents + [world] + ([restarted] if restarted else []), timeout=20)
     assert world.returncode == 0, ''.join(log.lines[-20:])
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed'
@@ -311,15 +305,7 @@ def test_latency_histogram_percentiles():
 
 def test_sigkilled_world_bag_is_recovered_by_analyze(tmp_path, ros_domain, capsys):
     path, sc, out = scenario_of(tmp_path, ['n_agents=2', 'informed.count=1', 'duration=1000'])
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
-    ros_args = ['--ros-args', '-p', f'scenario:={path}']
-    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    procs += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
-                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-              for i in range(2)]
-    world = subprocess.Popen(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    procs, world = start_nodes(path, ros_domain, out, 2)
     mcap = out / 'bag' / 'bag_0.mcap'
     try:
         wait_for(lambda: mcap.is_file() and mcap.stat().st_size > 300_000, 120,
@@ -327,10 +313,7 @@ def test_sigkilled_world_bag_is_recovered_by_analyze(tmp_path, ros_domain, capsy
         world.send_signal(signal.SIGKILL)
         world.wait(timeout=30)
     finally:
-        for proc in procs + [world]:
-            if proc.poll() is None:
-                proc.kill()
-            proc.wait()
+        stop(procs + [world])
     assert not (out / 'bag' / 'metadata.yaml').exists()
     assert analyze_main([str(out / 'bag'), '--out', str(tmp_path / 'recovered'),
                          '--no-anim']) == 0

@@ -23,6 +23,7 @@ from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.runner import executable, resolve_scenario, run_in_process, run_processes
 from flock_swarm.sim import simulate
+from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
 
@@ -190,15 +191,7 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
     scenario = resolve_scenario('demo', ['n_agents=2', 'informed.count=1', 'duration=1000'],
                                 None, out)
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
-    ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
-    procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    procs += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
-                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-              for i in range(2)]
-    world = subprocess.Popen(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                             text=True)
+    procs, world = start_nodes(scenario, ros_domain, out, 2, world_stderr=subprocess.PIPE)
     mcap = out / 'bag' / 'bag_0.mcap'
     try:
         # Several flushed chunks (1 MiB before zstd, ~10x less on disk): the loop is under way.
