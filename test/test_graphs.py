@@ -234,3 +234,82 @@ def test_degrees_match_dense_adjacency():
     edges = graphs.disk_graph(rng.uniform(0.0, 1.0, size=(50, 2)), 0.2)
     dense = graphs.edges_to_adjacency(edges)
     assert_array_equal(graphs.degrees(edges), dense.sum(axis=1))
+
+
+# --------------------------------------------------------------------------------------------
+# VerletDiskGraph
+
+
+def drifting_fragments(rng, n, dim, steps):
+    """Yield positions of fragments moving apart at different velocities, with jitter."""
+    q = rng.uniform(0.0, 4.0, size=(n, dim))
+    velocity = rng.normal(0.0, 0.3, size=(4, dim))[rng.integers(4, size=n)] + 0.5
+    for _ in range(steps):
+        yield q
+        q = q + velocity + rng.normal(0.0, 0.02, size=q.shape)
+
+
+@pytest.mark.parametrize('strict', [True, False])
+@pytest.mark.parametrize('dim', [2, 3])
+@pytest.mark.parametrize('skin', [0.05, 0.5])
+def test_verlet_disk_graph_is_the_disk_graph_at_every_step(dim, strict, skin):
+    rng = np.random.default_rng(7 + dim)
+    graph = graphs.VerletDiskGraph(1.0, strict, skin)
+    for q in drifting_fragments(rng, 80, dim, 60):
+        edges, exact = graph.edges(q), graphs.disk_graph(q, 1.0, strict)
+        assert_array_equal(edges.i, exact.i)
+        assert_array_equal(edges.j, exact.j)
+        assert_array_equal(edges.weight, exact.weight)
+    assert 1 <= graph.searches <= 60
+
+
+def test_verlet_disk_graph_keeps_candidates_of_a_rigidly_moving_swarm():
+    rng = np.random.default_rng(5)
+    q = rng.uniform(0.0, 5.0, size=(50, 2))
+    graph = graphs.VerletDiskGraph(1.0)
+    for k in range(100):
+        assert_array_equal(graph.edges(q + 0.3 * k).i, graphs.disk_graph(q, 1.0).i)
+    assert graph.searches == 1
+
+
+def test_verlet_disk_graph_of_stacked_swarms_is_block_diagonal():
+    # Three swarms drawn in the same box: one disk graph each, never linked to one another.
+    rng = np.random.default_rng(9)
+    walks = [list(drifting_fragments(rng, 30, 2, 40)) for _ in range(3)]
+    graph = graphs.VerletDiskGraph(1.0, blocks=3)
+    for parts in zip(*walks):
+        edges = graph.edges(np.concatenate(parts))
+        expected_i, expected_j = [], []
+        for b, q in enumerate(parts):
+            own = graphs.disk_graph(q, 1.0)
+            expected_i.append(own.i + 30 * b)
+            expected_j.append(own.j + 30 * b)
+        assert edges.n == 90
+        assert_array_equal(edges.i, np.concatenate(expected_i))
+        assert_array_equal(edges.j, np.concatenate(expected_j))
+    with pytest.raises(ValueError, match='equal groups'):
+        graph.edges(np.zeros((91, 2)))
+
+
+def flock_with_stragglers(rng, drift):
+    """Yield a rigid flock drifting by ``drift`` per step and three stragglers crossing it."""
+    flock = rng.uniform(0.0, 6.0, size=(60, 2))
+    stragglers = np.array([[-3.0, 1.0], [-3.0, 3.0], [9.0, 5.0]])
+    # The last one runs far beyond the flock (and, stacked, past the next group's range).
+    speed = np.array([[0.3, 0.0], [0.25, 0.05], [0.6, 0.0]])
+    for k in range(80):
+        yield np.concatenate((flock + drift * k, stragglers + (drift + speed) * k))
+
+
+@pytest.mark.parametrize('blocks', [1, 3])
+def test_verlet_disk_graph_searches_stragglers_again_not_the_flock(blocks):
+    rng = np.random.default_rng(21)
+    walks = [flock_with_stragglers(rng, np.array([0.05, 0.02 * b])) for b in range(blocks)]
+    graph = graphs.VerletDiskGraph(1.0, blocks=blocks)
+    for parts in zip(*walks):
+        edges = graph.edges(np.concatenate(parts))
+        own = [graphs.disk_graph(q, 1.0) for q in parts]
+        assert_array_equal(edges.i, np.concatenate([g.i + 63 * b for b, g in enumerate(own)]))
+        assert_array_equal(edges.j, np.concatenate([g.j + 63 * b for b, g in enumerate(own)]))
+    assert graph.searches == 1
+    assert graph.refreshes > 10

@@ -44,14 +44,189 @@ def disk_graph(q: np.ndarray, r: float, strict: bool = True) -> EdgeList:
         return EdgeList(n, empty, empty, np.zeros(0))
     # The tree proposes candidates with a margin; the decision is within_radius(), the one
     # predicate the agent node uses too, so both agree even for pairs exactly r apart.
-    pairs = cKDTree(q).query_pairs(r * (1.0 + 1e-9), output_type='ndarray')
-    if pairs.size:
-        diff = q[pairs[:, 1]] - q[pairs[:, 0]]
-        pairs = pairs[within_radius(np.einsum('ek,ek->e', diff, diff), r, strict)]
-        pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
-    i = pairs[:, 0].astype(np.intp)
-    j = pairs[:, 1].astype(np.intp)
+    i, j = sorted_pairs(q, r * (1.0 + 1e-9))
+    keep = within_radius(pair_sq_distances(q, i, j), r, strict)
+    i, j = i[keep], j[keep]
     return EdgeList(n, i, j, np.ones(i.size))
+
+
+def sorted_pairs(q: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return the candidate pairs ``i < j`` of a k-d tree within ``radius``, sorted by ``(i, j)``.
+
+    :param q: positions, shape ``(n, dim)``, finite.
+    :param radius: the search radius (the tree's ``<=``; callers add their own margin).
+    :return: ``(i, j)``, contiguous ``intp`` arrays.
+    """
+    return sorted_pairs_of_tree(cKDTree(q, balanced_tree=False, compact_nodes=False), radius,
+                                q.shape[0])
+
+
+def sorted_pairs_of_tree(tree: cKDTree, radius: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the pairs ``i < j`` of a k-d tree of ``n`` points within ``radius``, sorted.
+
+    :param tree: the tree.
+    :param radius: the search radius (the tree's ``<=``).
+    :param n: the number of points.
+    :return: ``(i, j)``, contiguous ``intp`` arrays sorted by ``(i, j)``.
+    """
+    pairs = tree.query_pairs(radius, output_type='ndarray')
+    # One integer key per pair: sorting it is an order of magnitude faster than lexsort.
+    key = np.sort(pairs[:, 0].astype(np.int64) * n + pairs[:, 1])
+    return (key // n).astype(np.intp), (key % n).astype(np.intp)
+
+
+def pair_sq_distances(q: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Return ``||q_j - q_i||^2`` for each pair.
+
+    ``take`` rather than fancy indexing: it gathers rows of an ``(n, dim)`` array several
+    times faster, with the same values.
+
+    :param q: positions, shape ``(n, dim)``.
+    :param i: first ends, shape ``(e,)``.
+    :param j: second ends, shape ``(e,)``.
+    :return: squared distances, shape ``(e,)``.
+    """
+    diff = q.take(j, axis=0) - q.take(i, axis=0)
+    return np.einsum('ek,ek->e', diff, diff)
+
+
+class VerletDiskGraph:
+    """The r-disk graph of a moving swarm, filtered from candidate pairs kept up to date.
+
+    A Verlet neighbour list (L. Verlet, Phys. Rev. 159, 98, 1967) with per-agent refresh.
+    Candidates are the pairs within ``R = r + skin``. Each agent keeps the position where
+    its candidates were last searched, seen in a frame that drifts with its swarm (the median
+    displacement, so a flock moving with its leader stays still in it). An agent that has
+    moved more than ``skin / 3`` in that frame has its candidates searched again, against
+    every agent where it is now. Every pair within ``r`` is then a candidate: a pair left
+    out was more than ``R`` apart when the later of its two agents was last searched, and
+    since then that agent has moved at most ``skin / 3`` and the other at most
+    ``2 skin / 3`` (``skin / 3`` to its own search position and ``skin / 3`` back), so it is
+    still more than ``r`` apart. Filtering the candidates with :func:`within_radius` gives
+    exactly :func:`disk_graph`: the same edges in the same order. A flock costs a distance
+    per candidate and step instead of a tree search; stragglers are searched in the tree of
+    the last full search (where every other agent is within ``skin / 3``) and among the
+    agents searched since.
+
+    The swarm may be a stack of ``blocks`` independent groups of equal size (consecutive
+    agents), none linked to another; each drifts with its own median.
+    """
+
+    #: Once this fraction of the agents has been searched again, search all of them.
+    FULL_SEARCH_FRACTION = 0.25
+
+    def __init__(self, r: float, strict: bool = True, skin: float = 0.2,
+                 blocks: int = 1) -> None:
+        """Create the graph; the first call to :meth:`edges` searches every agent.
+
+        :param r: interaction radius, ``> 0``.
+        :param strict: ``< r`` (``True``) or ``<= r``, as :func:`disk_graph`.
+        :param skin: extra search radius, relative to ``r``, ``> 0``.
+        :param blocks: number of independent groups the swarm is made of.
+        """
+        self.r, self.strict, self.blocks = r, strict, blocks
+        self.skin = skin * r
+        # The tree's <= with a margin: rounding cannot drop a pair at distance R.
+        self.reach = (r + self.skin) * (1.0 + 1e-9)
+        #: Searches of every agent, and of some agents only.
+        self.searches = self.refreshes = 0
+        self._ref: np.ndarray | None = None
+        self._key = np.zeros(0, dtype=np.int64)
+        self._i = self._j = np.zeros(0, dtype=np.intp)
+        self.sq_dist = np.zeros(0)
+
+    def edges(self, q: np.ndarray) -> EdgeList:
+        """Return the r-disk graph at positions ``q`` (``disk_graph(q, r, strict)`` per group).
+
+        :param q: positions, shape ``(n, dim)``, the same ``n`` at every call; finite.
+        :return: the edge list, unit weights, edges sorted by ``(i, j)``.
+        """
+        n, dim = q.shape
+        if n % self.blocks:
+            raise ValueError(f'{n} agents do not split into {self.blocks} equal groups')
+        if self._ref is None:
+            self._search_all(q)
+        else:
+            offset = (q - self._ref).reshape(self.blocks, n // self.blocks, dim)
+            drift = np.repeat(np.median(offset, axis=1), n // self.blocks, axis=0)
+            dev = offset.reshape(n, dim) - drift
+            moved = np.flatnonzero(~(9.0 * np.einsum('nk,nk->n', dev, dev)
+                                     <= self.skin * self.skin))
+            if moved.size + self._searched.sum() > self.FULL_SEARCH_FRACTION * n:
+                self._search_all(q)
+            elif moved.size:
+                self._refresh(q, moved, q - drift)
+        sq = pair_sq_distances(q, self._i, self._j)
+        keep = within_radius(sq, self.r, self.strict)
+        i, j = self._i[keep], self._j[keep]
+        #: The squared lengths of the edges last returned (``pair_sq_distances`` of them).
+        self.sq_dist = sq[keep]
+        return EdgeList(n, i, j, np.ones(i.size))
+
+    def _search_all(self, q: np.ndarray) -> None:
+        """Search the candidates of every agent; make ``q`` their reference."""
+        n = q.shape[0]
+        # Groups side by side along the first axis with gaps of 2 R: the tree pairs no two
+        # groups (the shift's rounding, ~1e-16 of it, is far inside the margin of reach).
+        self._shift = np.zeros(n)
+        if self.blocks > 1:
+            x = q[:, 0].reshape(self.blocks, -1)
+            low, width = x.min(axis=1), x.max(axis=1) - x.min(axis=1)
+            start = np.concatenate(([0.0], np.cumsum(width + 2.0 * self.reach)[:-1]))
+            self._shift = np.repeat(start - low, n // self.blocks)
+        self._tree = cKDTree(self._apart(q), balanced_tree=False, compact_nodes=False)
+        i, j = sorted_pairs_of_tree(self._tree, self.reach, n)
+        self._key = i.astype(np.int64) * n + j
+        self._i, self._j = i, j
+        self._ref = q.copy()
+        self._searched = np.zeros(n, dtype=bool)
+        self.searches += 1
+
+    def _apart(self, y: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Return positions (of agents ``rows``, default all) with the groups shifted apart.
+
+        The shift is that of the last full search.
+        """
+        if rows is not None:
+            y = y[rows]
+        if self.blocks == 1:
+            return y
+        out = y.copy()
+        out[:, 0] += self._shift if rows is None else self._shift[rows]
+        return out
+
+    def _refresh(self, q: np.ndarray, moved: np.ndarray, y: np.ndarray) -> None:
+        """Search the candidates of the agents ``moved`` again, ``y`` the drifting positions.
+
+        Agents not searched since the full search are in its tree within ``skin / 3`` of
+        where they are now; the others are searched where they are now.
+        """
+        n, size = q.shape[0], q.shape[0] // self.blocks
+        self._searched[moved] = True
+        here = cKDTree(self._apart(y, moved), balanced_tree=False, compact_nodes=False)
+        old = here.sparse_distance_matrix(self._tree, self.reach + self.skin / 3.0,
+                                          output_type='ndarray')
+        a, b = moved[old['i']], old['j']
+        keep = ~self._searched[b]
+        a, b = a[keep], b[keep]
+        since = np.flatnonzero(self._searched)
+        new = here.sparse_distance_matrix(
+            cKDTree(self._apart(y, since), balanced_tree=False, compact_nodes=False),
+            self.reach, output_type='ndarray')
+        a = np.concatenate((a, moved[new['i']]))
+        b = np.concatenate((b, since[new['j']]))
+        # A straggler may leave its group's range in the shifted frame: drop other groups.
+        keep = (a != b) & (a // size == b // size)
+        lo, hi = np.minimum(a, b)[keep], np.maximum(a, b)[keep]
+        fresh = np.unique(lo.astype(np.int64) * n + hi)
+        touched = np.zeros(n, dtype=bool)
+        touched[moved] = True
+        kept = self._key[~(touched[self._i] | touched[self._j])]
+        # Both parts are sorted and disjoint: a stable sort merges them in linear time.
+        self._key = np.sort(np.concatenate((kept, fresh)), kind='stable')
+        self._i, self._j = (self._key // n).astype(np.intp), (self._key % n).astype(np.intp)
+        self._ref[moved] = y[moved]
+        self.refreshes += 1
 
 
 def within_radius(sq_dist: np.ndarray, r: float, strict: bool = True) -> np.ndarray:
