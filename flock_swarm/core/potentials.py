@@ -146,7 +146,7 @@ def phi(z: np.ndarray, a: float, b: float) -> np.ndarray:
 
 
 def phi_alpha(z: np.ndarray, r_alpha: float, d_alpha: float, h: float,
-              a: float, b: float) -> np.ndarray:
+              a: float, b: float, rho: np.ndarray | None = None) -> np.ndarray:
     """Return the action function ``phi_alpha(z) = rho_h(z / r_alpha) phi(z - d_alpha)``.
 
     [OS06] eq. (15), the derivative of the pair potential ``psi_alpha`` used by [Su09] eq. (7),
@@ -158,10 +158,14 @@ def phi_alpha(z: np.ndarray, r_alpha: float, d_alpha: float, h: float,
     :param h: bump plateau, ``0 < h < 1``.
     :param a: attraction limit of ``phi``.
     :param b: repulsion limit of ``phi``.
+    :param rho: ``rho_h(z / r_alpha)`` when the caller has it already (the adjacency
+        ``a_ij`` of [Su09] eq. (8) is the same bump), else ``None``.
     :return: the action (positive: attraction).
     """
     z = np.asarray(z, dtype=float)
-    return bump(z / r_alpha, h) * phi(z - d_alpha, a, b)
+    if rho is None:
+        rho = bump(z / r_alpha, h)
+    return rho * phi(z - d_alpha, a, b)
 
 
 def psi_alpha(z: np.ndarray, r_alpha: float, d_alpha: float, h: float,

@@ -145,9 +145,11 @@ class SuParams(Protocol):
         dq = qj - qi
         z = pot.sigma_norm(dq, self.eps)
         r_a, d_a = self.r_alpha, self.d_alpha
-        gradient = pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b)[:, None] \
+        # The bump of the action phi_alpha is a_ij: evaluated once for both terms.
+        a_ij = pot.bump(z / r_a, self.h)
+        gradient = pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b, a_ij)[:, None] \
             * pot.sigma_grad(dq, self.eps)
-        consensus = pot.bump(z / r_a, self.h)[:, None] * (pj - pi)
+        consensus = a_ij[:, None] * (pj - pi)
         return gradient + consensus
 
     def combine(self, q, p, s, leader, agents, dt):
@@ -448,9 +450,11 @@ def pair_sums(law: Protocol, q: np.ndarray, p: np.ndarray, edges: EdgeList) -> n
     :return: the sums, shape ``(n, k)``.
     """
     n = q.shape[0]
+    # take() gathers rows several times faster than fancy indexing, with the same values.
+    qi, pi, qj, pj = q.take(edges.i, 0), p.take(edges.i, 0), q.take(edges.j, 0), p.take(edges.j, 0)
     i, j = edges.i, edges.j
-    to_i = law.pair(q[i], p[i], q[j], p[j], edges.weight)
-    to_j = -to_i if law.antisymmetric else law.pair(q[j], p[j], q[i], p[i], edges.weight)
+    to_i = law.pair(qi, pi, qj, pj, edges.weight)
+    to_j = -to_i if law.antisymmetric else law.pair(qj, pj, qi, pi, edges.weight)
     out = np.empty((n, to_i.shape[1]))
     for col in range(to_i.shape[1]):
         out[:, col] = (np.bincount(i, weights=to_i[:, col], minlength=n)
