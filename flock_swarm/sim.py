@@ -18,9 +18,10 @@ import numpy as np
 from flock_swarm import __version__
 from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.graphs import EdgeList, disk_graph, fixed_graph
-from flock_swarm.core.metrics import STEP_METRICS, RunMetrics, step_metrics
-from flock_swarm.core.protocols import advance_adaptive, swarm_control
+from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
+from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
+                                      update_stacked_from_edges)
+from flock_swarm.core.protocols import AgentData, advance_adaptive, swarm_control
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
 from flock_swarm.core.stability import check_step
@@ -95,6 +96,16 @@ class RunLog:
         :param extra: further per-step arrays to record (e.g. adaptive gains ``h``).
         """
         self.metrics.update_from_edges(q, edges, edges_radius)
+        return self.record(k, t, q, p, u, leader, informed, last, **extra)
+
+    def record(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
+               leader: LeaderState, informed: np.ndarray, last: bool,
+               **extra) -> dict | None:
+        """Measure and record step ``k`` if it is a recorded one; return its metrics or ``None``.
+
+        The part of :meth:`observe` after the whole-run metrics, for callers that fold those
+        in themselves (a stack of runs, :func:`simulate_stack`).
+        """
         if k % self.every and not last:
             return None
         now = step_metrics(q, p, leader, self.eta_tolerance, self.radius, self.strict)
@@ -143,67 +154,222 @@ def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
     :return: the result; ``summary['status']`` is ``completed``, ``interrupted`` or
         ``diverged``.
     """
-    real = realize(sc)
-    q, p = real.q0.copy(), real.p0.copy()
-    agents = real.agents
+    return simulate_stack([sc], progress, progress_every)[0]
+
+
+def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | None = None,
+                   progress_every: float = 2.0) -> list[SimResult]:
+    """Run independent realisations side by side in one vectorised state; return each result.
+
+    A Monte Carlo sweep pays the per-step cost of Python once for the whole stack instead of
+    once per run. Each realisation is drawn by :func:`realize` from its own scenario (seed,
+    informed set, initial boxes) and the stack's graph links no two of them, with every
+    realisation's edges in the order of its own run: each result is that of
+    :func:`simulate` on its scenario alone, up to the summation order of the metrics.
+    Realisations that diverge leave the stack at that step; the others go on.
+
+    :param scenarios: the realisations; more than one must agree in everything but seed,
+        informed set and initial state (:func:`stack_mismatch`).
+    :param progress: called with a one-line status (of the first realisation still running)
+        roughly every ``progress_every`` seconds.
+    :param progress_every: wall-clock seconds between progress lines.
+    :return: one result per scenario, in order; ``summary['wall_time_s']`` is the stack's
+        wall time divided among its realisations.
+    :raises ValueError: when the scenarios cannot share a stack.
+    """
+    reason = stack_mismatch(scenarios)
+    if reason is not None:
+        raise ValueError(f'cannot stack these scenarios: {reason}')
+    sc = scenarios[0]
+    reals = [realize(s) for s in scenarios]
     leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
     intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
-    static = static_graph(sc, real)
-    log = RunLog.for_scenario(sc)
+    stack = _Stack(scenarios, reals, static_graph(sc, reals[0]) if len(reals) == 1 else None)
     started = time.monotonic()
     # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
     with np.errstate(over='ignore', invalid='ignore'):
-        status, step, reselections = _run_loop(
-            sc, real, q, p, agents, leader, intrinsic, static, log, progress, progress_every)
-    series = log.rec.arrays()
-    summary = build_summary(sc, real, series, log.metrics, step, status)
-    summary['pseudo_leader_reselections'] = reselections
-    summary['wall_time_s'] = round(time.monotonic() - started, 3)
-    return SimResult(summary, series)
+        _run_loop(stack, leader, intrinsic, progress, progress_every)
+    wall = (time.monotonic() - started) / len(scenarios)
+    results = []
+    for g, (s, real) in enumerate(zip(scenarios, reals)):
+        status, step = stack.outcome[g]
+        log = stack.logs[g]
+        series = log.rec.arrays()
+        summary = build_summary(s, real, series, log.metrics, step, status)
+        summary['pseudo_leader_reselections'] = 0 if stack.reselector is None \
+            else stack.reselector.count
+        summary['wall_time_s'] = round(wall, 3)
+        results.append(SimResult(summary, series))
+    return results
 
 
-def _run_loop(sc, real, q, p, agents, leader, intrinsic, static, log, progress,
-              progress_every):
-    """Advance the swarm to the end (or divergence, or Ctrl-C); return how it ended."""
-    law, dt, steps = sc.law, sc.dt, sc.steps
-    status, step = 'completed', 0
+def stack_mismatch(scenarios: list[Scenario]) -> str | None:
+    """Return why scenarios cannot run in one stack (:func:`simulate_stack`), or ``None``.
+
+    One scenario always can. Several need an r-disk graph (no fixed graph, no law acting on
+    all pairs, no re-selected pseudo-leaders) and must agree in everything a step or the
+    record depends on: dimension, size, step, duration, law, leader, intrinsic dynamics,
+    recording and metric settings.
+    """
+    if not scenarios:
+        return 'no scenario'
+    if len(scenarios) == 1:
+        return None
+    first = scenarios[0]
+    for sc in scenarios:
+        if sc.graph_type != 'disk' or sc.law.all_pairs or sc.informed.reselect:
+            return f'{sc.name}: only r-disk graphs without re-selection stack'
+        same = {'dim': sc.dim == first.dim, 'n_agents': sc.n_agents == first.n_agents,
+                'dt': sc.dt == first.dt, 'duration': sc.steps == first.steps,
+                'protocol': sc.law == first.law, 'intrinsic': sc.intrinsic == first.intrinsic,
+                'record_every': sc.record_every == first.record_every,
+                'metrics': (sc.eta_tolerance, sc.collision_distance)
+                == (first.eta_tolerance, first.collision_distance),
+                'leader': sc.leader.model == first.leader.model
+                and sc.leader.field == first.leader.field
+                and np.array_equal(sc.leader.position, first.leader.position)
+                and np.array_equal(sc.leader.velocity, first.leader.velocity),
+                'observers': bool(sc.observers) == bool(first.observers)}
+        differ = [key for key, ok in same.items() if not ok]
+        if differ:
+            return f'{sc.name} (seed {sc.seed}) differs in {", ".join(differ)}'
+    return None
+
+
+class _Stack:
+    """The state of the realisations of :func:`simulate_stack` still running.
+
+    Agents ``b m .. (b + 1) m - 1`` of the arrays belong to the ``b``-th realisation in
+    ``active``; a realisation that ends early (diverges) is cut out of the arrays.
+    """
+
+    def __init__(self, scenarios: list[Scenario], reals: list[Realization],
+                 static: EdgeList | None) -> None:
+        """Stack the initial states, per-agent data and logs of the realisations."""
+        sc = scenarios[0]
+        self.scenarios, self.reals, self.static = scenarios, reals, static
+        self.size = sc.n_agents
+        self.logs = [RunLog.for_scenario(s) for s in scenarios]
+        self.outcome: dict[int, tuple[str, int]] = {}
+        self.active = list(range(len(scenarios)))
+        self.q = np.concatenate([r.q0 for r in reals])
+        self.p = np.concatenate([r.p0 for r in reals])
+        self.agents = stack_agents([r.agents for r in reals])
+        self.reselector = Reselector(sc.law) if sc.informed.reselect and static is None \
+            else None
+        self._disk = static is None and not sc.law.all_pairs
+        self.graph = self._new_graph()
+
+    def _new_graph(self) -> VerletDiskGraph | None:
+        """Return the r-disk graph tracker of the active realisations (``None``: not r-disk)."""
+        if not self._disk:
+            return None
+        law = self.scenarios[0].law
+        return VerletDiskGraph(law.radius, law.strict_radius, blocks=len(self.active))
+
+    def edges(self) -> EdgeList:
+        """Return the interaction graph at the current positions."""
+        if self.graph is not None:
+            return self.graph.edges(self.q)
+        return interaction_graph(self.scenarios[0], self.reals[0], self.q, self.static)
+
+    def failed(self, *arrays: np.ndarray) -> np.ndarray:
+        """Return, per active realisation, whether any of its rows is not finite."""
+        if all(np.isfinite(a).all() for a in arrays):
+            return np.zeros(len(self.active), dtype=bool)
+        ok = np.ones(self.q.shape[0], dtype=bool)
+        for a in arrays:
+            ok &= np.isfinite(a).all(axis=1)
+        return ~ok.reshape(len(self.active), self.size).all(axis=1)
+
+    def end(self, gone: np.ndarray, status: str, step: int) -> np.ndarray:
+        """End the realisations flagged in ``gone`` at ``step``; return the rows kept."""
+        keep = np.repeat(~gone, self.size)
+        for b in np.flatnonzero(gone).tolist():
+            self.outcome[self.active[b]] = (status, step)
+        self.active = [g for g, out in zip(self.active, gone.tolist()) if not out]
+        self.q, self.p = self.q[keep], self.p[keep]
+        self.agents = self.agents.subset(keep)
+        self.graph = self._new_graph()
+        return keep
+
+    def finish(self, status: str, step: int) -> None:
+        """End every realisation still running."""
+        for g in self.active:
+            self.outcome[g] = (status, step)
+
+    def extra(self, rows: slice) -> dict:
+        """Return the per-agent protocol state to record for some rows."""
+        return {} if self.agents.adaptive is None else {'h': self.agents.adaptive[rows]}
+
+
+def stack_agents(parts: list[AgentData]) -> AgentData:
+    """Return the per-agent data of several realisations, stacked in order."""
+    def joined(arrays):
+        return None if arrays[0] is None else np.concatenate(arrays)
+    return AgentData(np.concatenate([a.informed for a in parts]),
+                     joined([a.nav_gains for a in parts]), joined([a.adaptive for a in parts]))
+
+
+def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every):
+    """Advance the stack to the end (or divergence of all, or Ctrl-C); record how each ended."""
+    sc = stack.scenarios[0]
+    law, dt, steps, every = sc.law, sc.dt, sc.steps, sc.record_every
+    step = 0
     started = last = time.monotonic()
-    reselector = Reselector(law) if sc.informed.reselect and static is None else None
     try:
         for step in range(steps + 1):
+            gone = stack.failed(stack.q, stack.p)
+            if gone.any():
+                stack.end(gone, 'diverged', step)
+            if not stack.active:
+                return
             state = leader.state
-            edges = interaction_graph(sc, real, q, static)
-            if reselector is not None:
-                reselector.update(agents, edges)
-            u = swarm_control(law, q, p, edges, state, agents, dt)
-            if not (np.isfinite(u).all() and np.isfinite(q).all() and np.isfinite(p).all()):
-                status = 'diverged'
-                break
-            if static is None:
+            edges = stack.edges()
+            if stack.reselector is not None:
+                stack.reselector.update(stack.agents, edges)
+            u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
+            gone = stack.failed(u)
+            if gone.any():
+                u = u[stack.end(gone, 'diverged', step)]
+                if not stack.active:
+                    return
+                edges = stack.edges()
+            q, p, m = stack.q, stack.p, stack.size
+            if stack.static is None:
                 # r-disk edges cover every pair within the radius; all-pairs edges every pair.
                 covered, radius = edges, np.inf if law.all_pairs else law.radius
             else:
                 covered = disk_graph(q, sc.collision_distance)
                 radius = sc.collision_distance
-            log.observe(step, step * dt, q, p, u, state, agents.informed, covered, radius,
-                        step == steps,
-                        **({'h': agents.adaptive} if agents.adaptive is not None else {}))
+            logs = [stack.logs[g] for g in stack.active]
+            update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
+                                      None if stack.graph is None else stack.graph.sq_dist)
+            if step % every == 0 or step == steps:
+                for b, log in enumerate(logs):
+                    rows = slice(b * m, (b + 1) * m)
+                    log.record(step, step * dt, q[rows], p[rows], u[rows], state,
+                               stack.agents.informed[rows], step == steps,
+                               **stack.extra(rows))
             if step == steps:
                 break
-            advance_adaptive(law, q, p, state, agents, dt)
-            q, p = step_agents(q, p, u, dt, intrinsic)
+            advance_adaptive(law, q, p, state, stack.agents, dt)
+            stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
             leader.step(dt)
             now = time.monotonic()
             if progress is not None and now - last >= progress_every:
                 last = now
                 rate = (step + 1) / max(now - started, 1e-9)
+                latest = logs[0].latest
+                stacked = f'  {len(logs)} stacked' if len(stack.scenarios) > 1 else ''
                 progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
-                         f'step {step + 1}/{steps}  eta = {log.latest.get("eta", 0):.2f}  '
-                         f'mismatch = {log.latest.get("velocity_mismatch_max", 0):.3g}  '
-                         f'({rate:.0f} steps/s)')
+                         f'step {step + 1}/{steps}  eta = {latest.get("eta", 0):.2f}  '
+                         f'mismatch = {latest.get("velocity_mismatch_max", 0):.3g}  '
+                         f'({rate:.0f} steps/s){stacked}')
     except KeyboardInterrupt:
-        status = 'interrupted'
-    return status, step, 0 if reselector is None else reselector.count
+        stack.finish('interrupted', step)
+        return
+    stack.finish('completed', step)
 
 
 def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics,

@@ -11,8 +11,9 @@ from flock_swarm.core.graphs import diffusive_matrix, disk_graph
 from flock_swarm.core.protocols import AgentData, advance_adaptive, local_control
 from flock_swarm.core.pseudo_leaders import minor_lambda_max
 from flock_swarm.core.scenario import realize
+from flock_swarm import sim
 from flock_swarm.scenarios import load
-from flock_swarm.sim import main, simulate
+from flock_swarm.sim import main, simulate, simulate_stack, stack_mismatch
 
 SUMMARY_KEYS = {'n_agents', 't_final', 'steps', 'eta', 'eta_tolerance', 'velocity_mismatch_max',
                 'com_position_error', 'com_velocity_error', 'min_pair_distance', 'collisions',
@@ -133,3 +134,68 @@ def test_pseudo_leaders_are_reselected_when_the_disk_graph_switches():
         a = adjacency_of(edges, 12)
         lam = minor_lambda_max(sc.law.w * diffusive_matrix(a), np.flatnonzero(chosen))
         assert lam + sc.law.alpha < 0.0
+
+
+def fig3_realisations(n, side, fractions, duration):
+    """Return Su 2009 Fig. 3 scenarios at ``n`` agents: one per (seed, informed fraction)."""
+    return [load('su2009_fig3', [f'duration={duration}', f'n_agents={n}',
+                                 f'initial.position_box=[[0, {side}], [0, {side}]]'],
+                 seed, {'informed.fraction': fraction})
+            for seed, fraction in enumerate(fractions)]
+
+
+def assert_same_run(stacked, alone):
+    """Assert that a stacked realisation recorded what its own run recorded (to 1e-9)."""
+    assert set(stacked.series) == set(alone.series)
+    for name, values in alone.series.items():
+        assert_allclose(stacked.series[name], values, rtol=0, atol=1e-9, err_msg=name)
+    for key, value in alone.summary.items():
+        if isinstance(value, float) and key != 'wall_time_s':
+            assert stacked.summary[key] == pytest.approx(value, rel=0, abs=1e-9), key
+        elif key != 'wall_time_s':
+            assert stacked.summary[key] == value, key
+
+
+def test_stacked_realisations_equal_their_own_runs():
+    # Same N, different seeds (initial draws) and informed fractions; 2 s at dt = 0.02.
+    scenarios = fig3_realisations(40, 28.3, (0.1, 0.5, 1.0, 0.25), 2.0)
+    stacked = simulate_stack(scenarios)
+    assert [r.summary['seed'] for r in stacked] == [0, 1, 2, 3]
+    for sc, res in zip(scenarios, stacked):
+        alone = simulate(sc)
+        assert len(alone.summary['informed']) == round(sc.informed.fraction * 40)
+        assert_same_run(res, alone)
+
+
+def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypatch):
+    # The Su laws do not diverge at moderate positions: inject NaN inputs for informed agents
+    # beyond x = 25, which some realisations reach at different steps, one never.
+    real_control = sim.swarm_control
+
+    def failing(law, q, p, edges, leader, agents, dt):
+        u = real_control(law, q, p, edges, leader, agents, dt)
+        u[(q[:, 0] > 25.0) & agents.informed] = np.nan
+        return u
+
+    monkeypatch.setattr(sim, 'swarm_control', failing)
+    scenarios = fig3_realisations(20, 20.0, (1.0, 0.0, 0.5), 4.0)
+    alone = [simulate(sc) for sc in scenarios]
+    assert [r.summary['status'] for r in alone] == ['diverged', 'completed', 'diverged']
+    assert alone[0].summary['steps'] != alone[2].summary['steps']
+    for res, own in zip(simulate_stack(scenarios), alone):
+        assert res.summary['steps'] == own.summary['steps']
+        assert_same_run(res, own)
+
+
+@pytest.mark.parametrize('override, reason', [
+    ('n_agents=21', 'n_agents'), ('dt=0.01', 'dt'), ('protocol.c1=0.6', 'protocol'),
+    ('leader.velocity=[1, 1]', 'leader'),
+    ('graph={type: barabasi_albert, m0: 3, m: 2}', 'r-disk')])
+def test_realisations_that_differ_in_more_than_their_draw_do_not_stack(override, reason):
+    base = fig3_realisations(20, 20.0, (0.5,), 1.0)[0]
+    other = load('su2009_fig3', ['duration=1', 'n_agents=20',
+                                 'initial.position_box=[[0, 20.0], [0, 20.0]]', override], 1)
+    assert reason in stack_mismatch([base, other])
+    with pytest.raises(ValueError, match=reason):
+        simulate_stack([base, other])
+    assert stack_mismatch([other]) is None

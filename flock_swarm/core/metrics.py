@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.graphs import EdgeList, components, disk_graph
+from flock_swarm.core.graphs import EdgeList, components, disk_graph, pair_sq_distances
 
 #: The names of the per-step metrics, in the order of :func:`step_metrics`.
 STEP_METRICS = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
@@ -75,6 +75,21 @@ class RunMetrics:
     collision_distance: float
     min_pair_distance: float = float('inf')
     collision_pairs: set = field(default_factory=set)
+    #: Keys ``i n + j`` of the pairs close at the previous call of :meth:`add_collisions`.
+    _recent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64),
+                                repr=False, compare=False)
+
+    def add_collisions(self, i: np.ndarray, j: np.ndarray, n: int) -> None:
+        """Add the close pairs ``(i[k], j[k])`` of one instant (sorted, ``i < j < n``).
+
+        Colliding pairs mostly stay close for many steps: only the pairs not already close
+        at the previous call go through the set.
+        """
+        key = i.astype(np.int64) * n + j
+        new = ~np.isin(key, self._recent, assume_unique=True)
+        self._recent = key
+        if new.any():
+            self.collision_pairs.update(zip(i[new].tolist(), j[new].tolist()))
 
     def update(self, q: np.ndarray, step_min_distance: float) -> None:
         """Fold in one instant."""
@@ -94,17 +109,49 @@ class RunMetrics:
         :param edges: the step's r-disk (or denser) graph.
         :param radius: the radius the edges cover completely.
         """
-        if edges.size == 0:
-            return
-        d = q[edges.j] - q[edges.i]
-        dist = np.sqrt(np.einsum('ek,ek->e', d, d))
-        self.min_pair_distance = min(self.min_pair_distance, float(dist.min()))
-        if self.collision_distance > radius:
-            self.update(q, float(dist.min()))
-            return
-        close = dist < self.collision_distance
-        if close.any():
-            self.collision_pairs.update(zip(edges.i[close].tolist(), edges.j[close].tolist()))
+        update_stacked_from_edges([self], q, edges, radius)
+
+
+def update_stacked_from_edges(runs: list[RunMetrics], q: np.ndarray, edges: EdgeList,
+                              radius: float, sq_dist: np.ndarray | None = None) -> None:
+    """Fold one instant of a stack of independent swarms into the metrics of each.
+
+    The stack holds ``len(runs)`` swarms of equal size, agents ``g m .. (g + 1) m - 1`` being
+    swarm ``g`` (ids within a swarm in the metrics), and no edge links two swarms; each swarm
+    gets exactly what :meth:`RunMetrics.update_from_edges` would give it alone.
+
+    :param runs: the whole-run metrics of each swarm (the same ``collision_distance``).
+    :param q: positions of the stack, shape ``(len(runs) m, dim)``.
+    :param edges: the step's graph of the stack, sorted by ``(i, j)``.
+    :param radius: the radius the edges cover completely.
+    :param sq_dist: the squared lengths of the edges when the caller has them (as
+        :func:`~flock_swarm.core.graphs.pair_sq_distances` gives them), else ``None``.
+    """
+    if edges.size == 0:
+        return
+    size = q.shape[0] // len(runs)
+    sq = pair_sq_distances(q, edges.i, edges.j) if sq_dist is None else sq_dist
+    # Edges are sorted by i, so each swarm's edges are one contiguous run.
+    bounds = np.searchsorted(edges.i, np.arange(len(runs) + 1) * size)
+    linked = np.flatnonzero(bounds[1:] > bounds[:-1])
+    # sqrt is monotonic and correctly rounded: the root of the least square is the least root.
+    lows = np.sqrt(np.minimum.reduceat(sq, bounds[linked])).tolist()
+    for g, low in zip(linked.tolist(), lows):
+        runs[g].min_pair_distance = min(runs[g].min_pair_distance, low)
+    collision_distance = runs[0].collision_distance
+    if collision_distance > radius:
+        for g, low in zip(linked.tolist(), lows):
+            lo = g * size
+            runs[g].update(q[lo:lo + size], low)
+        return
+    # Roots only of the few squares near the collision distance.
+    near = np.flatnonzero(sq < (collision_distance * (1.0 + 1e-6)) ** 2)
+    close = near[np.sqrt(sq[near]) < collision_distance]
+    if close.size:
+        group = edges.i[close] // size
+        for g in np.unique(group).tolist():
+            pick = close[group == g]
+            runs[g].add_collisions(edges.i[pick] - g * size, edges.j[pick] - g * size, size)
 
 
 def su_energy(q: np.ndarray, p: np.ndarray, leader: LeaderState, law, informed: np.ndarray,
