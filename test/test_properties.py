@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import event, given, settings, strategies as st
+from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from flock_swarm import sim
 from flock_swarm.core.errors import ScenarioError, one_line
@@ -264,11 +264,12 @@ def rendered_paths(node, prefix=''):
             yield from rendered_paths(value, f'{prefix}[{k}]')
 
 
-def assert_one_line_error(status: int, err: str, data=None, prog: str = 'sim') -> str:
+def assert_one_line_error(status: int, err: str, data=None, prog: str = 'sim',
+                          keys=CLI_KEYS) -> str:
     """Assert a usage error: status 2 and one line ``PROG: error: KEY: reason``; return KEY.
 
-    KEY is a path of the input ``data`` or one of the schema's (a missing key), or names the
-    file or a command-line option.
+    KEY is a path of the input ``data`` or one of the schema's (a missing key), or one of
+    ``keys`` (the file, a command-line option, a ROS parameter).
     """
     assert status == 2, f'exit status {status}, stderr: {err!r}'
     assert 'Traceback' not in err, err
@@ -281,7 +282,7 @@ def assert_one_line_error(status: int, err: str, data=None, prog: str = 'sim') -
     for match in re.finditer(': ', rest):
         key = rest[:match.start()]
         root = re.split(r'[.\[]', key, maxsplit=1)[0]
-        if key in present or root in TOP_KEYS or key in CLI_KEYS:
+        if key in present or root in TOP_KEYS or key in keys:
             return key
     raise AssertionError(f'no key named: {err!r}')
 
@@ -421,3 +422,143 @@ def test_overrides_and_seed_run_or_name_the_key(case):
     """``--set`` and ``--seed`` on the presets: the same property, through the command line."""
     name, args = case
     assert_runs_or_names_key(BASES[name], args)
+
+
+# --------------------------------------------------------------------------------------------
+# ROS parameters of the nodes
+
+#: Examples per node kind; a node with its publishers and subscriptions takes ~20-60 ms here.
+NODE_EXAMPLES = 60
+#: The agents of the small scenario the nodes are built on (cheap to construct).
+NODE_AGENTS = 3
+#: Every parameter of each node kind (its own, the common ones, the input limits).
+NODE_PARAMS = {
+    'world': ('out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every',
+              'metrics_every', 'expect_subscribers', 'staleness', 'max_abs_position',
+              'max_abs_velocity', 'max_abs_accel'),
+    'leader': ('expect_subscribers', 'start_timeout'),
+    'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'max_abs_position', 'max_abs_velocity',
+              'max_abs_accel'),
+}
+COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor')
+#: Scenario keys given as ROS parameters (overrides of single values), and unknown ones.
+OVERRIDE_PARAMS = ('n_agents', 'dt', 'duration', 'dim', 'protocol.c1', 'protocol.name',
+                   'protocol.h', 'informed.count', 'informed.select', 'leader.position',
+                   'leader.model', 'metrics.eta_tolerance', 'record_every', 'gain',
+                   'protocol.gain', 'leader.position.x')
+
+INT64 = st.integers(-2 ** 63, 2 ** 63 - 1)
+ROS_FLOATS = st.one_of(st.sampled_from([0.0, -1.0, 1e300, -1e300, float('nan'), float('inf'),
+                                        float('-inf'), 5e-324, 0.5, 2.0, 30.0]),
+                       st.floats(allow_nan=True, allow_infinity=True))
+#: Any value a ROS parameter can hold (homogeneous arrays), small integers often: a valid but
+#: huge n_agents would only be slow to construct.
+ROS_VALUES = st.one_of(
+    st.booleans(), st.integers(-3, 5), INT64, ROS_FLOATS, st.text(max_size=8),
+    st.sampled_from(['lockstep', 'realtime', 'all', '0-2', '1,1', '2-0', 'demo', 'nope',
+                     'su_informed', 'disk', 'ids', '/nonexistent/x.yaml']),
+    st.lists(st.booleans(), min_size=1, max_size=3), st.lists(INT64, min_size=1, max_size=3),
+    st.lists(st.integers(-1, 4), min_size=1, max_size=3),
+    st.lists(ROS_FLOATS, min_size=1, max_size=3),
+    st.lists(st.text(max_size=4), min_size=1, max_size=3))
+
+
+@pytest.fixture(scope='module')
+def node_scenario(tmp_path_factory) -> Path:
+    """Return a small scenario file for the nodes (the demo with a few agents)."""
+    data = copy.deepcopy(BASES['demo'])
+    data.update(n_agents=NODE_AGENTS, informed={'select': 'random', 'count': 1})
+    path = tmp_path_factory.mktemp('node_scenario') / 'small.yaml'
+    path.write_text(dump(data))
+    return path
+
+
+@pytest.fixture
+def ros_context(ros_domain):
+    """Return an initialised ``rclpy`` context of its own on the test's domain id."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@st.composite
+def node_parameters(draw, kind: str):
+    """Draw one to three parameter overrides of a node kind as ``{name: value}``."""
+    names = NODE_PARAMS[kind] + COMMON_NODE_PARAMS + OVERRIDE_PARAMS
+    return draw(st.dictionaries(st.sampled_from(names), ROS_VALUES, min_size=1, max_size=3))
+
+
+def build_node(kind: str, context, overrides: dict, scenario: Path, out: Path):
+    """Construct a node of ``kind`` with ``overrides`` on top of the small scenario."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.agent import AgentNode
+    from flock_swarm.nodes.leader import LeaderNode
+    from flock_swarm.nodes.world import WorldNode
+    values = {'scenario': str(scenario)}
+    if kind == 'world':
+        values['out_dir'] = str(out)
+    values.update(overrides)
+    params = [Parameter(name, value=value) for name, value in values.items()]
+    cls = {'world': WorldNode, 'leader': LeaderNode, 'agent': AgentNode}[kind]
+    return cls(context=context, parameter_overrides=params)
+
+
+def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Path) -> None:
+    """The property for ROS parameters: the node is built, or one line names the parameter.
+
+    ``run_node`` prints that line as ``NODE: error: KEY: reason`` with exit status 2; the
+    line is the :class:`ScenarioError`'s message, checked here without the process.
+    """
+    if 'out_dir' in overrides and isinstance(overrides['out_dir'], str):
+        # Never a path outside the test's directory: '' would mean out/ in the working tree.
+        overrides = dict(overrides, out_dir=str(Path(tempfile.gettempdir()) / 'flock_prop_od'
+                                                / overrides['out_dir'].replace('/', '_')))
+    with tempfile.TemporaryDirectory(prefix='flock_prop_node_') as tmp:
+        try:
+            node = build_node(kind, context, overrides, scenario, Path(tmp) / 'out')
+        except ScenarioError as exc:
+            event(f'{kind}: error')
+            assert_one_line_error(2, f'{kind}: error: {exc}\n', None, prog=kind,
+                                  keys=(*overrides, *NODE_PARAMS[kind], *COMMON_NODE_PARAMS))
+            return
+        event(f'{kind}: built')
+        try:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+        finally:
+            node.destroy_node()
+
+
+@pytest.mark.parametrize('kind, overrides, key', [
+    # TypeError: a list compared with a number, or made into a path.
+    ('world', {'start_timeout': [True, False]}, 'start_timeout'),
+    ('world', {'out_dir': [2, 2]}, 'out_dir'),
+    ('leader', {'scenario': False}, 'scenario'),
+    # ValueError: a timer period of NaN (an infinite factor gave a busy 0 ns timer).
+    ('agent', {'realtime_factor': float('nan'), 'mode': 'realtime'}, 'realtime_factor'),
+    ('agent', {'realtime_factor': float('inf'), 'mode': 'realtime'}, 'realtime_factor'),
+])
+def test_node_parameter_regression(kind, overrides, key, ros_context, node_scenario, tmp_path):
+    """Each override once broke a node's construction (or was taken); now it names its key."""
+    with pytest.raises(ScenarioError) as err:
+        build_node(kind, ros_context, overrides, node_scenario, tmp_path / 'out')
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize('kind', sorted(NODE_PARAMS))
+@settings(derandomize=True, max_examples=NODE_EXAMPLES, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_node_parameters_build_or_name_the_key(kind, ros_context, node_scenario, data):
+    """Generated ``parameter_overrides``: the node is built or stops naming the parameter.
+
+    One context (and domain id) serves every example of a node kind: the fixtures are
+    deliberately shared across examples, each example destroys its node.
+    """
+    overrides = data.draw(node_parameters(kind), label='overrides')
+    assert_builds_or_names_key(kind, ros_context, overrides, node_scenario)

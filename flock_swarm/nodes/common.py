@@ -6,6 +6,7 @@ other parameter whose name is a dotted scenario key overrides that single value,
 """
 
 import bisect
+import math
 import sys
 from typing import Any, Callable, Sequence
 
@@ -121,18 +122,51 @@ class StepClock:
         return int(round(ns / self.dt_ns))
 
 
+#: Parameters that take more than their default's type and whose node checks the value
+#: itself: ``agent_ids`` is a string of ids and ranges or an integer array.
+FREE_TYPED = {'agent_ids'}
+
+
 def declare(node: Node, name: str, default: Any, description: str) -> Any:
     """Declare a node parameter (unless an override already declared it) and return its value.
+
+    An override is automatically declared with its own type, so the value is checked against
+    the default's: a boolean, an integer, a number (an integer is taken for a float, NaN is
+    not) or a string, as the default is.
 
     :param node: the node.
     :param name: parameter name.
     :param default: default value (its type is the parameter's type).
     :param description: what it is, shown by ``ros2 param describe``.
     :return: the value.
+    :raises ScenarioError: when the value is not of the default's type.
     """
     if not node.has_parameter(name):
         node.declare_parameter(name, default, ParameterDescriptor(description=description))
-    return node.get_parameter(name).value
+    value = node.get_parameter(name).value
+    return value if name in FREE_TYPED else typed_value(name, value, default)
+
+
+def typed_value(name: str, value: Any, default: Any) -> Any:
+    """Return ``value`` if it has the type of ``default`` (a float for a float default).
+
+    :raises ScenarioError: naming ``name`` otherwise.
+    """
+    if isinstance(default, bool):
+        ok, what = isinstance(value, bool), 'true or false'
+    elif isinstance(default, int):
+        ok, what = isinstance(value, int) and not isinstance(value, bool), 'an integer'
+    elif isinstance(default, float):
+        ok, what = (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and not math.isnan(value)), 'a number'
+        value = float(value) if ok else value
+    elif isinstance(default, str):
+        ok, what = isinstance(value, str), 'a string'
+    else:
+        return value
+    if not ok:
+        raise ScenarioError(name, f'expected {what}, got {value!r}')
+    return value
 
 
 def scenario_overrides(node: Node, own: set[str]) -> dict[str, Any]:
@@ -177,8 +211,8 @@ def declare_common(node: Node) -> None:
         raise ScenarioError('mode', f'must be lockstep or realtime, got {mode!r}')
     factor = declare(node, 'realtime_factor', 1.0,
                      'realtime mode: simulated seconds per wall second (same for every node)')
-    if not isinstance(factor, (int, float)) or factor <= 0:
-        raise ScenarioError('realtime_factor', f'must be > 0, got {factor!r}')
+    if not math.isfinite(factor) or factor <= 0:
+        raise ScenarioError('realtime_factor', f'must be finite and > 0, got {factor!r}')
 
 
 def timer_period(node: Node, dt: float) -> float:
