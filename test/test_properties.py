@@ -550,6 +550,29 @@ def test_node_parameter_regression(kind, overrides, key, ros_context, node_scena
     assert err.value.key == key
 
 
+@pytest.mark.parametrize('kind, ros_args, key', [
+    # rclpy.init raised RCLError: a traceback, exit status 1 (and rcl's own log line).
+    ('leader', ['-p', 'foo'], '--ros-args'),
+    ('agent', ['-p', 'seed:=[1,'], '--ros-args'),
+    ('world', ['-p'], '--ros-args'),
+    ('leader', ['--params-file', '/nonexistent/params.yaml'], '--ros-args'),
+    ('agent', ['-r', 'foo'], '--ros-args'),
+    # Through the whole executable: a value of the wrong type.
+    ('agent', ['-p', 'seed:=abc'], 'seed'),
+    ('world', ['-p', 'step_timeout:=[1, 2]'], 'step_timeout'),
+])
+def test_node_main_bad_arguments(kind, ros_args, key, ros_domain, monkeypatch, capfd,
+                                 node_scenario):
+    """A node's ``main()``: exit status 2 and one line naming the argument, on stderr alone."""
+    import importlib
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+    main = importlib.import_module(f'flock_swarm.nodes.{kind}').main
+    status = main([kind, '--ros-args', '-p', f'scenario:={node_scenario}', *ros_args])
+    out, err = capfd.readouterr()
+    assert assert_one_line_error(status, err, None, prog=kind, keys=('--ros-args', key)) == key
+    assert out == ''
+
+
 @pytest.mark.parametrize('kind', sorted(NODE_PARAMS))
 @settings(derandomize=True, max_examples=NODE_EXAMPLES, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])

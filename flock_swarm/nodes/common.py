@@ -7,6 +7,7 @@ other parameter whose name is a dotted scenario key overrides that single value,
 
 import bisect
 import math
+import re
 import sys
 from typing import Any, Callable, Sequence
 
@@ -19,7 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.scenarios import load
 
@@ -329,7 +330,26 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     :return: the exit status.
     """
     import rclpy
-    rclpy.init(args=args)
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.logging import LoggingSeverity, get_logger_level, set_logger_level
+    # rcl logs a line of its own for malformed arguments; the reason is in the error below.
+    previous = get_logger_level('rcl')
+    set_logger_level('rcl', LoggingSeverity.FATAL)
+    try:
+        rclpy.init(args=args)
+    except rclpy_implementation.RCLError as exc:
+        set_logger_level('rcl', previous)
+        reason = str(exc).removeprefix('failed to initialize rcl: ')
+        if "Couldn't parse" not in reason:
+            raise
+        # A malformed --ros-args rule ('-p key' without ':=', unparsable YAML, a missing
+        # params file): rcl's message, without the C source locations it appends.
+        reason = re.split(r'(?:\. Error: |, at /)', reason, maxsplit=1)[0]
+        print(f'{name}: error: --ros-args: {one_line(reason)}', file=sys.stderr)
+        return EXIT_CONFIG
+    if get_logger_level('rcl') == LoggingSeverity.FATAL:
+        # Unless --ros-args --log-level set the rcl logger's level itself.
+        set_logger_level('rcl', previous)
     node = None
     executor = None
     status = 0
