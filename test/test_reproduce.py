@@ -15,8 +15,9 @@ from numpy.testing import assert_allclose
 import pytest
 
 from flock_swarm import reproduce
-from flock_swarm.reproduce import (EXPERIMENTS, FIG_MAX_BYTES, Plan, aggregate_fig3,
-                                   delta_for_eta, fmt, read_cache, run_simulations)
+from flock_swarm.reproduce import (EXPERIMENTS, FIG_MAX_BYTES, Plan, Progress, aggregate_fig3,
+                                   delta_for_eta, fig3_stacks, fig3_tasks, fmt, read_cache,
+                                   run_simulations)
 
 # A table row of the report: "| what (`key`) | paper | ours |".
 ROW = re.compile(r'\(`(?P<key>[\w.]+)`\) \| (?P<paper>.*?) \| (?P<ours>[^|]*) \|$')
@@ -122,7 +123,8 @@ def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
     real_run_task = reproduce.run_task
 
     def counting(task):
-        ran.append((task['kind'], task.get('n_agents'), task.get('delta'), task.get('seed')))
+        for run in task.get('runs', [task]):
+            ran.append((task['kind'], run.get('n_agents'), run.get('delta'), run.get('seed')))
         return real_run_task(task)
 
     monkeypatch.setattr(reproduce, 'run_task', counting)
@@ -144,3 +146,69 @@ def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
     assert len(third['fig3']) == 6
     rows = aggregate_fig3(third['fig3'])
     assert [r['count'] for r in rows] == [3, 3]
+
+
+def test_fig3_sweep_alone_stacks_runs_and_resumes(tmp_path, monkeypatch):
+    jobs = []
+    real_run_task = reproduce.run_task
+
+    def counting(task):
+        jobs.append([(r['n_agents'], r['delta'], r['seed']) for r in task['runs']])
+        return real_run_task(task)
+
+    monkeypatch.setattr(reproduce, 'run_task', counting)
+    monkeypatch.setattr(reproduce, 'FIG3_STACK_AGENTS', 24)
+    plan = Plan(True, 2, (12, 30), (0.25, 0.5, 1.0), ('duration=0.5',))
+    quiet = (lambda line: None)
+    first = run_simulations(plan, tmp_path, 1, False, quiet, presets=False)
+    assert first['summaries'] == {} and first['executed'] == 12
+    # N = 12: stacks of two and one per seed; N = 30: one run per stack.
+    assert sorted(len(j) for j in jobs) == [1] * 8 + [2, 2]
+    assert all(len({(n, seed) for n, _, seed in job}) == 1 for job in jobs)
+    assert len(read_cache(tmp_path / 'fig3_runs.jsonl')) == 12
+
+    jobs.clear()
+    second = run_simulations(plan, tmp_path, 1, False, quiet, presets=False)
+    assert jobs == [] and second['executed'] == 0 and second['cached'] == 12
+    assert second['fig3'] == first['fig3']
+
+
+def test_a_stacked_fig3_run_equals_its_own_run():
+    plan = Plan(True, 1, (15,), (0.2, 0.6, 1.0), ('duration=1',))
+    runs = fig3_tasks(plan)
+    [stack] = fig3_stacks(runs, stack_agents=45)
+    stacked = reproduce.run_task(stack)['records']
+    alone = [reproduce.run_task({'kind': 'fig3', 'runs': [r]})['records'][0] for r in runs]
+    for a, b in zip(stacked, alone):
+        assert {k: v for k, v in a.items() if k != 'wall_time_s'} \
+            == {k: v for k, v in b.items() if k != 'wall_time_s'}
+
+
+def test_fig3_stacks_keep_the_order_and_split_evenly():
+    runs = [{'n_agents': n, 'seed': seed, 'steps': 10, 'delta': d}
+            for seed in range(2) for n in (300, 100) for d in range(10)]
+    jobs = fig3_stacks(runs, stack_agents=1000)
+    assert [r for job in jobs for r in job['runs']] == runs
+    # Per seed: 10 runs of N = 300 in stacks of at most 3, then one stack of 10 of N = 100.
+    assert [len(job['runs']) for job in jobs] == [3, 3, 2, 2, 10] * 2
+    assert jobs[0]['weight'] == 3 * 300 * 10
+
+
+def test_progress_lines_without_a_terminal_are_periodic():
+    lines = []
+    progress = Progress(4, 400.0, lines.append, every=3600.0)
+    progress.step(1, 100.0, 'one')
+    progress.step(2, 200.0, 'two')
+    assert lines == []
+    progress.step(1, 100.0, 'last')
+    assert len(lines) == 1 and '4/4 runs' in lines[0] and 'ETA 0.0 min' in lines[0]
+
+
+def test_progress_on_a_terminal_rewrites_one_line():
+    live, said = [], []
+    progress = Progress(2, 20.0, said.append, live=live.append)
+    progress.step(1, 10.0, 'half')
+    progress.step(1, 10.0, 'all')
+    assert said == [] and len(live) == 2
+    assert '1/2 runs' in live[0] and 'ETA' in live[0] and not live[0].endswith('\n')
+    assert live[1].endswith('\n')
