@@ -2,6 +2,7 @@
 
 import itertools
 import os
+import subprocess
 
 import pytest
 
@@ -35,3 +36,23 @@ def ros_domain() -> int:
 def other_ros_domain(ros_domain) -> int:
     """Return a second domain id for the same test, different from :func:`ros_domain`'s."""
     return _unique_domain()
+
+
+def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
+                world_stderr=subprocess.DEVNULL):
+    """Start the leader, ``agents`` agent processes and the world (the ros2 run executables).
+
+    :return: ``(others, world)``: the leader's and agents' processes, and the world's.
+    """
+    from flock_swarm.runner import executable
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
+    quiet = {'env': env, 'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL}
+    others = [subprocess.Popen(executable('leader') + ros_args, **quiet)]
+    others += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                                **quiet) for i in range(agents)]
+    world = subprocess.Popen(executable('world') + ros_args + ['-p', f'out_dir:={out}',
+                                                               *world_args],
+                             env=env, stdout=subprocess.DEVNULL, stderr=world_stderr,
+                             text=True)
+    return others, world
