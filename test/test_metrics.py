@@ -9,7 +9,7 @@ import pytest
 from flock_swarm.core import metrics as mt
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.graphs import disk_graph
+from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.protocols import PROTOCOLS
 
 
@@ -169,3 +169,26 @@ def test_update_from_edges_matches_a_full_search(collision_distance):
         full.min_pair_distance = min(full.min_pair_distance, gaps[np.triu_indices(40, 1)].min())
     assert fast.collision_pairs == full.collision_pairs
     assert fast.min_pair_distance == pytest.approx(full.min_pair_distance, rel=1e-12)
+
+
+@pytest.mark.parametrize('collision_distance', [0.3, 2.0])
+def test_stacked_swarms_get_the_metrics_of_their_own_runs(collision_distance):
+    # Two swarms of 30 agents doing small random walks (collisions persist and change), stacked.
+    rng = np.random.default_rng(4)
+    radius = 1.0
+    q = [rng.uniform(0.0, 3.0, size=(30, 2)) for _ in range(2)]
+    alone = [mt.RunMetrics(collision_distance) for _ in range(2)]
+    stacked = [mt.RunMetrics(collision_distance) for _ in range(2)]
+    for _ in range(20):
+        q = [x + rng.normal(0.0, 0.05, size=x.shape) for x in q]
+        for run, x in zip(alone, q):
+            run.update_from_edges(x, disk_graph(x, radius), radius)
+        both = np.concatenate(q)
+        own = [disk_graph(x, radius) for x in q]
+        edges = EdgeList(60, np.concatenate([own[0].i, own[1].i + 30]),
+                         np.concatenate([own[0].j, own[1].j + 30]),
+                         np.ones(own[0].size + own[1].size))
+        mt.update_stacked_from_edges(stacked, both, edges, radius)
+    for a, b in zip(alone, stacked):
+        assert a.collision_pairs and a.collision_pairs == b.collision_pairs
+        assert a.min_pair_distance == b.min_pair_distance

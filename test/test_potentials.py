@@ -371,3 +371,19 @@ def test_yu_pair_potential_derivative_over_s_is_gain(a, b, c_bar):
     s = np.linspace(0.05, 3.0, 60)
     fd = central_difference(lambda x: pot.yu_pair_potential(x, a, b, c_bar), s)
     assert_allclose(fd / s, pot.yu_pair_gain(s, a, b, c_bar), rtol=1e-7, atol=1e-8)
+
+
+@pytest.mark.parametrize('shape', [(7, 2), (5, 3), (2,)])
+def test_rowwise_is_broadcasting_bit_for_bit(shape):
+    rng = np.random.default_rng(8)
+    v = rng.normal(size=shape)
+    s = rng.uniform(0.5, 2.0, size=shape[:-1])
+    for op in (np.multiply, np.divide):
+        assert np.array_equal(pot.rowwise(op, v, s), op(v, np.asarray(s)[..., None]))
+
+
+def test_sigma_norm_and_grad_take_the_squared_norm():
+    z = np.random.default_rng(9).normal(size=(6, 3))
+    sq = pot.squared_norm(z)
+    assert np.array_equal(pot.sigma_norm(z, 0.1, sq), pot.sigma_norm(z, 0.1))
+    assert np.array_equal(pot.sigma_grad(z, 0.1, sq), pot.sigma_grad(z, 0.1))

@@ -86,7 +86,9 @@ class RunMetrics:
         at the previous call go through the set.
         """
         key = i.astype(np.int64) * n + j
-        new = ~np.isin(key, self._recent, assume_unique=True)
+        # Both key arrays are sorted: a binary search tells which keys are new.
+        at = np.minimum(np.searchsorted(self._recent, key), max(self._recent.size - 1, 0))
+        new = self._recent[at] != key if self._recent.size else np.ones(key.size, dtype=bool)
         self._recent = key
         if new.any():
             self.collision_pairs.update(zip(i[new].tolist(), j[new].tolist()))

@@ -143,13 +143,14 @@ class SuParams(Protocol):
         ``n_ij = (q_j - q_i) / sqrt(1 + eps ||q_j - q_i||^2)``.
         """
         dq = qj - qi
-        z = pot.sigma_norm(dq, self.eps)
+        sq = pot.squared_norm(dq)
+        z = pot.sigma_norm(dq, self.eps, sq)
         r_a, d_a = self.r_alpha, self.d_alpha
         # The bump of the action phi_alpha is a_ij: evaluated once for both terms.
         a_ij = pot.bump(z / r_a, self.h)
-        gradient = pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b, a_ij)[:, None] \
-            * pot.sigma_grad(dq, self.eps)
-        consensus = a_ij[:, None] * (pj - pi)
+        gradient = pot.rowwise(np.multiply, pot.sigma_grad(dq, self.eps, sq),
+                               pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b, a_ij))
+        consensus = pot.rowwise(np.multiply, pj - pi, a_ij)
         return gradient + consensus
 
     def combine(self, q, p, s, leader, agents, dt):
