@@ -1,0 +1,132 @@
+"""The SROS2 policy (config/sros2_policy.xml): one enclave per node, exactly the node's topics.
+
+The expected topics are built here from the names in :mod:`flock_swarm.nodes.common`, and
+checked once more against the ROS graph of live world, leader and agent nodes; the policy is
+read with an XML parser of its own, not with the generator that wrote it.
+"""
+
+import time
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import pytest
+
+from flock_swarm.nodes import common
+from flock_swarm.security import main as security_main, policy
+
+ROOT = Path(__file__).resolve().parent.parent
+POLICY = ROOT / 'config' / 'sros2_policy.xml'
+#: The swarm the shipped policy is for: the demo's (scripts/demo flies su2009_fig6).
+N_AGENTS = 10
+#: What any rclpy node publishes and the services it offers, besides the swarm's own topics.
+ROSOUT, PARAMETER_EVENTS = '/rosout', '/parameter_events'
+PARAMETER_SERVICES = ('describe_parameters', 'get_parameter_types', 'get_parameters',
+                      'get_type_description', 'list_parameters', 'set_parameters',
+                      'set_parameters_atomically')
+
+
+def absolute(name: str) -> str:
+    """Return a topic name resolved in the root namespace, as the nodes run."""
+    return name if name.startswith('/') else '/' + name
+
+
+def expected(n: int) -> dict[str, tuple[set, set]]:
+    """Return ``{node: (published, subscribed)}``, from the topic names of nodes/common.py."""
+    odom = {common.odom_topic(i) for i in range(n)}
+    cmds = {common.cmd_topic(i) for i in range(n)}
+    leader = {common.LEADER_ODOM, common.LEADER_ACCEL}
+    nodes = {'world': ({common.CLOCK, common.MARKERS, common.METRICS} | odom, cmds | leader),
+             'leader': (leader, {common.CLOCK})}
+    for i in range(n):
+        nodes[f'agent_{i}'] = ({common.cmd_topic(i)}, odom | leader)
+    return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
+                   {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
+
+
+def read_policy(path: Path) -> dict[str, dict]:
+    """Return ``{enclave path: {'node', 'ns', 'publish', 'subscribe', 'reply'}}`` of a policy.
+
+    Fails on anything but the SROS2 0.2.0 elements the swarm needs (ALLOW rules only).
+    """
+    root = ElementTree.parse(path).getroot()
+    assert root.tag == 'policy' and root.get('version') == '0.2.0'
+    (enclaves,) = list(root)
+    assert enclaves.tag == 'enclaves'
+    out = {}
+    for enclave in enclaves:
+        assert enclave.tag == 'enclave'
+        (profiles,) = list(enclave)
+        (profile,) = list(profiles)
+        assert profile.tag == 'profile'
+        rules = {'publish': set(), 'subscribe': set(), 'reply': set()}
+        for group in profile:
+            assert group.tag in ('topics', 'services'), group.tag
+            assert set(group.attrib.values()) == {'ALLOW'}, group.attrib
+            for rule in group.attrib:
+                rules[rule] |= {item.text for item in group}
+        out[enclave.get('path')] = dict(node=profile.get('node'), ns=profile.get('ns'),
+                                        **rules)
+    return out
+
+
+def test_shipped_policy_is_the_generated_one(capsys):
+    """config/sros2_policy.xml is ``python -m flock_swarm.security 10``, verbatim."""
+    assert security_main([str(N_AGENTS)]) == 0
+    assert capsys.readouterr().out == POLICY.read_text() == policy(N_AGENTS)
+
+
+def test_policy_grants_each_node_exactly_its_topics():
+    """One enclave per node (/flock_swarm/<node>); its grants are the node's topics."""
+    read = read_policy(POLICY)
+    want = expected(N_AGENTS)
+    assert set(read) == {f'/flock_swarm/{node}' for node in want}
+    for node, (published, subscribed) in want.items():
+        grant = read[f'/flock_swarm/{node}']
+        assert (grant['node'], grant['ns']) == (node, '/')
+        assert {absolute(t) for t in grant['publish']} == published, node
+        assert {absolute(t) for t in grant['subscribe']} == subscribed, node
+        assert grant['reply'] == {f'~{name}' for name in PARAMETER_SERVICES}, node
+
+
+@pytest.mark.ros
+def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain):
+    """World, leader and an agent as built: the ROS graph shows exactly the policy's names."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.agent import AgentNode
+    from flock_swarm.nodes.leader import LeaderNode
+    from flock_swarm.nodes.world import WorldNode
+    read = read_policy(POLICY)
+    context = Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    base = [Parameter('scenario', value='su2009_fig6')]
+    nodes = []
+    try:
+        nodes.append(WorldNode(context=context, parameter_overrides=base + [
+            Parameter('record', value=False), Parameter('out_dir', value=str(tmp_path))]))
+        nodes.append(LeaderNode(context=context, parameter_overrides=base))
+        nodes.append(AgentNode(node_name='agent_3', context=context,
+                               parameter_overrides=base + [Parameter('agent_id', value=3)]))
+        probe = nodes[0]
+
+        def graph(name: str) -> tuple[set, set, set]:
+            return ({t for t, _ in probe.get_publisher_names_and_types_by_node(name, '/')},
+                    {t for t, _ in probe.get_subscriber_names_and_types_by_node(name, '/')},
+                    {t for t, _ in probe.get_service_names_and_types_by_node(name, '/')})
+
+        for node in nodes:
+            name = node.get_name()
+            grant = read[f'/flock_swarm/{name}']
+            want = ({absolute(t) for t in grant['publish']},
+                    {absolute(t) for t in grant['subscribe']},
+                    {f'/{name}/{s[1:]}' for s in grant['reply']})
+            deadline = time.monotonic() + 10.0
+            while graph(name) != want and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert graph(name) == want, name
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
