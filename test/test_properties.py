@@ -379,6 +379,22 @@ def test_regression_runs(name, changes):
         assert_outputs_finite(out)
 
 
+@pytest.mark.parametrize('name', ['../escaped', '/tmp/flock_absolute', 'a\x00b', '..', ''])
+def test_regression_name_is_one_directory(name, tmp_path, monkeypatch, capsys):
+    """Without --out, sim writes to out/<name>: a name that is a path was followed out of it.
+
+    '/tmp/x' wrote the outputs to /tmp/x, '../x' beside out/, and a NUL ended sim with a
+    ValueError from mkdir (a traceback).
+    """
+    monkeypatch.chdir(tmp_path)
+    data = dict(BASES['demo'], name=name)
+    Path('scenario.yaml').write_text(dump(data))
+    status = sim.main(['scenario.yaml', '--quiet'])
+    err = capsys.readouterr().err
+    assert assert_one_line_error(status, err, data) == 'name'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['scenario.yaml']
+
+
 @pytest.mark.parametrize('text, extra, key', [
     # ValueError, AttributeError, RecursionError from PyYAML's constructors and composer.
     ('n_agents: 1' + '0' * 5000 + '\n', [], 'scenario'),
@@ -516,11 +532,11 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
     ``run_node`` prints that line as ``NODE: error: KEY: reason`` with exit status 2; the
     line is the :class:`ScenarioError`'s message, checked here without the process.
     """
-    if 'out_dir' in overrides and isinstance(overrides['out_dir'], str):
-        # Never a path outside the test's directory: '' would mean out/ in the working tree.
-        overrides = dict(overrides, out_dir=str(Path(tempfile.gettempdir()) / 'flock_prop_od'
-                                                / overrides['out_dir'].replace('/', '_')))
     with tempfile.TemporaryDirectory(prefix='flock_prop_node_') as tmp:
+        if isinstance(overrides.get('out_dir'), str):
+            # Never a path outside the example's directory ('' would be out/ in the tree).
+            overrides = dict(overrides, out_dir=str(
+                Path(tmp) / ('od_' + overrides['out_dir'].replace('/', '_'))))
         try:
             node = build_node(kind, context, overrides, scenario, Path(tmp) / 'out')
         except ScenarioError as exc:

@@ -218,6 +218,11 @@ def parse_scenario(data: Any) -> Scenario:
         if key not in data:
             raise ScenarioError(key, 'missing required key')
     name = _text(data.get('name'), 'name', 'unnamed')
+    # The name is the default output directory (out/<name>, out/<name>_ros): one plain
+    # path component, so a scenario file cannot send the outputs anywhere else.
+    if name in ('', '.', '..') or any(c in name for c in '/\\\0'):
+        raise ScenarioError('name', f'must be usable as a directory name (no /, \\ or NUL, '
+                            f'not . or ..), got {name!r}')
     dim = _integer(data['dim'], 'dim')
     if dim not in (2, 3):
         raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
