@@ -558,6 +558,8 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
     ('world', {'start_timeout': [True, False]}, 'start_timeout'),
     ('world', {'out_dir': [2, 2]}, 'out_dir'),
     ('leader', {'scenario': False}, 'scenario'),
+    # ValueError: embedded null byte (a NUL in a path, through the Python API).
+    ('world', {'out_dir': 'a\x00b'}, 'out_dir'),
     # ValueError: a timer period of NaN (an infinite factor gave a busy 0 ns timer).
     ('agent', {'realtime_factor': float('nan'), 'mode': 'realtime'}, 'realtime_factor'),
     ('agent', {'realtime_factor': float('inf'), 'mode': 'realtime'}, 'realtime_factor'),

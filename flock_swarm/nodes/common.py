@@ -162,7 +162,8 @@ def typed_value(name: str, value: Any, default: Any) -> Any:
                     and not math.isnan(value)), 'a number'
         value = float(value) if ok else value
     elif isinstance(default, str):
-        ok, what = isinstance(value, str), 'a string'
+        # No NUL: rcl passes strings as C strings, and paths cannot hold one.
+        ok, what = isinstance(value, str) and '\0' not in value, 'a string (without NUL)'
     else:
         return value
     if not ok:
