@@ -71,8 +71,17 @@ def sorted_pairs_of_tree(tree: cKDTree, radius: float, n: int) -> tuple[np.ndarr
     """
     pairs = tree.query_pairs(radius, output_type='ndarray')
     # One integer key per pair: sorting it is an order of magnitude faster than lexsort.
-    key = np.sort(pairs[:, 0].astype(np.int64) * n + pairs[:, 1])
-    return (key // n).astype(np.intp), (key % n).astype(np.intp)
+    return pairs_of_keys(np.sort(pair_keys(pairs[:, 0], pairs[:, 1])))
+
+
+def pair_keys(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Return one ``int64`` key per pair, ordered as the pairs ``(i, j)`` are (ids < 2^31)."""
+    return (i.astype(np.int64) << 32) | j
+
+
+def pairs_of_keys(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the pairs ``(i, j)`` of keys made by :func:`pair_keys`."""
+    return (key >> 32).astype(np.intp), (key & 0xFFFFFFFF).astype(np.intp)
 
 
 def pair_sq_distances(q: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -176,7 +185,7 @@ class VerletDiskGraph:
             self._shift = np.repeat(start - low, n // self.blocks)
         self._tree = cKDTree(self._apart(q), balanced_tree=False, compact_nodes=False)
         i, j = sorted_pairs_of_tree(self._tree, self.reach, n)
-        self._key = i.astype(np.int64) * n + j
+        self._key = pair_keys(i, j)
         self._i, self._j = i, j
         self._ref = q.copy()
         self._searched = np.zeros(n, dtype=bool)
@@ -218,13 +227,15 @@ class VerletDiskGraph:
         # A straggler may leave its group's range in the shifted frame: drop other groups.
         keep = (a != b) & (a // size == b // size)
         lo, hi = np.minimum(a, b)[keep], np.maximum(a, b)[keep]
-        fresh = np.unique(lo.astype(np.int64) * n + hi)
+        # The old tree's wider reach finds more than the candidates: keep those within R.
+        near = pair_sq_distances(q, lo, hi) <= self.reach * self.reach
+        fresh = np.unique(pair_keys(lo[near], hi[near]))
         touched = np.zeros(n, dtype=bool)
         touched[moved] = True
         kept = self._key[~(touched[self._i] | touched[self._j])]
         # Both parts are sorted and disjoint: a stable sort merges them in linear time.
         self._key = np.sort(np.concatenate((kept, fresh)), kind='stable')
-        self._i, self._j = (self._key // n).astype(np.intp), (self._key % n).astype(np.intp)
+        self._i, self._j = pairs_of_keys(self._key)
         self._ref[moved] = y[moved]
         self.refreshes += 1
 
