@@ -455,8 +455,14 @@ def pair_sums(law: Protocol, q: np.ndarray, p: np.ndarray, edges: EdgeList) -> n
     qi, pi, qj, pj = q.take(edges.i, 0), p.take(edges.i, 0), q.take(edges.j, 0), p.take(edges.j, 0)
     i, j = edges.i, edges.j
     to_i = law.pair(qi, pi, qj, pj, edges.weight)
-    to_j = -to_i if law.antisymmetric else law.pair(qj, pj, qi, pi, edges.weight)
     out = np.empty((n, to_i.shape[1]))
+    if law.antisymmetric:
+        # pair(j <- i) = -pair(i <- j): subtracting its sums is adding those of its negation.
+        for col in range(to_i.shape[1]):
+            out[:, col] = (np.bincount(i, weights=to_i[:, col], minlength=n)
+                           - np.bincount(j, weights=to_i[:, col], minlength=n))
+        return out
+    to_j = law.pair(qj, pj, qi, pi, edges.weight)
     for col in range(to_i.shape[1]):
         out[:, col] = (np.bincount(i, weights=to_i[:, col], minlength=n)
                        + np.bincount(j, weights=to_j[:, col], minlength=n))
