@@ -249,10 +249,13 @@ def drifting_fragments(rng, n, dim, steps):
         q = q + velocity + rng.normal(0.0, 0.02, size=q.shape)
 
 
+@pytest.mark.parametrize('fewest', [0, 1000])
 @pytest.mark.parametrize('strict', [True, False])
 @pytest.mark.parametrize('dim', [2, 3])
 @pytest.mark.parametrize('skin', [0.05, 0.5])
-def test_verlet_disk_graph_is_the_disk_graph_at_every_step(dim, strict, skin):
+def test_verlet_disk_graph_is_the_disk_graph_at_every_step(dim, strict, skin, fewest,
+                                                           monkeypatch):
+    monkeypatch.setattr(graphs.VerletDiskGraph, 'FEWEST_TO_REFRESH', fewest)
     rng = np.random.default_rng(7 + dim)
     graph = graphs.VerletDiskGraph(1.0, strict, skin)
     for q in drifting_fragments(rng, 80, dim, 60):
@@ -302,7 +305,8 @@ def flock_with_stragglers(rng, drift):
 
 
 @pytest.mark.parametrize('blocks', [1, 3])
-def test_verlet_disk_graph_searches_stragglers_again_not_the_flock(blocks):
+def test_verlet_disk_graph_searches_stragglers_again_not_the_flock(blocks, monkeypatch):
+    monkeypatch.setattr(graphs.VerletDiskGraph, 'FEWEST_TO_REFRESH', 0)
     rng = np.random.default_rng(21)
     walks = [flock_with_stragglers(rng, np.array([0.05, 0.02 * b])) for b in range(blocks)]
     graph = graphs.VerletDiskGraph(1.0, blocks=blocks)

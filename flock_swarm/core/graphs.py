@@ -123,6 +123,8 @@ class VerletDiskGraph:
 
     #: Once this fraction of the agents has been searched again, search all of them.
     FULL_SEARCH_FRACTION = 0.25
+    #: Below this many agents one search of all costs less than searching some again.
+    FEWEST_TO_REFRESH = 1000
 
     def __init__(self, r: float, strict: bool = True, skin: float = 0.2,
                  blocks: int = 1) -> None:
@@ -156,12 +158,17 @@ class VerletDiskGraph:
         if self._ref is None:
             self._search_all(q)
         else:
-            offset = (q - self._ref).reshape(self.blocks, n // self.blocks, dim)
-            drift = np.repeat(np.median(offset, axis=1), n // self.blocks, axis=0)
+            m = n // self.blocks
+            offset = (q - self._ref).reshape(self.blocks, m, dim)
+            # Any vector common to a group will do as its drift: a median (the middle order
+            # statistic of each coordinate) is cheap and ignores stragglers.
+            middle = np.partition(offset, m // 2, axis=1)[:, m // 2]
+            drift = np.repeat(middle, m, axis=0)
             dev = offset.reshape(n, dim) - drift
             moved = np.flatnonzero(~(9.0 * np.einsum('nk,nk->n', dev, dev)
                                      <= self.skin * self.skin))
-            if moved.size + self._searched.sum() > self.FULL_SEARCH_FRACTION * n:
+            if moved.size and (n < self.FEWEST_TO_REFRESH or moved.size + self._searched.sum()
+                               > self.FULL_SEARCH_FRACTION * n):
                 self._search_all(q)
             elif moved.size:
                 self._refresh(q, moved, q - drift)
