@@ -1,21 +1,26 @@
 """Benchmark of the reference simulator against a per-agent Python loop of the same law.
 
     python bench/bench_sim.py [--sizes 100 1000 10000 100000] [--baseline-sizes 100 300]
-                              [--steps 20] [--json out/bench/sim.json]
+                              [--steps 20] [--repeats 5] [--json out/bench/sim.json]
 
-Scenario: Su, Wang, Lin 2009 Fig. 3 (density N / L^2 = 0.05, protocol (10), 10 % informed).
-For each N it times ``sim``'s step (neighbour search, law, integration, metrics) over
-``--steps`` steps after one warm-up step, and reports steps/s and the time per agent-step.
-The baseline is the straightforward implementation most published flocking code uses: a
-Python loop over agents and, for each, over every other agent, with scalar ``math``. It is
-checked to produce the same accelerations as ``sim`` (to 1e-9) before it is timed, so the
-comparison is between two implementations of one law.
+Scenario: Su, Wang, Lin 2009 Fig. 3 (density N / L^2 = 0.05, protocol (10), 10 % informed,
+2-D). For each N it times the steps of :func:`flock_swarm.sim.simulate` itself (neighbour
+search, law, integration, whole-run metrics; the first ``--steps`` steps from the preset's
+random start), best of ``--repeats`` runs for N below 10000, and reports steps/s and the
+time per agent-step. The baseline is the straightforward implementation most published flocking
+code uses: a Python loop over agents and, for each, over every other agent, with scalar
+``math``. It is checked to produce the same accelerations as ``sim`` (to 1e-9) before it is
+timed, so the comparison is between two implementations of one law.
+
+Targets (issue 5), printed with PASS or FAIL against the measured ratio: ``sim`` at least
+100 times the baseline's steps/s at N = 300; time per agent-step at N = 100000 within 1.5
+times that at N = 1000.
 """
 
 import argparse
 import json
 import math
-import platform
+import os
 import time
 from pathlib import Path
 
@@ -23,10 +28,16 @@ import numpy as np
 
 from flock_swarm.core.dynamics import VirtualLeader, step_agents
 from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.metrics import RunMetrics
 from flock_swarm.core.protocols import SuParams, swarm_control
 from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.reproduce import machine
 from flock_swarm.scenarios import load
+from flock_swarm.sim import simulate
+
+#: Issue 5: sim's speed over the per-agent loop at N = SPEEDUP_N, at least SPEEDUP_MIN.
+SPEEDUP_N, SPEEDUP_MIN = 300, 100.0
+#: Issue 5: time per agent-step at the largest N over that at LINEAR_N, at most LINEAR_MAX.
+LINEAR_N, LINEAR_MAX = 1000, 1.5
 
 
 def fig3_scenario(n: int, steps: int) -> Scenario:
@@ -37,28 +48,26 @@ def fig3_scenario(n: int, steps: int) -> Scenario:
                                 f'duration={steps * 0.02}', 'dt=0.02'])
 
 
-def time_sim_steps(sc: Scenario, steps: int) -> float:
-    """Return the mean wall time of one simulator step (the loop body of ``sim``)."""
-    real = realize(sc)
-    q, p, agents = real.q0.copy(), real.p0.copy(), real.agents
-    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
-    law, dt = sc.law, sc.dt
-    run = RunMetrics(sc.collision_distance)
+def time_sim_steps(n: int, steps: int, repeats: int) -> float:
+    """Return the wall time of one step of ``sim`` at ``n`` agents.
 
-    def one_step(q, p):
-        state = leader.state
-        edges = disk_graph(q, law.radius, law.strict_radius)
-        u = swarm_control(law, q, p, edges, state, agents, dt)
-        run.update_from_edges(q, edges, law.radius)
-        q, p = step_agents(q, p, u, dt, None)
-        leader.step(dt)
-        return q, p
+    ``simulate`` reports progress after every step when asked to (``progress_every=0``):
+    the time between the first and the last report, over the steps between them, leaves
+    out the setup, the first step and the final record.
 
-    q, p = one_step(q, p)
-    start = time.perf_counter()
-    for _ in range(steps):
-        q, p = one_step(q, p)
-    return (time.perf_counter() - start) / steps
+    :param n: number of agents.
+    :param steps: steps per run.
+    :param repeats: runs; the fastest counts.
+    :return: seconds per step.
+    """
+    best = math.inf
+    sc = fig3_scenario(n, steps + 1)
+    for _ in range(repeats):
+        stamps: list[float] = []
+        simulate(sc, progress=lambda line: stamps.append(time.perf_counter()),
+                 progress_every=0.0)
+        best = min(best, (stamps[-1] - stamps[0]) / (len(stamps) - 1))
+    return best
 
 
 def baseline_accelerations(law: SuParams, q: list, p: list, leader_q, leader_p,
@@ -114,19 +123,27 @@ def time_baseline(sc: Scenario, steps: int) -> float:
     return (time.perf_counter() - start) / steps
 
 
+def verdict(ok: bool) -> str:
+    """Return ``PASS`` or ``FAIL``."""
+    return 'PASS' if ok else 'FAIL'
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the benchmark and print (and optionally save) the table."""
+    """Run the benchmark and print (and optionally save) the table and the targets."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--sizes', type=int, nargs='+', default=[100, 1000, 10000, 100000])
-    parser.add_argument('--baseline-sizes', type=int, nargs='+', default=[100, 300])
+    parser.add_argument('--baseline-sizes', type=int, nargs='+', default=[100, SPEEDUP_N])
     parser.add_argument('--steps', type=int, default=20)
+    parser.add_argument('--repeats', type=int, default=5)
     parser.add_argument('--json', type=Path, help='also write the results here')
     args = parser.parse_args(argv)
-    results = {'machine': {'processor': platform.processor() or platform.machine(),
-                           'python': platform.python_version()},
-               'sim': {}, 'baseline': {}}
+    host = machine()
+    print(f'# {host["nproc"]} CPUs ({host["cpu_model"]}), Python {host["python"]}, '
+          f'load average {" ".join(f"{x:.2f}" for x in host["load_average"])}', flush=True)
+    results = {'machine': host, 'steps': args.steps, 'sim': {}, 'baseline': {},
+               'targets': {}}
     for n in sorted(set(args.sizes) | set(args.baseline_sizes)):
-        step = time_sim_steps(fig3_scenario(n, args.steps), args.steps)
+        step = time_sim_steps(n, args.steps, args.repeats if n < 10000 else 1)
         results['sim'][n] = {'step_s': step, 'steps_per_s': 1 / step,
                              'us_per_agent_step': step / n * 1e6}
         print(f'sim       N = {n:>6}: {1 / step:9.1f} steps/s  '
@@ -139,12 +156,25 @@ def main(argv: list[str] | None = None) -> int:
                                   'sim_speedup': speedup}
         print(f'baseline  N = {n:>6}: {1 / step:9.2f} steps/s  sim is {speedup:.0f}x faster',
               flush=True)
+    if SPEEDUP_N in results['baseline']:
+        speedup = results['baseline'][SPEEDUP_N]['sim_speedup']
+        ok = speedup >= SPEEDUP_MIN
+        results['targets']['speedup'] = {'n': SPEEDUP_N, 'measured': speedup,
+                                         'target': SPEEDUP_MIN, 'pass': ok}
+        print(f'target: sim >= {SPEEDUP_MIN:.0f}x the per-agent loop at N = {SPEEDUP_N}: '
+              f'{verdict(ok)} ({speedup:.0f}x)')
     sizes = sorted(results['sim'])
-    if len(sizes) > 1 and 1000 in results['sim']:
+    if len(sizes) > 1 and LINEAR_N in results['sim'] and sizes[-1] > LINEAR_N:
         ratio = (results['sim'][sizes[-1]]['us_per_agent_step']
-                 / results['sim'][1000]['us_per_agent_step'])
-        results['linearity'] = {'largest_n': sizes[-1], 'per_agent_ratio_vs_1000': ratio}
-        print(f'time per agent-step at N = {sizes[-1]} / at N = 1000: {ratio:.2f}')
+                 / results['sim'][LINEAR_N]['us_per_agent_step'])
+        ok = ratio <= LINEAR_MAX
+        results['targets']['linear'] = {'largest_n': sizes[-1], 'measured': ratio,
+                                        'target': LINEAR_MAX, 'pass': ok}
+        print(f'target: time per agent-step at N = {sizes[-1]} <= {LINEAR_MAX:g} x that at '
+              f'N = {LINEAR_N}: {verdict(ok)} ({ratio:.2f})')
+    results['load_average_end'] = list(os.getloadavg())
+    print(f'# load average at the end: '
+          f'{" ".join(f"{x:.2f}" for x in results["load_average_end"])}')
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2) + '\n')
