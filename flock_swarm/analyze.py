@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from flock_swarm.cli import OneLineParser
 from flock_swarm import __version__
 from flock_swarm.bag import BagError, BagReader
 from flock_swarm.core.dynamics import LeaderState
@@ -29,7 +30,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
-from flock_swarm.sim import RunLog, build_summary, ensure_writable, jsonable, simulate
+from flock_swarm.sim import RunLog, build_summary, ensure_writable, json_text, simulate
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
 EXIT_VERIFY_FAILED = 1
@@ -696,7 +697,7 @@ def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None
     files = [out / 'timeseries.npz', write_csv(series, out / 'timeseries.csv')]
     if run.scenario is not None:
         (out / 'scenario.json').write_text(
-            json.dumps(run.scenario.raw, indent=2, default=jsonable) + '\n')
+            json_text(run.scenario.raw))
         files.append(out / 'scenario.json')
 
     def wrote(path: Path) -> None:
@@ -709,7 +710,7 @@ def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None
                   collision_distance=run.collision_distance, snapshots=snapshots,
                   animate=animate, progress=wrote)
     tmp = out / 'summary.json.tmp'
-    tmp.write_text(json.dumps(summary, indent=2, default=jsonable) + '\n')
+    tmp.write_text(json_text(summary))
     tmp.replace(out / 'summary.json')
     files.append(out / 'summary.json')
     return Analysis(summary, series, files, verification)
@@ -756,7 +757,7 @@ def _positive_int(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``analyze``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='analyze',
         description='Metrics, time series and figures of a recorded flock_swarm run.')
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')

@@ -40,6 +40,7 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rosgraph_msgs.msg import Clock
 
+from flock_swarm.cli import OneLineParser
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
 
@@ -548,7 +549,7 @@ class Player(Node):
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``replay``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='replay', description='Republish the topics of a ROS 2 MCAP bag with their '
         'recorded timing and QoS, like ros2 bag play. Progress on stderr: [RUNNING]  Bag Time '
         'T  Duration ELAPSED/TOTAL (seconds).',

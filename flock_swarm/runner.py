@@ -18,6 +18,7 @@ from pathlib import Path
 
 import yaml
 
+from flock_swarm.cli import OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml
 from flock_swarm.scenarios import load_mapping
@@ -278,7 +279,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``swarm``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='swarm', description='Fly a scenario through the real ROS 2 nodes (world, leader, '
         'N agents) and record it.')
     parser.add_argument('scenario', help='preset name or path to a YAML file')

@@ -7,6 +7,7 @@ The step uses the same law functions as the agent node (:mod:`flock_swarm.core.p
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -17,6 +18,7 @@ import numpy as np
 
 from flock_swarm import __version__
 from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
+from flock_swarm.cli import OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
@@ -424,10 +426,10 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
     """
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / 'timeseries.npz', **result.series)
-    (out / 'scenario.json').write_text(json.dumps(sc.raw, indent=2, default=jsonable) + '\n')
+    (out / 'scenario.json').write_text(json_text(sc.raw))
     # summary.json last: its presence means the other files are complete.
     tmp = out / 'summary.json.tmp'
-    tmp.write_text(json.dumps(result.summary, indent=2, default=jsonable) + '\n')
+    tmp.write_text(json_text(result.summary))
     tmp.replace(out / 'summary.json')
 
 
@@ -443,35 +445,28 @@ def ensure_writable(out: Path) -> None:
     probe.unlink()
 
 
-def jsonable(value):
-    """Return a JSON-serialisable form of NumPy values (``inf`` becomes ``null``)."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if value == float('inf'):
-        return None
-    raise TypeError(f'not JSON serialisable: {type(value).__name__}')
+def plain_json(value):
+    """Return ``value`` with NumPy values as Python ones and non-finite floats as ``None``.
 
-
-class OneLineParser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line naming the option, like scenario errors.
-
-    ``sim: error: --seed: invalid int value: 'x'`` instead of argparse's usage block followed
-    by ``sim: error: argument --seed: ...``; exit status 2 as argparse's.
+    ``json.dumps`` writes ``inf`` and ``nan`` as ``Infinity`` and ``NaN``, which are not JSON
+    (and it never asks a ``default`` hook about floats), so values are cleaned first.
     """
+    if isinstance(value, dict):
+        return {key: plain_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain_json(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return plain_json(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
-    def error(self, message: str):
-        """Print ``PROG: error: OPTION: reason (see PROG --help)`` and exit with status 2."""
-        required = 'the following arguments are required: '
-        unknown = 'unrecognized arguments: '
-        if message.startswith('argument '):
-            message = message[len('argument '):]
-        elif message.startswith(required):
-            message = f'{message[len(required):]}: required'
-        elif message.startswith(unknown):
-            message = f'{message[len(unknown):]}: unrecognized argument(s)'
-        self.exit(EXIT_USAGE, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+def json_text(value, indent: int | None = 2) -> str:
+    """Return strict JSON for ``value`` (see :func:`plain_json`), with a final newline."""
+    return json.dumps(plain_json(value), indent=indent, allow_nan=False) + '\n'
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -93,6 +93,9 @@ class FaultyPublisher(Node):
         faults.append(wrong_frame)
         if k >= 6:
             faults.append(make_odometry(good_q, good_p, old, 'agent_0'))
+        # Well-formed but stamped far beyond the run: it must not make the genuine
+        # odometry that follows look stale (it once stalled every agent).
+        faults.append(make_odometry(good_q, good_p, self.clock.stamp(k + 10_000), 'agent_0'))
         for msg in faults:
             self.odom.publish(msg)
         self.leader.publish(make_odometry([math.nan, 0.0], good_p, now, 'leader'))

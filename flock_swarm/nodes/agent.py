@@ -37,6 +37,9 @@ from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, 
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.sim import interaction_graph, static_graph
 
+#: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
+MAX_PENDING = 8
+
 AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout'}
 
 
@@ -130,9 +133,15 @@ class AgentController:
         self.answered = -1
 
     def inputs(self, k: int) -> StepInputs | None:
-        """Return the buffer of step ``k`` (``None`` for a step already answered)."""
+        """Return the buffer of step ``k`` (``None`` for a step already answered).
+
+        At most ``MAX_PENDING`` steps are buffered: the one farthest ahead (a forged or
+        corrupted stamp, in lockstep) makes room.
+        """
         if k <= self.answered:
             return None
+        if k not in self.pending and len(self.pending) >= MAX_PENDING:
+            del self.pending[max(self.pending)]
         return self.pending.setdefault(k, StepInputs())
 
     def answer(self, k: int) -> np.ndarray:
@@ -229,7 +238,7 @@ class AgentNode(Node):
         state = odometry_state(msg, self.scenario.dim)
         self.latest.odom[j] = state
         self.latest_stamp = msg.header.stamp
-        self.stash(k, lambda box: box.odom.__setitem__(j, state))
+        self.stash(k, lambda box: box.odom.__setitem__(j, state), odom_topic(j))
 
     def check_odometry(self, topic: str, msg: Odometry, child: str) -> int | None:
         """Return the step of an acceptable odometry message, or ``None`` (rejected)."""
@@ -237,7 +246,7 @@ class AgentNode(Node):
         return self.guard.check(topic, msg.header.stamp, msg.header.frame_id,
                                 (((pos.x, pos.y, pos.z), lim.position),
                                  ((vel.x, vel.y, vel.z), lim.velocity)),
-                                (msg.child_frame_id, child))
+                                (msg.child_frame_id, child), ordered=not self.lockstep)
 
     def on_leader_odom(self, msg: Odometry) -> None:
         """Check and store the leader's position and velocity for its step."""
@@ -247,19 +256,20 @@ class AgentNode(Node):
         self.leader_heard(k)
         state = odometry_state(msg, self.scenario.dim)
         self.latest.leader_odom = state
-        self.stash(k, lambda box: setattr(box, 'leader_odom', state))
+        self.stash(k, lambda box: setattr(box, 'leader_odom', state), LEADER_ODOM)
 
     def on_leader_accel(self, msg: AccelStamped) -> None:
         """Check and store the leader's acceleration ``f_gamma`` for its step."""
         lin = msg.accel.linear
         k = self.guard.check(LEADER_ACCEL, msg.header.stamp, msg.header.frame_id,
-                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),))
+                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
+                             ordered=not self.lockstep)
         if k is None:
             return
         self.leader_heard(k)
         a = accel_vector(msg, self.scenario.dim)
         self.latest.leader_accel = a
-        self.stash(k, lambda box: setattr(box, 'leader_accel', a))
+        self.stash(k, lambda box: setattr(box, 'leader_accel', a), LEADER_ACCEL)
 
     # -- the leader lost and found --------------------------------------------------------------
 
@@ -280,7 +290,7 @@ class AgentNode(Node):
 
     # -- lockstep -------------------------------------------------------------------------------
 
-    def stash(self, k: int, store) -> None:
+    def stash(self, k: int, store, topic: str) -> None:
         """Lockstep: put an input into the buffer of step ``k``, answer if complete."""
         if not self.lockstep:
             return
@@ -288,11 +298,16 @@ class AgentNode(Node):
         if box is not None:
             store(box)
             self.try_answer(k)
-        elif k == self.controller.answered and self.repeated != k:
-            # The world offers a stalled step again: our commands may have been lost.
-            self.repeated = k
-            self.outbox.extend(self.sent)
-            self.flush()
+        elif k == self.controller.answered:
+            if self.repeated != k:
+                # The world offers a stalled step again: our commands may have been lost.
+                self.repeated = k
+                self.outbox.extend(self.sent)
+                self.flush()
+        else:
+            self.guard.reject(topic, 'stale_stamp',
+                              f'stamp of step {k} after step {self.controller.answered} was '
+                              'answered')
 
     def try_answer(self, k: int) -> None:
         """Answer step ``k`` once every odometry is in, and the leader's state or its timeout."""

@@ -83,7 +83,7 @@ class InputGuard:
     def check(self, topic: str, stamp: Time, frame_id: str,
               values: Iterable[tuple[Iterable[float], float]],
               child: tuple[str, str] | None = None,
-              window: tuple[int, int] | None = None) -> int | None:
+              window: tuple[int, int] | None = None, ordered: bool = True) -> int | None:
         """Return the step of an acceptable message, or ``None`` (rejected and counted).
 
         :param topic: the topic it came on.
@@ -94,6 +94,10 @@ class InputGuard:
         :param window: ``(first, last)`` steps acceptable now (the world's lockstep: the
             step just closed and the open one); outside it the message is ``late`` or
             ``future``, and does not move the topic's latest stamp.
+        :param ordered: reject a stamp older than the topic's latest accepted one. A
+            lockstep agent passes ``False`` and judges staleness by the steps it has
+            answered instead: one forged far-future stamp must not make it reject the
+            genuine messages that follow.
         """
         fault = None
         if frame_id != FRAME:
@@ -117,7 +121,7 @@ class InputGuard:
         if fault is None and window is not None and not window[0] <= k <= window[1]:
             fault = ('late', f'stamp of step {k} before step {window[0]}') if k < window[0] \
                 else ('future', f'stamp of step {k} after step {window[1]}')
-        if fault is None and k < self.latest.get(topic, -1):
+        if fault is None and ordered and k < self.latest.get(topic, -1):
             fault = ('stale_stamp', f'stamp of step {k} after step {self.latest[topic]}')
         if fault is not None:
             self.reject(topic, *fault)

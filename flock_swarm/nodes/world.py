@@ -43,7 +43,7 @@ from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LE
                                       odometry_state, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
-from flock_swarm.sim import RunLog, SimResult, build_summary, jsonable, write_outputs
+from flock_swarm.sim import RunLog, SimResult, build_summary, json_text, write_outputs
 
 #: Seconds after which a stalled lockstep step is offered again (see ``resend_step``).
 RESEND_PERIOD = 0.5
@@ -177,7 +177,7 @@ class WorldNode(Node):
                 from None
         sc = self.scenario
         bag.add_metadata('flock_swarm', {
-            'scenario': json.dumps(sc.raw, default=jsonable),
+            'scenario': json_text(sc.raw, indent=None).strip(),
             'scenario_name': sc.name,
             'seed': str(sc.seed),
             'informed': json.dumps(self.real.informed_ids),
