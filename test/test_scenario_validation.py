@@ -282,3 +282,20 @@ def test_exponents_in_files_are_numbers(tmp_path):
     path = tmp_path / 'exp.yaml'
     path.write_text(yaml.safe_dump(BASE).replace('dt: 0.01', 'dt: 1e-2'))
     assert load(str(path)).dt == 0.01
+
+
+@pytest.mark.parametrize('tool, args, start', [
+    ('swarm', ['demo', '--domain-id', 'x'], "swarm: error: --domain-id: invalid int value: 'x'"),
+    ('swarm', ['demo', '--mode', 'warp'], 'swarm: error: --mode: invalid choice'),
+    ('swarm', ['demo', '--container'], 'swarm: error: --container: goes with --processes'),
+    ('swarm', [], 'swarm: error: scenario: required'),
+    ('analyze', ['bag', '--record-every', '0'], 'analyze: error: --record-every'),
+    ('replay', ['bag', '--bogus'], 'replay: error: --bogus: unrecognized argument(s)'),
+])
+def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
+    module = {'swarm': 'runner'}.get(tool, tool)
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.{module}', *args],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.startswith(start), res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
