@@ -317,3 +317,16 @@ def test_verlet_disk_graph_searches_stragglers_again_not_the_flock(blocks, monke
         assert_array_equal(edges.j, np.concatenate([g.j + 63 * b for b, g in enumerate(own)]))
     assert graph.searches == 1
     assert graph.refreshes > 10
+
+
+def test_verlet_disk_graph_searches_plainly_while_nothing_lasts():
+    # New random positions at every step: no candidate list survives a step.
+    rng = np.random.default_rng(13)
+    graph = graphs.VerletDiskGraph(0.2)
+    for _ in range(40):
+        q = rng.uniform(0.0, 1.0, size=(50, 2))
+        edges, exact = graph.edges(q), graphs.disk_graph(q, 0.2)
+        assert_array_equal(edges.i, exact.i)
+        assert_array_equal(edges.j, exact.j)
+    assert graph.plain_searches >= 30
+    assert graph.searches + graph.plain_searches == 40
