@@ -100,8 +100,12 @@ def bump(z: np.ndarray, h: float) -> np.ndarray:
     :return: values in ``[0, 1]``.
     """
     z = np.asarray(z, dtype=float)
-    ramp = 0.5 * (1.0 + np.cos(np.pi * (z - h) / (1.0 - h)))
-    return np.where(z < h, np.where(z >= 0.0, 1.0, 0.0), np.where(z <= 1.0, ramp, 0.0))
+    out = np.asarray(0.5 * (1.0 + np.cos(np.pi * (z - h) / (1.0 - h))))
+    # In place, one pass each (cheaper than nested np.where on every edge and step).
+    np.copyto(out, 0.0, where=~(z <= 1.0))
+    np.copyto(out, 1.0, where=z < h)
+    np.copyto(out, 0.0, where=z < 0.0)
+    return out
 
 
 def bump_derivative(z: np.ndarray, h: float) -> np.ndarray:
