@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
               'projected_full_wall_min': None if projected is None else projected / 60.0}
     print(f'measured: {sims["executed"]} runs ({sims["cached"]} reused) in {wall / 60:.2f} min '
           f'wall, {cpu / 60:.2f} CPU-min: {result["runs_per_min"]:.1f} runs/min, '
-          f'{result["cpu_per_run_s"]:.2f} CPU-s per run, both cores busy '
+          f'{result["cpu_per_run_s"]:.2f} CPU-s per run, the workers busy '
           f'{100 * result["parallel_efficiency"]:.0f} % of the time')
     for n, row in result['per_size'].items():
         print(f'  N = {n:>4}: {row["runs"]:>4} runs, {row["mean_s"]:6.2f} s per run '
