@@ -3,6 +3,7 @@
 import itertools
 import os
 import subprocess
+import time
 
 import pytest
 
@@ -56,3 +57,12 @@ def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
                              env=env, stdout=subprocess.DEVNULL, stderr=world_stderr,
                              text=True)
     return others, world
+
+
+def wait_for(condition, timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.05)

@@ -13,7 +13,6 @@ import shutil
 import signal
 import subprocess
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -32,7 +31,7 @@ from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock,
                                       make_odometry)
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.sim import interaction_graph, simulate, static_graph
-from conftest import start_nodes
+from conftest import start_nodes, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -45,15 +44,6 @@ def scenario_of(tmp_path, overrides, preset='demo'):
     out = tmp_path / 'run'
     path = resolve_scenario(preset, overrides, None, out)
     return path, parse_scenario(yaml.safe_load(path.read_text())), out
-
-
-def wait_for(condition, timeout: float, what: str) -> None:
-    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -8,7 +8,6 @@ import json
 import os
 import signal
 import subprocess
-import time
 
 import numpy as np
 import pytest
@@ -23,7 +22,7 @@ from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.runner import executable, resolve_scenario, run_in_process, run_processes
 from flock_swarm.sim import simulate
-from conftest import start_nodes
+from conftest import start_nodes, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -173,15 +172,6 @@ def test_separate_processes(tmp_path, ros_domain, container):
     ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
     with np.load(out / 'timeseries.npz') as ros:
         assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
-
-
-def wait_for(condition, timeout: float, what: str) -> None:
-    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
