@@ -312,6 +312,10 @@ def load_run(bag: Path | str, *, radius: float | None = None,
         radius, eta_tolerance = sc.law.radius, sc.eta_tolerance
         collision_distance = sc.collision_distance
     raw = _read_messages(reader, topics, progress)
+    if raw.undecodable:
+        notes.append(f'{len(raw.undecodable)} message(s) that do not decode as their type '
+                     f'skipped (a faulty writer\'s, recorded as received; first: '
+                     f'{raw.undecodable[0]})')
     return _assemble(reader, topics, sc, meta, raw, radius, eta_tolerance, collision_distance,
                      notes)
 
@@ -328,6 +332,8 @@ class _Messages:
     leader_accel: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     # (stamp, the world's metric values)
     metrics: list[tuple[int, dict[str, str]]] = field(default_factory=list)
+    #: Messages whose bytes do not decode (skipped): ``topic at t ns (reason)``.
+    undecodable: list[str] = field(default_factory=list)
 
 
 def _read_messages(reader: BagReader, topics: SwarmTopics,
@@ -345,7 +351,12 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
     out = _Messages()
     tick = _Ticker(progress)
     read = 0
-    for message, msg in reader.decoded(list(kinds)):
+    bad: list[str] = []
+
+    def undecodable(message, reason: str) -> None:
+        bad.append(f'{message.topic} at {message.log_time_ns} ns ({reason})')
+
+    for message, msg in reader.decoded(list(kinds), undecodable):
         kind, i = kinds[message.topic]
         stamp = _stamp_ns(msg.header.stamp)
         if kind == 'odom' or kind == 'leader_odom':
@@ -372,6 +383,7 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
         read += 1
         tick(lambda: f'[analyze] reading {reader.path}: {read}/{total} messages '
                      f'({100 * read / max(total, 1):.0f} %)')
+    out.undecodable = bad
     return out
 
 

@@ -50,6 +50,10 @@ def scenario_of(tmp_path, overrides, preset='demo'):
 # Faulty messages never reach a command
 
 
+#: Serialised bytes that decode as nothing: a CDR header, then a string without its NUL.
+MALFORMED = b'\x00\x01\x00\x00' + bytes(8) + b'\x40\x00\x00\x00garbage'
+
+
 class FaultyPublisher(Node):
     """Publishes, every 10 ms, one faulty message of each kind on the swarm's topics."""
 
@@ -93,10 +97,13 @@ class FaultyPublisher(Node):
         self.cmd.publish(make_accel([math.nan, 0.0], now))
         self.cmd.publish(make_accel([1e12, 0.0], now))
         self.cmd.publish(make_accel([0.5, 0.5], self.clock.stamp(k + 3)))
+        # Bytes that are no message at all (a foreign or corrupted writer).
+        for pub in (self.odom, self.leader, self.cmd):
+            pub.publish(MALFORMED)
         self.sent += 1
 
 
-def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain):
+def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain, capfd):
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=2',
                                            'record_every=1'])
     with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
@@ -111,14 +118,19 @@ def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain)
     with np.load(out / 'timeseries.npz') as ros:
         for name in ('q', 'p', 'u'):
             assert_allclose(ros[name], ref[name], rtol=0, atol=1e-9, err_msg=name)
-    for kind in ('non_finite', 'magnitude', 'frame', 'off_grid_stamp', 'stale_stamp'):
+    for kind in ('non_finite', 'magnitude', 'frame', 'off_grid_stamp', 'stale_stamp',
+                 'malformed'):
         assert agent_rejections.get(kind, 0) > 0, (kind, agent_rejections)
     world_rejections = summary['rejected_messages']
-    for kind in ('non_finite', 'magnitude', 'frame', 'future'):
+    for kind in ('non_finite', 'magnitude', 'frame', 'future', 'malformed'):
         assert world_rejections.get(kind, 0) > 0, (kind, world_rejections)
     # The faulty messages were recorded as received (nothing received is lost).
     counts = BagReader(out / 'bag').message_counts()
     assert counts['/agent_1/cmd_accel'] > sc.steps + 1
+    # ... and analyze reads the bag past the ones that decode as nothing, saying so.
+    assert analyze_main([str(out / 'bag'), '--out', str(tmp_path / 'analysis'),
+                         '--no-anim']) == 0
+    assert 'do not decode' in capfd.readouterr().err
 
 
 def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):

@@ -14,7 +14,7 @@ from io import BytesIO
 from pathlib import Path
 import re
 import struct
-from typing import Any, BinaryIO, Iterable, Iterator
+from typing import Any, BinaryIO, Callable, Iterable, Iterator
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -479,13 +479,18 @@ class BagReader:
             return streams[0]
         return heapq.merge(*streams, key=lambda message: message.log_time_ns)
 
-    def decoded(self, topics: Iterable[str] | str | None = None
+    def decoded(self, topics: Iterable[str] | str | None = None,
+                undecodable: Callable[[BagMessage, str], None] | None = None
                 ) -> Iterator[tuple[BagMessage, Any]]:
         """Iterate over the messages with their deserialised rclpy objects.
 
         :param topics: only these topics; all when None.
+        :param undecodable: called with a message whose bytes do not decode as its type
+            (a faulty writer's, recorded as received) and the reason; the message is then
+            skipped. ``None``: such a message raises.
         :return: an iterator of ``(BagMessage, message)`` pairs.
-        :raises BagError: if a message type is not installed or a message does not decode.
+        :raises BagError: if a message type is not installed or a message does not decode
+            (without ``undecodable``).
         """
         for message in self.messages(topics):
             cls = self._classes.get(message.type_name)
@@ -498,8 +503,12 @@ class BagReader:
             try:
                 decoded = deserialize_message(message.data, cls)
             except Exception as exc:
-                raise BagError(f'message on {message.topic} at {message.log_time_ns} ns does '
-                               f'not decode as {message.type_name} ({_one_line(exc)})') from None
+                if undecodable is None:
+                    raise BagError(f'message on {message.topic} at {message.log_time_ns} ns '
+                                   f'does not decode as {message.type_name} '
+                                   f'({_one_line(exc)})') from None
+                undecodable(message, _one_line(exc))
+                continue
             yield message, decoded
 
     def _file_messages(self, file: _McapFile, wanted: set[str] | None

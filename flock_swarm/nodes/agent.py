@@ -23,7 +23,6 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
 
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.errors import ScenarioError
@@ -31,10 +30,10 @@ from flock_swarm.core.protocols import advance_adaptive, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                      StepClock, accel_vector, claimants, cmd_topic, declare,
-                                      declare_common, load_scenario, make_accel, odom_topic,
-                                      odometry_state, run_node, timer_period)
+                                      StepClock, claimants, cmd_topic, declare, declare_common,
+                                      load_scenario, odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
+from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
 from flock_swarm.sim import interaction_graph, static_graph
 
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
@@ -62,11 +61,11 @@ class StepInputs:
 
     def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
         """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
-        q = np.array([self.odom[j][0] for j in range(n_agents)])
-        p = np.array([self.odom[j][1] for j in range(n_agents)])
-        leader = LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel) \
-            if self.has_leader else None
-        return q, p, leader
+        odom = self.odom
+        qp = np.array([odom[j] for j in range(n_agents)])
+        leader = LeaderState(np.array(self.leader_odom[0]), np.array(self.leader_odom[1]),
+                             np.array(self.leader_accel)) if self.has_leader else None
+        return qp[:, 0], qp[:, 1], leader
 
 
 def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
@@ -205,16 +204,20 @@ class AgentNode(Node):
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
                          for i in self.controller.ids]
+        # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
+        self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
+        self.children = [f'agent_{j}' for j in range(sc.n_agents)]
         for j in range(sc.n_agents):
             self.create_subscription(Odometry, odom_topic(j),
-                                     lambda msg, j=j: self.on_odom(j, msg), LOCKSTEP_QOS)
-        self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, LOCKSTEP_QOS)
+                                     lambda data, j=j: self.on_odom(j, data), LOCKSTEP_QOS,
+                                     raw=True)
+        self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, LOCKSTEP_QOS,
+                                 raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel,
-                                 LOCKSTEP_QOS)
+                                 LOCKSTEP_QOS, raw=True)
         self.latest: StepInputs = StepInputs()
-        self.latest_stamp = None
-        self.cmd_msgs = [make_accel(np.zeros(sc.dim), self.clock.stamp(0))
-                         for _ in self.controller.ids]
+        self.latest_stamp: int | None = None
+        self.encoder = AccelEncoder()
         self.outbox: list[tuple[int, bytes]] = []
         self.sent: list[tuple[int, bytes]] = []
         self.repeated = -1
@@ -230,44 +233,61 @@ class AgentNode(Node):
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def on_odom(self, j: int, msg: Odometry) -> None:
-        """Check and store agent ``j``'s odometry for its step."""
-        k = self.check_odometry(odom_topic(j), msg, f'agent_{j}')
-        if k is None:
+    def on_odom(self, j: int, data: bytes) -> None:
+        """Check and store agent ``j``'s odometry (serialised) for its step."""
+        checked = self.check_odometry(self.odom_topics[j], data, self.children[j])
+        if checked is None:
             return
-        state = odometry_state(msg, self.scenario.dim)
+        k, state = checked
         self.latest.odom[j] = state
-        self.latest_stamp = msg.header.stamp
-        self.stash(k, lambda box: box.odom.__setitem__(j, state), odom_topic(j))
+        self.latest_stamp = self.clock.ns(k)
+        if self.lockstep:
+            box = self.controller.inputs(k)
+            if box is None:
+                self.answered_again(k, self.odom_topics[j])
+            else:
+                box.odom[j] = state
+                self.try_answer(k)
 
-    def check_odometry(self, topic: str, msg: Odometry, child: str) -> int | None:
-        """Return the step of an acceptable odometry message, or ``None`` (rejected)."""
-        pos, vel, lim = msg.pose.pose.position, msg.twist.twist.linear, self.guard.limits
-        return self.guard.check(topic, msg.header.stamp, msg.header.frame_id,
-                                (((pos.x, pos.y, pos.z), lim.position),
-                                 ((vel.x, vel.y, vel.z), lim.velocity)),
-                                (msg.child_frame_id, child), ordered=not self.lockstep)
-
-    def on_leader_odom(self, msg: Odometry) -> None:
-        """Check and store the leader's position and velocity for its step."""
-        k = self.check_odometry(LEADER_ODOM, msg, 'leader')
+    def check_odometry(self, topic: str, data: bytes,
+                       child: str) -> tuple[int, tuple[tuple, tuple]] | None:
+        """Return the step and ``(q, p)`` of an acceptable odometry message, or ``None``."""
+        try:
+            ns, frame, child_id, pos, vel = decode_odometry(data)
+        except MalformedMessage as exc:
+            self.guard.reject(topic, 'malformed', str(exc))
+            return None
+        lim = self.guard.limits
+        k = self.guard.check(topic, ns, frame, ((pos, lim.position), (vel, lim.velocity)),
+                             (child_id, child), ordered=not self.lockstep)
         if k is None:
+            return None
+        dim = self.scenario.dim
+        return k, (pos[:dim], vel[:dim])
+
+    def on_leader_odom(self, data: bytes) -> None:
+        """Check and store the leader's position and velocity (serialised) for its step."""
+        checked = self.check_odometry(LEADER_ODOM, data, 'leader')
+        if checked is None:
             return
+        k, state = checked
         self.leader_heard(k)
-        state = odometry_state(msg, self.scenario.dim)
         self.latest.leader_odom = state
         self.stash(k, lambda box: setattr(box, 'leader_odom', state), LEADER_ODOM)
 
-    def on_leader_accel(self, msg: AccelStamped) -> None:
-        """Check and store the leader's acceleration ``f_gamma`` for its step."""
-        lin = msg.accel.linear
-        k = self.guard.check(LEADER_ACCEL, msg.header.stamp, msg.header.frame_id,
-                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
+    def on_leader_accel(self, data: bytes) -> None:
+        """Check and store the leader's acceleration ``f_gamma`` (serialised) for its step."""
+        try:
+            ns, frame, lin = decode_accel(data)
+        except MalformedMessage as exc:
+            self.guard.reject(LEADER_ACCEL, 'malformed', str(exc))
+            return
+        k = self.guard.check(LEADER_ACCEL, ns, frame, ((lin, self.guard.limits.accel),),
                              ordered=not self.lockstep)
         if k is None:
             return
         self.leader_heard(k)
-        a = accel_vector(msg, self.scenario.dim)
+        a = lin[:self.scenario.dim]
         self.latest.leader_accel = a
         self.stash(k, lambda box: setattr(box, 'leader_accel', a), LEADER_ACCEL)
 
@@ -295,10 +315,16 @@ class AgentNode(Node):
         if not self.lockstep:
             return
         box = self.controller.inputs(k)
-        if box is not None:
+        if box is None:
+            self.answered_again(k, topic)
+        else:
             store(box)
             self.try_answer(k)
-        elif k == self.controller.answered:
+
+    def answered_again(self, k: int, topic: str) -> None:
+        """An input for step ``k``, already answered: repeat the commands once if the world
+        offers that step again, else reject the input as stale."""
+        if k == self.controller.answered:
             if self.repeated != k:
                 # The world offers a stalled step again: our commands may have been lost.
                 self.repeated = k
@@ -322,7 +348,7 @@ class AgentNode(Node):
                 return
             self.lose_leader(k)
         self.waiting_since = None
-        self.publish_commands(self.controller.answer(k), self.clock.stamp(k))
+        self.publish_commands(self.controller.answer(k), self.clock.ns(k))
 
     def on_lockstep_timer(self) -> None:
         """Answer a step that waits for the leader once its timeout is over; send the queue."""
@@ -330,13 +356,11 @@ class AgentNode(Node):
             self.try_answer(max(self.controller.pending))
         self.flush()
 
-    def publish_commands(self, u: np.ndarray, stamp) -> None:
-        """Queue one command per hosted agent and send what the world can receive.
-
-        Commands are queued serialised, so one message per agent can be reused.
-        """
-        self.sent = [(row, serialize_message(make_accel(a, stamp, msg)))
-                     for row, (a, msg) in enumerate(zip(u.tolist(), self.cmd_msgs))]
+    def publish_commands(self, u: np.ndarray, stamp_ns: int) -> None:
+        """Queue one command per hosted agent (serialised) and send what the world can
+        receive."""
+        encode = self.encoder.encode
+        self.sent = [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
         self.outbox.extend(self.sent)
         self.flush()
 
@@ -365,7 +389,7 @@ class AgentNode(Node):
             return
         q, p, leader = latest.swarm(self.scenario.n_agents)
         if leader is not None and time.monotonic() - self.leader_seen_at > self.leader_timeout:
-            self.lose_leader(self.clock.step_of(self.latest_stamp))
+            self.lose_leader(self.clock.step_at(self.latest_stamp))
         if self.leader_lost:
             leader = None
         self.publish_commands(self.controller.command(q, p, leader), self.latest_stamp)

@@ -119,8 +119,11 @@ class StepClock:
 
     def step_of(self, stamp: Time) -> int:
         """Return the step ``k`` of a stamp (nearest step)."""
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        return int(round(ns / self.dt_ns))
+        return self.step_at(stamp.sec * 1_000_000_000 + stamp.nanosec)
+
+    def step_at(self, ns: int) -> int:
+        """Return the step ``k`` nearest to time ``ns`` [ns] (exact integer arithmetic)."""
+        return (2 * ns + self.dt_ns) // (2 * self.dt_ns)
 
 
 #: Parameters that take more than their default's type and whose node checks the value
@@ -250,14 +253,6 @@ def make_odometry(q: Sequence[float], p: Sequence[float], stamp: Time, child: st
     return msg
 
 
-def odometry_state(msg: Odometry, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(q, p)`` of an Odometry message."""
-    pos, vel = msg.pose.pose.position, msg.twist.twist.linear
-    if dim == 2:
-        return np.array([pos.x, pos.y]), np.array([vel.x, vel.y])
-    return np.array([pos.x, pos.y, pos.z]), np.array([vel.x, vel.y, vel.z])
-
-
 def make_accel(a: Sequence[float], stamp: Time,
                msg: AccelStamped | None = None) -> AccelStamped:
     """Return an AccelStamped with linear acceleration ``a`` in the world frame.
@@ -273,12 +268,6 @@ def make_accel(a: Sequence[float], stamp: Time,
     if len(a) == 3:
         lin.z = float(a[2])
     return msg
-
-
-def accel_vector(msg: AccelStamped, dim: int) -> np.ndarray:
-    """Return the linear acceleration of an AccelStamped message."""
-    lin = msg.accel.linear
-    return np.array([lin.x, lin.y] if dim == 2 else [lin.x, lin.y, lin.z])
 
 
 def agent_hosts(node: Node, n_agents: int) -> int | None:

@@ -9,19 +9,19 @@ first. It is rejected (counted by reason, the first of each kind per topic logge
 - a value is NaN or infinite, or beyond the absurd-magnitude limits (:class:`Limits`);
 - its stamp is not a step of the simulation clock (``t_k = k dt`` exactly), or is older
   than the last accepted stamp on the same topic (stale or out of order). The same stamp
-  again is accepted: the world re-offers a stalled lockstep step.
+  again is accepted: the world re-offers a stalled lockstep step;
+- its bytes are not a message of the topic's type at all (``malformed``, counted by the
+  node that decodes them, see :mod:`flock_swarm.nodes.wire`).
 
 Reasons (the keys of :meth:`InputGuard.counts`): ``frame``, ``non_finite``, ``magnitude``,
-``off_grid_stamp``, ``stale_stamp``; the world adds ``late`` (a command for a step it has
-already closed) and ``future`` (for a step it has not opened).
+``off_grid_stamp``, ``stale_stamp``, ``malformed``; the world adds ``late`` (a command for a
+step it has already closed) and ``future`` (for a step it has not opened).
 """
 
 import math
 from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, Iterable
-
-from builtin_interfaces.msg import Time
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import FRAME, StepClock, declare
@@ -80,14 +80,14 @@ class InputGuard:
         self.latest: dict[str, int] = {}
         self._told: set[tuple[str, str]] = set()
 
-    def check(self, topic: str, stamp: Time, frame_id: str,
+    def check(self, topic: str, stamp_ns: int, frame_id: str,
               values: Iterable[tuple[Iterable[float], float]],
               child: tuple[str, str] | None = None,
               window: tuple[int, int] | None = None, ordered: bool = True) -> int | None:
         """Return the step of an acceptable message, or ``None`` (rejected and counted).
 
         :param topic: the topic it came on.
-        :param stamp: its ``header.stamp``.
+        :param stamp_ns: its ``header.stamp`` [ns].
         :param frame_id: its ``header.frame_id``.
         :param values: ``(components, limit)`` pairs to check for finiteness and magnitude.
         :param child: ``(child_frame_id, expected)`` for odometry.
@@ -114,10 +114,10 @@ class InputGuard:
                         break
                 if fault is not None:
                     break
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        k = self.clock.step_of(stamp)
-        if fault is None and ns != self.clock.ns(k):
-            fault = ('off_grid_stamp', f'stamp {ns} ns is not a step of dt = {self.clock.dt:g} s')
+        k = self.clock.step_at(stamp_ns)
+        if fault is None and stamp_ns != self.clock.ns(k):
+            fault = ('off_grid_stamp',
+                     f'stamp {stamp_ns} ns is not a step of dt = {self.clock.dt:g} s')
         if fault is None and window is not None and not window[0] <= k <= window[1]:
             fault = ('late', f'stamp of step {k} before step {window[0]}') if k < window[0] \
                 else ('future', f'stamp of step {k} after step {window[1]}')

@@ -17,8 +17,9 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm.core.dynamics import VirtualLeader
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
-                                      declare, declare_common, load_scenario, make_accel,
-                                      make_odometry, run_node, timer_period)
+                                      declare, declare_common, load_scenario, run_node,
+                                      timer_period)
+from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 
 LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout'}
@@ -48,6 +49,7 @@ class LeaderNode(Node):
         self.t0 = time.monotonic()
         self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
         self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
+        self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
         if self.get_parameter('mode').value == 'lockstep':
             self.create_subscription(Clock, CLOCK, self.on_clock, CLOCK_QOS)
             self.retry = self.create_timer(0.01, self.flush)
@@ -92,11 +94,11 @@ class LeaderNode(Node):
         self.step += 1
 
     def publish(self) -> None:
-        """Publish the state of the current step."""
+        """Publish the state of the current step (serialised by :mod:`flock_swarm.nodes.wire`)."""
         state = self.model.state
-        stamp = self.clock.stamp(self.step)
-        self.odom_pub.publish(make_odometry(state.q, state.p, stamp, 'leader'))
-        self.accel_pub.publish(make_accel(state.a, stamp))
+        ns = self.clock.ns(self.step)
+        self.odom_pub.publish(self.odom_encoder.encode(ns, state.q.tolist(), state.p.tolist()))
+        self.accel_pub.publish(self.accel_encoder.encode(ns, state.a.tolist()))
 
 
 def main(args: list[str] | None = None) -> int:

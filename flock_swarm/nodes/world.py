@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
@@ -37,11 +37,12 @@ from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
-                                      TELEMETRY_QOS, LatencyHistogram, StepClock,
-                                      accel_vector, agent_hosts, claimants, cmd_topic, declare,
-                                      declare_common, load_scenario, make_odometry, odom_topic,
-                                      odometry_state, run_node, timer_period)
+                                      TELEMETRY_QOS, LatencyHistogram, StepClock, agent_hosts,
+                                      claimants, cmd_topic, declare, declare_common,
+                                      load_scenario, odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
+from flock_swarm.nodes.wire import (MalformedMessage, OdometryEncoder, decode_accel,
+                                    decode_odometry, encode_clock)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
 from flock_swarm.sim import RunLog, SimResult, build_summary, json_text, write_outputs
 
@@ -136,16 +137,19 @@ class WorldNode(Node):
         self.clock_pub = self._publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self._publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(n)]
-        self.odom_msgs = [make_odometry(self.q[i], self.p[i], self.clock.stamp(0),
-                                        f'agent_{i}') for i in range(n)]
+        self.odom_encoders = [OdometryEncoder(f'agent_{i}') for i in range(n)]
+        self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
+        # The current step's serialised /clock and odometry, offered again by resend_step.
+        self.step_bytes: list[tuple] = []
         self.marker_pub = self._publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
         self.metrics_pub = self._publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
-        self.cmd_topics = [self._subscribe(AccelStamped, cmd_topic(i),
+        self.cmd_topics = [self._subscribe(AccelStamped, cmd_topic(i), decode_accel,
                                            lambda msg, i=i: self.on_command(i, msg))
                            for i in range(n)]
         self.create_timer(1.0, self.check_claims)
-        self.leader_odom_topic = self._subscribe(Odometry, LEADER_ODOM, self.on_leader_odom)
-        self.leader_accel_topic = self._subscribe(AccelStamped, LEADER_ACCEL,
+        self.leader_odom_topic = self._subscribe(Odometry, LEADER_ODOM, decode_odometry,
+                                                 self.on_leader_odom)
+        self.leader_accel_topic = self._subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                                   self.on_leader_accel)
         if self.lockstep:
             self.timer = self.create_timer(0.01, self.on_lockstep_timer)
@@ -226,17 +230,23 @@ class WorldNode(Node):
             pass
         self.finish('recording_failed')
 
-    def _subscribe(self, msg_type, topic: str, handler) -> str:
+    def _subscribe(self, msg_type, topic: str, decode: Callable, handler: Callable) -> str:
         """Subscribe to ``topic``; record each message as received, then hand it on.
 
         The subscription takes the serialised bytes, so the bag stores what came over the
-        wire (faulty messages included) without serialising it again; ``handler(msg)`` gets
-        the decoded message. Return the resolved topic name.
+        wire (faulty messages included) without serialising it again; ``handler`` gets
+        ``decode(data)`` (:mod:`flock_swarm.nodes.wire`: its first item is the stamp [ns]).
+        Bytes that are no message of the type are recorded at the open step and rejected
+        (``malformed``). Return the resolved topic name.
         """
         def on_data(data: bytes) -> None:
-            msg = deserialize_message(data, msg_type)
-            k = self.clock.step_of(msg.header.stamp)
-            self._write(name, data, self.clock.ns(max(k, 0)))
+            try:
+                msg = decode(data)
+            except MalformedMessage as exc:
+                self._write(name, data, self.clock.ns(self.k))
+                self.guard.reject(name, 'malformed', str(exc))
+                return
+            self._write(name, data, self.clock.ns(max(self.clock.step_at(msg[0]), 0)))
             handler(msg)
 
         name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
@@ -246,16 +256,16 @@ class WorldNode(Node):
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def on_command(self, i: int, msg: AccelStamped) -> None:
-        """Check and store agent ``i``'s command (lockstep: for the current step; realtime:
-        held)."""
-        lin, topic = msg.accel.linear, self.cmd_topics[i]
-        k = self.guard.check(topic, msg.header.stamp, msg.header.frame_id,
-                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
+    def on_command(self, i: int, msg: tuple) -> None:
+        """Check and store agent ``i``'s command ``(stamp_ns, frame_id, linear)`` (lockstep:
+        for the current step; realtime: held)."""
+        ns, frame, lin = msg
+        topic = self.cmd_topics[i]
+        k = self.guard.check(topic, ns, frame, ((lin, self.guard.limits.accel),),
                              window=self.window())
         if k is None:
             return
-        u = accel_vector(msg, self.scenario.dim)
+        u = lin[:self.scenario.dim]
         if not self.lockstep:
             now = time.monotonic()
             self.held[i] = u
@@ -278,27 +288,28 @@ class WorldNode(Node):
         the one just closed; realtime: any)."""
         return (self.k - 1, self.k) if self.lockstep else None
 
-    def on_leader_odom(self, msg: Odometry) -> None:
-        """Check and store the leader's position and velocity of its step."""
-        pos, vel, lim = msg.pose.pose.position, msg.twist.twist.linear, self.guard.limits
-        k = self.guard.check(self.leader_odom_topic, msg.header.stamp, msg.header.frame_id,
-                             (((pos.x, pos.y, pos.z), lim.position),
-                              ((vel.x, vel.y, vel.z), lim.velocity)),
-                             (msg.child_frame_id, 'leader'), self.window())
+    def on_leader_odom(self, msg: tuple) -> None:
+        """Check and store the leader's position and velocity of its step (``msg``: see
+        :func:`~flock_swarm.nodes.wire.decode_odometry`)."""
+        ns, frame, child, pos, vel = msg
+        lim = self.guard.limits
+        k = self.guard.check(self.leader_odom_topic, ns, frame,
+                             ((pos, lim.position), (vel, lim.velocity)), (child, 'leader'),
+                             self.window())
         if k is not None:
             self.leader_heard(k)
-            self.leader_odom[k] = odometry_state(msg, self.scenario.dim)
+            dim = self.scenario.dim
+            self.leader_odom[k] = (np.array(pos[:dim]), np.array(vel[:dim]))
             self._maybe_finish()
 
-    def on_leader_accel(self, msg: AccelStamped) -> None:
+    def on_leader_accel(self, msg: tuple) -> None:
         """Check and store the leader's acceleration of its step."""
-        lin = msg.accel.linear
-        k = self.guard.check(self.leader_accel_topic, msg.header.stamp, msg.header.frame_id,
-                             (((lin.x, lin.y, lin.z), self.guard.limits.accel),),
-                             window=self.window())
+        ns, frame, lin = msg
+        k = self.guard.check(self.leader_accel_topic, ns, frame,
+                             ((lin, self.guard.limits.accel),), window=self.window())
         if k is not None:
             self.leader_heard(k)
-            self.leader_accel[k] = accel_vector(msg, self.scenario.dim)
+            self.leader_accel[k] = np.array(lin[:self.scenario.dim])
             self._maybe_finish()
 
     def leader_heard(self, k: int) -> None:
@@ -373,27 +384,27 @@ class WorldNode(Node):
         """
         self.resends += 1
         self.resend_at = time.monotonic() + RESEND_PERIOD
-        stamp = self.clock.stamp(self.k)
-        self.clock_pub.publish(Clock(clock=stamp))
-        for pub, msg in zip(self.odom_pubs, self.odom_msgs):
-            msg.header.stamp = stamp
-            pub.publish(msg)
+        for pub, data in self.step_bytes:
+            pub.publish(data)
 
     def begin_step(self) -> None:
         """Publish ``/clock`` and every odometry for the current step."""
-        k, t_ns = self.k, self.clock.ns(self.k)
-        stamp = self.clock.stamp(k)
         self.commands = {}
         self.deadline = time.monotonic() + self.step_timeout
         self.resend_at = time.monotonic() + RESEND_PERIOD
-        self.publish_states(stamp, t_ns)
+        self.publish_states(self.clock.ns(self.k))
 
-    def publish_states(self, stamp, t_ns: int) -> None:
-        """Publish ``/clock`` and every agent's odometry (reusing one message per agent)."""
-        self._publish(self.clock_pub, Clock(clock=stamp), t_ns)
-        for pub, msg, q, p in zip(self.odom_pubs, self.odom_msgs, self.q.tolist(),
-                                  self.p.tolist()):
-            self._publish(pub, make_odometry(q, p, stamp, '', msg), t_ns)
+    def publish_states(self, t_ns: int) -> None:
+        """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
+        sent = [(self.clock_pub, encode_clock(t_ns))]
+        sent += [(pub, enc.encode(t_ns, q, p)) for pub, enc, q, p in
+                 zip(self.odom_pubs, self.odom_encoders, self.q.tolist(), self.p.tolist())]
+        for pub, data in sent:
+            pub.publish(data)
+        if self.bag is not None:
+            for name, (_, data) in zip(self.state_topics, sent):
+                self._write(name, data, t_ns)
+        self.step_bytes = sent
 
     def _maybe_finish(self) -> None:
         if (self.lockstep and self.started and not self.done
@@ -480,7 +491,7 @@ class WorldNode(Node):
         if self.done:
             return
         k = self.k
-        stamp, t_ns = self.clock.stamp(k), self.clock.ns(k)
+        t_ns = self.clock.ns(k)
         if k in self.leader_odom and k in self.leader_accel:
             q_l, p_l = self.leader_odom[k]
             self.last_leader = LeaderState(q_l, p_l, self.leader_accel[k])
@@ -500,7 +511,7 @@ class WorldNode(Node):
             self.leader_seen_at = max(self.leader_seen_at, now)
         if now - self.leader_seen_at > self.staleness:
             self.lose_leader()
-        self.publish_states(stamp, t_ns)
+        self.publish_states(t_ns)
         self.published_at[k] = time.monotonic()
         self.published_at.pop(k - 100, None)
         u = self.held.copy()

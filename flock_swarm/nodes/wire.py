@@ -1,0 +1,187 @@
+"""CDR encoding and decoding of the messages every step carries: Odometry, AccelStamped, Clock.
+
+A lockstep step moves ``N`` odometry messages to every agent host and ``N`` commands back.
+Through rclpy's typed API each of them is built as nested Python message objects and
+(de)serialised by the C type support: 56 us to deserialise one ``nav_msgs/Odometry`` and
+23 us one ``geometry_msgs/AccelStamped`` on the project's machines, more than everything
+else a step does (docs/performance.md). The nodes therefore subscribe raw (``raw=True``: the
+serialised bytes) and publish bytes, and this module reads and writes the three fixed
+layouts with :mod:`struct` at a few microseconds per message.
+
+The format is the OMG CDR that rmw_fastrtps and rmw_cyclonedds put on the wire (XCDR1, as
+ROS 2 Jazzy uses it): a 4-byte encapsulation header (``00 01``: little-endian, ``00 00``:
+big-endian, then two option bytes), then the fields in declaration order, each aligned to its
+size relative to the end of the header; a string is a ``uint32`` length counting its NUL, the
+bytes, the NUL. Decoding accepts both byte orders and any frame ids (the node's
+:class:`~flock_swarm.nodes.guard.InputGuard` judges those); what is not a message of the
+type raises :class:`MalformedMessage`. Encoding writes little-endian with zeroed padding
+(rclpy leaves its padding bytes uninitialised), so a recorded bag is byte-for-byte
+reproducible. The tests check both directions against rclpy's own serialisation.
+"""
+
+import struct
+from typing import Sequence
+
+from flock_swarm.nodes.common import FRAME
+
+#: Encapsulation header of little-endian plain CDR.
+CDR_LE = b'\x00\x01\x00\x00'
+#: Bytes of ``PoseWithCovariance`` (position, orientation, 6 x 6 covariance) and of
+#: ``TwistWithCovariance`` (linear, angular, covariance).
+POSE_BYTES = (3 + 4 + 36) * 8
+TWIST_BYTES = (3 + 3 + 36) * 8
+#: Bytes of ``Accel`` (linear, angular).
+ACCEL_BYTES = (3 + 3) * 8
+NS_PER_S = 1_000_000_000
+
+
+class MalformedMessage(ValueError):
+    """Bytes that are not a CDR-serialised message of the expected type."""
+
+
+class _Layout:
+    """The :class:`struct.Struct` objects of one byte order."""
+
+    def __init__(self, order: str) -> None:
+        self.u32 = struct.Struct(order + 'I')
+        self.time = struct.Struct(order + 'iI')
+        self.vec3 = struct.Struct(order + '3d')
+
+
+_ORDERS = {0: _Layout('>'), 1: _Layout('<')}
+_LE = _ORDERS[1]
+_VEC2_LE = struct.Struct('<2d')
+
+
+def _layout(data: bytes) -> _Layout:
+    """Return the layout of ``data``'s byte order (from its encapsulation header)."""
+    if len(data) < 12 or data[0] != 0 or data[1] not in _ORDERS:
+        raise MalformedMessage('not plain CDR (encapsulation header)')
+    return _ORDERS[data[1]]
+
+
+def _align(offset: int, size: int) -> int:
+    """Return ``offset`` (in the buffer) aligned to ``size`` relative to the CDR payload."""
+    return 4 + ((offset - 4 + size - 1) & -size)
+
+
+def _string(data: bytes, offset: int, lay: _Layout) -> tuple[str, int]:
+    """Return the string at ``offset`` (4-aligned) and the offset just after it."""
+    if offset + 4 > len(data):
+        raise MalformedMessage('truncated before a string')
+    (size,) = lay.u32.unpack_from(data, offset)
+    end = offset + 4 + size
+    if size == 0 or end > len(data) or data[end - 1] != 0:
+        raise MalformedMessage('a string without its terminating NUL')
+    try:
+        return data[offset + 4:end - 1].decode(), end
+    except UnicodeDecodeError:
+        raise MalformedMessage('a string that is not UTF-8') from None
+
+
+def _header(data: bytes, lay: _Layout) -> tuple[int, str, int]:
+    """Return ``(stamp_ns, frame_id, offset after the header)`` of a ``std_msgs/Header``."""
+    sec, nanosec = lay.time.unpack_from(data, 4)
+    frame, end = _string(data, 12, lay)
+    return sec * NS_PER_S + nanosec, frame, end
+
+
+def _need(data: bytes, end: int, what: str) -> None:
+    if len(data) < end:
+        raise MalformedMessage(f'truncated {what} ({len(data)} bytes, need {end})')
+
+
+def decode_odometry(data: bytes) -> tuple[int, str, str, tuple, tuple]:
+    """Return ``(stamp_ns, frame_id, child_frame_id, position, linear velocity)`` of a
+    serialised ``nav_msgs/Odometry`` (``position``, ``velocity``: 3 floats).
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay = _layout(data)
+    ns, frame, end = _header(data, lay)
+    child, end = _string(data, _align(end, 4), lay)
+    pose = _align(end, 8)
+    _need(data, pose + POSE_BYTES + TWIST_BYTES, 'Odometry')
+    return (ns, frame, child, lay.vec3.unpack_from(data, pose),
+            lay.vec3.unpack_from(data, pose + POSE_BYTES))
+
+
+def decode_accel(data: bytes) -> tuple[int, str, tuple]:
+    """Return ``(stamp_ns, frame_id, linear acceleration)`` of a serialised
+    ``geometry_msgs/AccelStamped``.
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay = _layout(data)
+    ns, frame, end = _header(data, lay)
+    accel = _align(end, 8)
+    _need(data, accel + ACCEL_BYTES, 'AccelStamped')
+    return ns, frame, lay.vec3.unpack_from(data, accel)
+
+
+def decode_clock(data: bytes) -> int:
+    """Return the time [ns] of a serialised ``rosgraph_msgs/Clock``.
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    sec, nanosec = _layout(data).time.unpack_from(data, 4)
+    return sec * NS_PER_S + nanosec
+
+
+def encode_clock(ns: int) -> bytes:
+    """Return a serialised ``rosgraph_msgs/Clock`` of time ``ns`` (>= 0)."""
+    return CDR_LE + _LE.time.pack(*divmod(ns, NS_PER_S))
+
+
+def _put_string(buf: bytearray, text: str) -> None:
+    """Append a CDR string to ``buf`` (4-aligned first)."""
+    raw = text.encode() + b'\0'
+    buf.extend(bytes(_align(len(buf), 4) - len(buf)))
+    buf.extend(_LE.u32.pack(len(raw)) + raw)
+
+
+class _Encoder:
+    """A message's bytes kept as a template; each call overwrites the stamp and the vectors.
+
+    :ivar vectors: buffer offsets of the 3-float vectors :meth:`encode` writes.
+    """
+
+    def __init__(self, strings: Sequence[str], body: int, vectors: Sequence[int],
+                 constants: Sequence[tuple[int, float]] = ()) -> None:
+        buf = bytearray(CDR_LE + bytes(8))
+        for text in strings:
+            _put_string(buf, text)
+        start = _align(len(buf), 8)
+        buf.extend(bytes(start - len(buf) + body))
+        for offset, value in constants:
+            struct.pack_into('<d', buf, start + offset, value)
+        self.buf = buf
+        self.vectors = [start + v for v in vectors]
+
+    def encode(self, ns: int, *vectors: Sequence[float]) -> bytes:
+        """Return the message stamped ``ns`` [ns] with the vectors (2 or 3 floats; 2-D: z
+        stays 0)."""
+        buf = self.buf
+        _LE.time.pack_into(buf, 4, *divmod(ns, NS_PER_S))
+        for offset, v in zip(self.vectors, vectors):
+            (_VEC2_LE if len(v) == 2 else _LE.vec3).pack_into(buf, offset, *v)
+        return bytes(buf)
+
+
+class OdometryEncoder(_Encoder):
+    """Serialised ``nav_msgs/Odometry`` in frame ``world`` for one ``child_frame_id``:
+    ``encode(ns, position, velocity)`` (identity orientation, zero covariances)."""
+
+    def __init__(self, child: str, frame: str = FRAME) -> None:
+        """Create the encoder of ``child``'s odometry."""
+        # Quaternion (x, y, z, w) follows the position: w = 1, rclpy's default.
+        super().__init__((frame, child), POSE_BYTES + TWIST_BYTES, (0, POSE_BYTES),
+                         constants=((6 * 8, 1.0),))
+
+
+class AccelEncoder(_Encoder):
+    """Serialised ``geometry_msgs/AccelStamped`` in frame ``world``: ``encode(ns, linear)``."""
+
+    def __init__(self, frame: str = FRAME) -> None:
+        """Create the encoder."""
+        super().__init__((frame,), ACCEL_BYTES, (0,))
