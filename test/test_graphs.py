@@ -43,6 +43,22 @@ def test_disk_graph_matches_brute_force(dim, r, strict):
     assert_allclose(edges.weight, 1.0, rtol=0.0)
 
 
+@pytest.mark.parametrize('strict', [True, False])
+@pytest.mark.parametrize('n', [2, 5, 30, graphs.BRUTE_FORCE_MAX, graphs.BRUTE_FORCE_MAX + 1])
+def test_disk_graph_every_pair_and_tree_give_the_same_edges(n, strict, monkeypatch):
+    # Integer grid points: many pairs exactly r = 5 apart (3-4-5), the hardest case.
+    rng = np.random.default_rng(n)
+    q = rng.integers(0, 12, size=(n, 2)).astype(float)
+    edges = {}
+    for limit in (0, n):
+        monkeypatch.setattr(graphs, 'BRUTE_FORCE_MAX', limit)
+        edges[limit] = graphs.disk_graph(q, 5.0, strict)
+    assert_array_equal(edges[0].i, edges[n].i)
+    assert_array_equal(edges[0].j, edges[n].j)
+    assert list(zip(edges[n].i.tolist(), edges[n].j.tolist())) == \
+        brute_force_pairs(q, 5.0, strict)
+
+
 @pytest.mark.parametrize('q, r', [
     ([[0.0, 0.0], [3.0, 4.0]], 5.0),              # 3-4-5 triangle
     ([[0.0, 0.0, 0.0], [1.0, 2.0, 2.0]], 3.0),    # 1 + 4 + 4 = 9

@@ -7,6 +7,7 @@ neighbour search is ``O(n log n + |E|)``.
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -42,12 +43,27 @@ def disk_graph(q: np.ndarray, r: float, strict: bool = True) -> EdgeList:
     if n < 2:
         empty = np.zeros(0, dtype=np.intp)
         return EdgeList(n, empty, empty, np.zeros(0))
-    # The tree proposes candidates with a margin; the decision is within_radius(), the one
-    # predicate the agent node uses too, so both agree even for pairs exactly r apart.
-    i, j = sorted_pairs(q, r * (1.0 + 1e-9))
+    # The tree (or, for a small swarm, every pair) proposes candidates with a margin; the
+    # decision is within_radius(), the one predicate the agent node uses too, so both agree
+    # even for pairs exactly r apart, and both ways give the same edges.
+    i, j = every_pair(n) if n <= BRUTE_FORCE_MAX else sorted_pairs(q, r * (1.0 + 1e-9))
     keep = within_radius(pair_sq_distances(q, i, j), r, strict)
     i, j = i[keep], j[keep]
     return EdgeList(n, i, j, np.ones(i.size))
+
+
+#: Swarms up to this size test every pair for the r-disk graph: below about 100 agents that
+#: is cheaper than building a k-d tree (5 us against 50 us at 5 agents, 17 against 66 at 50).
+BRUTE_FORCE_MAX = 64
+
+
+@lru_cache(maxsize=8)
+def every_pair(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return all pairs ``i < j`` of ``n`` vertices sorted by ``(i, j)`` (read-only arrays)."""
+    i, j = np.triu_indices(n, 1)
+    i, j = i.astype(np.intp), j.astype(np.intp)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
 
 
 def sorted_pairs(q: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
