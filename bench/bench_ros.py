@@ -16,7 +16,13 @@ For each layout and N it runs, in fresh processes and one after the other:
     (EventsExecutor) and process layout, but empty callbacks: a world publishing ``/clock``
     and N odometry messages per step and waiting for N commands and the leader's two
     messages; a leader answering each tick; agent hosts answering once they have every
-    odometry and the leader's state. Messages are built once and reused.
+    odometry and the leader's state. Messages are built once and reused; subscriptions
+    deliver rclpy messages (the typed API every rclpy node uses by default).
+``raw floor``
+    the same with serialised bytes: every message of the run serialised before the clock
+    starts, raw subscriptions (``raw=True``) reading the step off the bytes. This is how the
+    pipeline's nodes move messages (``flock_swarm.nodes.wire``), and the lowest cost of the
+    pattern in rclpy.
 
 Each variant runs ``--repeat`` times, interleaved, and the best run counts (on a shared
 machine the least disturbed one); every run is in the JSON.
@@ -25,7 +31,8 @@ Layouts: ``one`` (every node in one process, the agents in one container node),
 ``container`` (three processes: world | leader | agents container), ``processes`` (world,
 leader and one process per agent, like ``ros2 run flock_swarm agent`` on robots).
 
-Targets (issue 5): pipeline >= 70 % of the floor's steps/s at every N; N = 100 in one
+Targets (issue 5): pipeline >= 70 % of the floor's steps/s at every N (checked against
+both floors); N = 100 in one
 process >= 20 steps/s; recording costs <= 10 % (pipeline against no-record). The memory check
 (``--memory``) runs the one-process pipeline for S and 10 S steps and compares peak RSS
 (target: < 1.2x).
@@ -69,7 +76,69 @@ RESEND_PERIOD = 0.5
 WARMUP = 10
 
 
-def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int], context):
+class Wire:
+    """How the floor moves messages: rclpy's typed messages, or serialised bytes.
+
+    ``typed``: messages built once and refilled, subscriptions deserialise (what an rclpy
+    node with empty callbacks costs). ``raw``: every message of the run serialised before
+    the clock starts, raw subscriptions (``raw=True``) that read the step off the bytes: the
+    lowest cost of the pattern in rclpy, and the way the pipeline's nodes move messages.
+    """
+
+    def __init__(self, raw: bool, n: int, last: int) -> None:
+        """Prepare the messages of steps ``0..last`` (``raw``) or the reusable ones."""
+        from geometry_msgs.msg import AccelStamped
+        from nav_msgs.msg import Odometry
+        from rosgraph_msgs.msg import Clock
+
+        from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder, encode_clock
+        self.raw = raw
+        if raw:
+            ns = [k * 1_000_000_000 for k in range(last + 1)]
+            odom = [OdometryEncoder(f'agent_{i}') for i in range(n)]
+            self.clock = [encode_clock(t) for t in ns]
+            self.odom = [[enc.encode(t, (0.0, 0.0), (0.0, 0.0)) for enc in odom] for t in ns]
+            self.accel = [AccelEncoder().encode(t, (0.0, 0.0)) for t in ns]
+            leader = OdometryEncoder('leader')
+            self.leader_odom = [leader.encode(t, (0.0, 0.0), (0.0, 0.0)) for t in ns]
+        else:
+            self.clock_msg, self.odom_msgs = Clock(), [Odometry() for _ in range(n)]
+            self.accel_msg, self.leader_msg = AccelStamped(), Odometry()
+
+    def step_of(self, msg) -> int:
+        """Return the step a received message is stamped with."""
+        return int.from_bytes(msg[4:8], 'little') if self.raw else msg.header.stamp.sec
+
+    def step_of_clock(self, msg) -> int:
+        """Return the step of a received ``/clock``."""
+        return int.from_bytes(msg[4:8], 'little') if self.raw else msg.clock.sec
+
+    def states(self, k: int) -> tuple:
+        """Return ``/clock`` and the odometry messages of step ``k``."""
+        if self.raw:
+            return self.clock[k], self.odom[k]
+        self.clock_msg.clock.sec = k
+        for msg in self.odom_msgs:
+            msg.header.stamp.sec = k
+        return self.clock_msg, self.odom_msgs
+
+    def command(self, k: int):
+        """Return a command (and the leader's acceleration) of step ``k``."""
+        if self.raw:
+            return self.accel[k]
+        self.accel_msg.header.stamp.sec = k
+        return self.accel_msg
+
+    def leader_state(self, k: int) -> tuple:
+        """Return the leader's odometry and acceleration of step ``k``."""
+        if self.raw:
+            return self.leader_odom[k], self.accel[k]
+        self.leader_msg.header.stamp.sec = k
+        return self.leader_msg, self.command(k)
+
+
+def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int], context,
+                raw: bool = False):
     """Return the floor's nodes for one process and its shared state.
 
     :param role: ``one`` (all), ``world``, ``leader`` or ``agents``.
@@ -78,6 +147,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
     :param hosts: processes hosting agents (subscribers the world waits for).
     :param agent_ids: the agents this process hosts (role ``one`` or ``agents``).
     :param context: the rclpy context.
+    :param raw: move serialised bytes (see :class:`Wire`).
     """
     from geometry_msgs.msg import AccelStamped
     from nav_msgs.msg import Odometry
@@ -88,25 +158,24 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                                           LOCKSTEP_QOS, cmd_topic, odom_topic)
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0}
+    wire = Wire(raw, n, WARMUP + steps)
+    kw = {'raw': True} if raw else {}
 
     if role in ('one', 'world'):
         world = Node('floor_world', context=context)
         clock_pub = world.create_publisher(Clock, CLOCK, CLOCK_QOS)
         odom_pubs = [world.create_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                      for i in range(n)]
-        odom_msgs = [Odometry() for _ in range(n)]
-        clock_msg = Clock()
 
         def tick():
             state['stall'] = time.monotonic() + RESEND_PERIOD
-            clock_msg.clock.sec = state['step']
-            clock_pub.publish(clock_msg)
-            for pub, msg in zip(odom_pubs, odom_msgs):
-                msg.header.stamp.sec = state['step']
+            clock, odom = wire.states(state['step'])
+            clock_pub.publish(clock)
+            for pub, msg in zip(odom_pubs, odom):
                 pub.publish(msg)
 
         def arrived(msg, kind):
-            if msg.header.stamp.sec != state['step']:
+            if wire.step_of(msg) != state['step']:
                 return
             state[kind] += 1
             if state['cmds'] >= n and state['leader'] >= 2:
@@ -121,11 +190,11 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
         for i in range(n):
             world.create_subscription(AccelStamped, cmd_topic(i),
-                                      lambda m: arrived(m, 'cmds'), LOCKSTEP_QOS)
+                                      lambda m: arrived(m, 'cmds'), LOCKSTEP_QOS, **kw)
         world.create_subscription(Odometry, LEADER_ODOM, lambda m: arrived(m, 'leader'),
-                                  LOCKSTEP_QOS)
+                                  LOCKSTEP_QOS, **kw)
         world.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: arrived(m, 'leader'),
-                                  LOCKSTEP_QOS)
+                                  LOCKSTEP_QOS, **kw)
 
         def on_timer():
             if state['started']:
@@ -147,41 +216,40 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
         leader = Node('floor_leader', context=context)
         l_odom = leader.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
         l_accel = leader.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
-        l_msgs = (Odometry(), AccelStamped())
 
         def on_clock(msg):
-            l_msgs[0].header.stamp = l_msgs[1].header.stamp = msg.clock
-            l_odom.publish(l_msgs[0])
-            l_accel.publish(l_msgs[1])
+            odom, accel = wire.leader_state(wire.step_of_clock(msg))
+            l_odom.publish(odom)
+            l_accel.publish(accel)
 
-        leader.create_subscription(Clock, CLOCK, on_clock, CLOCK_QOS)
+        leader.create_subscription(Clock, CLOCK, on_clock, CLOCK_QOS, **kw)
         nodes.append(leader)
 
     if role in ('one', 'agents'):
         host = Node('floor_agents', context=context)
         pubs = [host.create_publisher(AccelStamped, cmd_topic(i), LOCKSTEP_QOS)
                 for i in agent_ids]
-        cmd_msgs = [AccelStamped() for _ in agent_ids]
         box = {'step': -1, 'odom': 0, 'leader': 0, 'answered': -1}
 
         def got(msg, kind):
-            if msg.header.stamp.sec != box['step']:
-                box.update(step=msg.header.stamp.sec, odom=0, leader=0)
+            k = wire.step_of(msg)
+            if k != box['step']:
+                box.update(step=k, odom=0, leader=0)
             box[kind] += 1
             # ">=" and once per step: a re-offered step delivers some messages twice.
-            if box['odom'] >= n and box['leader'] >= 2 and box['answered'] != box['step']:
-                box['answered'] = box['step']
-                for pub, cmd in zip(pubs, cmd_msgs):
-                    cmd.header.stamp = msg.header.stamp
+            if box['odom'] >= n and box['leader'] >= 2 and box['answered'] != k:
+                box['answered'] = k
+                cmd = wire.command(k)
+                for pub in pubs:
                     pub.publish(cmd)
 
         for j in range(n):
             host.create_subscription(Odometry, odom_topic(j), lambda m: got(m, 'odom'),
-                                     LOCKSTEP_QOS)
+                                     LOCKSTEP_QOS, **kw)
         host.create_subscription(Odometry, LEADER_ODOM, lambda m: got(m, 'leader'),
-                                 LOCKSTEP_QOS)
+                                 LOCKSTEP_QOS, **kw)
         host.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: got(m, 'leader'),
-                                 LOCKSTEP_QOS)
+                                 LOCKSTEP_QOS, **kw)
         nodes.append(host)
     return nodes, state
 
@@ -195,7 +263,8 @@ def run_floor_role(args) -> int:
     context = Context()
     rclpy.init(context=context, domain_id=args.domain)
     ids = list(range(args.n)) if args.agent_ids is None else args.agent_ids
-    nodes, state = floor_nodes(args.role, args.n, args.steps, args.hosts, ids, context)
+    nodes, state = floor_nodes(args.role, args.n, args.steps, args.hosts, ids, context,
+                               raw=args.raw)
     ex = make_executor(context)
     for node in nodes:
         ex.add_node(node)
@@ -224,10 +293,10 @@ def _env() -> dict:
                 ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
 
-def floor(layout: str, n: int, steps: int) -> float:
-    """Return the floor's steps/s for a layout."""
+def floor(layout: str, n: int, steps: int, raw: bool = False) -> float:
+    """Return the floor's steps/s for a layout (``raw``: serialised bytes, see :class:`Wire`)."""
     me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
-          '--domain', str(DOMAIN)]
+          '--domain', str(DOMAIN)] + (['--raw'] if raw else [])
     if layout == 'one':
         out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
                              text=True, timeout=RUN_TIMEOUT, env=_env())
@@ -310,6 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--hosts', type=int, default=1, help=argparse.SUPPRESS)
     parser.add_argument('--agent-ids', type=int, nargs='+', help=argparse.SUPPRESS)
     parser.add_argument('--domain', type=int, default=DOMAIN, help=argparse.SUPPRESS)
+    parser.add_argument('--raw', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.role is not None:
         return run_floor_role(args)
@@ -317,8 +387,8 @@ def main(argv: list[str] | None = None) -> int:
     info = machine()
     print(f'# machine: {info}', flush=True)
     rows = []
-    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"pipeline":>9} {"ratio":>6} {"no-rec":>7} '
-          f'{"rec cost":>8} {"RTF":>6}  [steps/s]', flush=True)
+    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"pipeline":>9} {"ratio":>6} '
+          f'{"raw r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6}  [steps/s]', flush=True)
     for layout in args.layouts:
         for n in args.sizes:
             if layout == 'processes' and n > args.max_process_agents:
@@ -326,27 +396,31 @@ def main(argv: list[str] | None = None) -> int:
             steps = args.steps if layout != 'processes' else max(50, args.steps * 10 // n)
             # Interleaved repeats, best of each: the run least disturbed by whatever else the
             # shared machine was doing.
-            fls, fulls, bares = [], [], []
+            fls, raws, fulls, bares = [], [], [], []
             for _ in range(args.repeat):
                 fls.append(floor(layout, n, steps))
+                raws.append(floor(layout, n, steps, raw=True))
                 fulls.append(pipeline(layout, n, steps, record=True))
                 bares.append(pipeline(layout, n, steps, record=False))
-            fl = max(fls)
+            fl, raw = max(fls), max(raws)
             full = max(fulls, key=lambda r: r['steps_per_s'])
             bare = max(bares, key=lambda r: r['steps_per_s'])
-            row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl,
-                   'floor_runs': fls, 'pipeline_runs': [r['steps_per_s'] for r in fulls],
+            row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl, 'raw_floor': raw,
+                   'floor_runs': fls, 'raw_floor_runs': raws,
+                   'pipeline_runs': [r['steps_per_s'] for r in fulls],
                    'no_record_runs': [r['steps_per_s'] for r in bares],
                    'pipeline': full['steps_per_s'], 'rtf': full['rtf'],
                    'no_record': bare['steps_per_s'],
-                   'ratio': full['steps_per_s'] / fl,
+                   'ratio': full['steps_per_s'] / fl, 'raw_ratio': full['steps_per_s'] / raw,
                    'recording_cost': 1.0 - full['steps_per_s'] / bare['steps_per_s']}
             rows.append(row)
-            print(f'{layout:>10} {n:>4} {fl:8.1f} {row["pipeline"]:9.1f} {row["ratio"]:6.2f} '
-                  f'{row["no_record"]:7.1f} {100 * row["recording_cost"]:7.1f}% '
-                  f'{row["rtf"]:6.2f}', flush=True)
-    checks = [(f'{r["layout"]} N={r["n"]}: pipeline >= 70% of floor', r['ratio'] >= 0.7)
+            print(f'{layout:>10} {n:>4} {fl:8.1f} {raw:8.1f} {row["pipeline"]:9.1f} '
+                  f'{row["ratio"]:6.2f} {row["raw_ratio"]:6.2f} {row["no_record"]:7.1f} '
+                  f'{100 * row["recording_cost"]:7.1f}% {row["rtf"]:6.2f}', flush=True)
+    checks = [(f'{r["layout"]} N={r["n"]}: pipeline >= 70% of the floor', r['ratio'] >= 0.7)
               for r in rows]
+    checks += [(f'{r["layout"]} N={r["n"]}: pipeline >= 70% of the raw-bytes floor',
+                r['raw_ratio'] >= 0.7) for r in rows]
     checks += [(f'{r["layout"]} N={r["n"]}: recording costs <= 10%',
                 r['recording_cost'] <= 0.10) for r in rows]
     checks += [(f'one N=100: >= 20 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 20)

@@ -27,6 +27,7 @@ from nav_msgs.msg import Odometry
 import pytest
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rosgraph_msgs.msg import Clock
@@ -37,6 +38,7 @@ import yaml
 from flock_swarm.bag import (
     BagError, BagReader, BagWriter, encoded_definition, message_definition, parse_qos_profiles,
     type_hash, type_name_of)
+from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 #: Simulation steps recorded in the test bag.
 STEPS = 60
@@ -703,3 +705,71 @@ def test_chunk_compression(tmp_path, compression):
     assert {index.compression for index in indexes} == {'' if compression == 'none'
                                                         else compression}
     assert [msg.clock.sec for _, msg in BagReader(path).decoded()] == list(range(50))
+
+
+def _write_steps(path: Path, batched: bool, steps: int = 120) -> BagWriter:
+    """Record ``steps`` lockstep steps of 1 + 3 odometry and 3 commands, as the world does.
+
+    The messages come from flock_swarm.nodes.wire: rclpy leaves padding bytes uninitialised,
+    so its bytes of one message may differ from call to call.
+    """
+    odom = [OdometryEncoder(f'agent_{i}').encode(0, (float(i + k), 0.0), (0.0, 0.0))
+            for k in range(2) for i in range(3)]
+    cmd = AccelEncoder().encode(0, (0.0, 0.0))
+    with BagWriter(path, chunk_size=3000) as writer:
+        writer.add_topic('/clock', Clock)
+        for i in range(3):
+            writer.add_topic(f'/agent_{i}/odom', Odometry)
+            writer.add_topic(f'/agent_{i}/cmd_accel', AccelStamped)
+        for k in range(steps):
+            clock = serialize_message(Clock(clock=Time(sec=k)))
+            step = [('/clock', clock)]
+            step += [(f'/agent_{i}/odom', odom[3 * (k % 2) + i]) for i in range(3)]
+            step += [(f'/agent_{i}/cmd_accel', cmd) for i in (2, 0, 1)]
+            if batched:
+                writer.write_serialized_many(step[:4], k * 20_000_000)
+                writer.write_serialized_many(step[4:], k * 20_000_000)
+            else:
+                for topic, data in step:
+                    writer.write_serialized(topic, data, k * 20_000_000)
+    return writer
+
+
+def test_batched_writes_make_the_same_file_through_the_fast_path(tmp_path, monkeypatch):
+    """write_serialized_many writes byte for byte what write_serialized does message by
+    message (chunk boundaries inside a batch included), and with the pinned mcap it does so
+    without mcap's per-message path."""
+    one = _write_steps(tmp_path / 'one' / 'bag', batched=False)
+    import mcap.writer
+
+    def refused(*args, **kwargs):
+        raise AssertionError('write_serialized_many fell back to Writer.add_message')
+
+    monkeypatch.setattr(mcap.writer.Writer, 'add_message', refused)
+    many = _write_steps(tmp_path / 'many' / 'bag', batched=True)
+    with mcap_file(one.path).open('rb') as stream:
+        assert len(make_reader(stream).get_summary().chunk_indexes) > 3
+    assert one.mcap_path.read_bytes() == many.mcap_path.read_bytes()
+    assert (one.path / 'metadata.yaml').read_text() == (many.path / 'metadata.yaml').read_text()
+    assert many.message_counts == one.message_counts
+
+
+def test_batched_writes_fall_back_without_the_chunk_builder(tmp_path, monkeypatch):
+    """Where mcap's internals are not what the fast path expects, each message goes the
+    public way: the same file."""
+    one = _write_steps(tmp_path / 'one' / 'bag', batched=False, steps=20)
+    monkeypatch.setattr(BagWriter, '_fast_path', lambda self: None)
+    many = _write_steps(tmp_path / 'many' / 'bag', batched=True, steps=20)
+    assert one.mcap_path.read_bytes() == many.mcap_path.read_bytes()
+
+
+def test_batched_writes_misuse(tmp_path):
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/clock', Clock)
+        data = serialize_message(Clock())
+        with pytest.raises(KeyError, match='/odom'):
+            writer.write_serialized_many([('/clock', data), ('/odom', data)], 0)
+        with pytest.raises(ValueError, match='non-negative'):
+            writer.write_serialized_many([('/clock', data)], -1)
+        writer.write_serialized_many([], 5)
+        assert writer.message_counts == {'/clock': 0}

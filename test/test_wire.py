@@ -129,3 +129,23 @@ def test_every_truncation_is_malformed(decode, good):
 def test_malformed_bytes_raise_with_a_reason(data, reason):
     with pytest.raises(MalformedMessage, match=reason):
         decode_accel(data)
+
+
+@pytest.mark.parametrize('dim, n', [(2, 100), (3, 7), (2, 1)])
+def test_markers_written_as_cdr_are_the_rclpy_markers(dim, n):
+    """swarm_markers_cdr (what the world publishes) is swarm_markers's message, serialised."""
+    import numpy as np
+    from visualization_msgs.msg import MarkerArray
+
+    from flock_swarm.core.graphs import disk_graph
+    from flock_swarm.nodes.markers import swarm_markers, swarm_markers_cdr
+    rng = np.random.default_rng(n)
+    q, p = rng.uniform(0.0, 30.0, (n, dim)), rng.normal(size=(n, dim))
+    edges, informed = disk_graph(q, 4.0), rng.random(n) < 0.3
+    assert n < 50 or edges.size > 50
+    typed = swarm_markers(q, p, q[0] + 1.0, informed, edges, Time(sec=3, nanosec=5), 'world',
+                          0.3)
+    ours = swarm_markers_cdr(q, p, q[0] + 1.0, informed, edges, 3_000_000_005, 'world', 0.3)
+    # Compared after serialisation: colours are float32 on the wire.
+    assert deserialize_message(ours, MarkerArray) == \
+        deserialize_message(serialize_message(typed), MarkerArray)

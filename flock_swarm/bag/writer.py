@@ -24,8 +24,10 @@ from importlib.metadata import PackageNotFoundError, version
 from numbers import Integral
 import os
 from pathlib import Path
-from typing import Any, BinaryIO
+import struct
+from typing import Any, BinaryIO, Iterable
 
+from mcap.records import MessageIndex
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
@@ -49,6 +51,11 @@ METADATA_FILENAME = 'metadata.yaml'
 ROSBAG2_METADATA_RECORD = 'rosbag2'
 #: rosbag2's starting time for a bag without messages (``std::chrono::nanoseconds::max()``).
 NO_MESSAGES_START_NS = 2**63 - 1
+
+#: An MCAP Message record up to its data: opcode 0x05, record length, channel id, sequence,
+#: log time, publish time (the MCAP specification's layout, as mcap.records.Message writes it).
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')
+_MESSAGE_FIELDS = _MESSAGE_HEAD.size - 9
 
 _COMPRESSION = {
     'zstd': CompressionType.ZSTD,
@@ -337,6 +344,80 @@ class BagWriter:
         entry.count += 1
         self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
         self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
+
+    def write_serialized_many(self, messages: Iterable[tuple[str, bytes]], t_ns: int) -> None:
+        """Record already serialised messages, all at time ``t_ns``, in order.
+
+        The same file as :meth:`write_serialized` once per message (tested byte for byte),
+        in a fraction of the time: the messages of a lockstep step go into the open chunk
+        directly instead of one ``mcap.records.Message`` object and seven stream writes each
+        (12 us a message in ``mcap`` 1.6 against about 2 here). That reaches into
+        ``mcap.writer.Writer``'s chunk builder; where it is not there (another ``mcap``
+        version, chunking off), each message goes through :meth:`write_serialized`.
+
+        :param messages: ``(topic, data)`` pairs, topics declared with :meth:`add_topic`.
+        :param t_ns: receive and publish time (ns) of them all, non-negative.
+        :raises KeyError: if a topic was not added.
+        """
+        self._check_open()
+        messages = [(self._topic(topic), data) for topic, data in messages]
+        if isinstance(t_ns, bool) or not isinstance(t_ns, Integral) or not 0 <= t_ns < 2**64:
+            raise ValueError(f'message time must be a non-negative 64-bit ns count, got {t_ns!r}')
+        if not messages:
+            return
+        t_ns = int(t_ns)
+        fast = self._fast_path()
+        if fast is None:
+            for entry, data in messages:
+                self.write_serialized(entry.name, data, t_ns)
+            return
+        chunk, stats, limit, finish = fast
+        pack, counts = _MESSAGE_HEAD.pack, stats.channel_message_counts
+        for entry, data in messages:
+            # Writer.add_message's statistics, ChunkBuilder.add_message's bookkeeping and
+            # Message.write's bytes, then the writer's chunk-size check, per message.
+            if stats.message_count == 0:
+                stats.message_start_time = t_ns
+            else:
+                stats.message_start_time = min(t_ns, stats.message_start_time)
+            stats.message_end_time = max(t_ns, stats.message_end_time)
+            channel = entry.channel_id
+            counts[channel] += 1
+            stats.message_count += 1
+            if chunk.num_messages == 0:
+                chunk.message_start_time = t_ns
+            else:
+                chunk.message_start_time = min(chunk.message_start_time, t_ns)
+            chunk.message_end_time = max(chunk.message_end_time, t_ns)
+            index = chunk.message_indices.get(channel)
+            if index is None:
+                index = chunk.message_indices[channel] = MessageIndex(channel_id=channel,
+                                                                      records=[])
+            stream = chunk.record_writer._buffer
+            index.records.append((t_ns, stream.tell()))
+            chunk.num_messages += 1
+            stream.write(pack(0x05, _MESSAGE_FIELDS + len(data), channel, 0, t_ns, t_ns))
+            stream.write(data)
+            entry.count += 1
+            if stream.tell() > limit:
+                finish()
+        self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
+        self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
+
+    def _fast_path(self) -> tuple | None:
+        """Return the mcap writer's ``(chunk builder, statistics, chunk size, finalize)``,
+        or ``None`` where they are not as ``mcap`` 1.6 has them."""
+        writer = self._writer
+        chunk = getattr(writer, '_Writer__chunk_builder', None)
+        stats = getattr(writer, '_Writer__statistics', None)
+        limit = getattr(writer, '_Writer__chunk_size', None)
+        finish = getattr(writer, '_Writer__maybe_finalize_chunk', None)
+        stream = getattr(getattr(chunk, 'record_writer', None), '_buffer', None)
+        if stream is None or stats is None or not isinstance(limit, int) or finish is None \
+                or not hasattr(stats, 'channel_message_counts') \
+                or not hasattr(chunk, 'message_indices'):
+            return None
+        return chunk, stats, limit, finish
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write an MCAP metadata record (string keys and values), such as run provenance.

@@ -219,6 +219,7 @@ class AgentNode(Node):
         self.latest_stamp: int | None = None
         self.encoder = AccelEncoder()
         self.outbox: list[tuple[int, bytes]] = []
+        self.matched = [False] * len(self.cmd_pubs)
         self.sent: list[tuple[int, bytes]] = []
         self.repeated = -1
         self.leader_lost = False
@@ -368,13 +369,17 @@ class AgentNode(Node):
         """Publish queued commands whose topic the world's subscription has matched.
 
         A command published before the match would be lost and cost the world a timeout.
+        A topic once matched is not asked again (the question costs more than the publish):
+        should the world go and come back, it offers its open step again and gets the
+        commands repeated (see :meth:`answered_again`).
         """
         if not self.outbox:
             return
-        waiting = []
+        waiting, matched = [], self.matched
         for row, msg in self.outbox:
             pub = self.cmd_pubs[row]
-            if pub.get_subscription_count() > 0:
+            if matched[row] or pub.get_subscription_count() > 0:
+                matched[row] = True
                 pub.publish(msg)
             else:
                 waiting.append((row, msg))

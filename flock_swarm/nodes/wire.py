@@ -185,3 +185,45 @@ class AccelEncoder(_Encoder):
     def __init__(self, frame: str = FRAME) -> None:
         """Create the encoder."""
         super().__init__((frame,), ACCEL_BYTES, (0,))
+
+
+class CdrWriter:
+    """Little-endian plain CDR, written field by field (for :mod:`flock_swarm.nodes.markers`).
+
+    Arrays of points or colours go in with one ``tobytes`` each, which is what makes a
+    ``MarkerArray`` of a hundred agents and their links cheap to build (its rclpy message
+    objects cost about 20 ms every tenth step at N = 100).
+    """
+
+    def __init__(self) -> None:
+        """Start a message: the encapsulation header."""
+        self.buf = bytearray(CDR_LE)
+
+    def align(self, size: int) -> None:
+        """Pad with zeros to a multiple of ``size`` from the payload's start."""
+        self.buf.extend(bytes(_align(len(self.buf), size) - len(self.buf)))
+
+    def pack(self, fmt: str, *values, size: int) -> None:
+        """Append ``values`` packed little-endian by ``fmt``, aligned to ``size`` first."""
+        self.align(size)
+        self.buf.extend(struct.pack('<' + fmt, *values))
+
+    def string(self, text: str) -> None:
+        """Append a string."""
+        _put_string(self.buf, text)
+
+    def time(self, ns: int) -> None:
+        """Append a ``builtin_interfaces/Time`` (or ``Duration``) of ``ns`` [ns]."""
+        self.pack('iI', *divmod(ns, NS_PER_S), size=4)
+
+    def sequence(self, rows, size: int) -> None:
+        """Append a sequence of fixed-size structs given as a C-contiguous array (a row each),
+        its elements aligned to ``size``."""
+        self.pack('I', len(rows), size=4)
+        if len(rows):
+            self.align(size)
+            self.buf.extend(rows.tobytes())
+
+    def getvalue(self) -> bytes:
+        """Return the message."""
+        return bytes(self.buf)

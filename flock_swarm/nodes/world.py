@@ -43,7 +43,7 @@ from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LE
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import (MalformedMessage, OdometryEncoder, decode_accel,
                                     decode_odometry, encode_clock)
-from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers
+from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers_cdr
 from flock_swarm.sim import RunLog, SimResult, build_summary, json_text, write_outputs
 
 #: Seconds after which a stalled lockstep step is offered again (see ``resend_step``).
@@ -118,6 +118,8 @@ class WorldNode(Node):
         self.duplicates: set[int] = set()
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.bag_error: str | None = None
+        # Messages waiting for the bag: (topic, data, t_ns), written once a step.
+        self.records: list[tuple[str, bytes, int]] = []
         self.last_missing: set[int] = set()
         # Realtime: wall time each step's odometry went out, and how long commands took.
         self.published_at: dict[int, float] = {}
@@ -200,16 +202,29 @@ class WorldNode(Node):
         return pub
 
     def _publish(self, pub, msg, t_ns: int) -> None:
-        # Serialised once: the same bytes go to DDS and to the bag.
-        data = serialize_message(msg)
+        """Publish ``msg`` (a message, or its bytes) and record it: the same bytes for both."""
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
         pub.publish(data)
         self._write(pub.topic_name, data, t_ns)
 
     def _write(self, topic: str, data: bytes, t_ns: int) -> None:
-        if self.bag is None:
+        """Queue a message for the bag (written by :meth:`flush_records`, once a step)."""
+        if self.bag is not None:
+            self.records.append((topic, data, t_ns))
+
+    def flush_records(self) -> None:
+        """Write the queued messages, in the order they were queued, a run of equal times at
+        once (:meth:`~flock_swarm.bag.BagWriter.write_serialized_many`)."""
+        queue, self.records = self.records, []
+        if self.bag is None or not queue:
             return
         try:
-            self.bag.write_serialized(topic, data, t_ns)
+            start = 0
+            for end in range(1, len(queue) + 1):
+                if end == len(queue) or queue[end][2] != queue[start][2]:
+                    self.bag.write_serialized_many(
+                        [(topic, data) for topic, data, _ in queue[start:end]], queue[start][2])
+                    start = end
         except OSError as exc:
             self.recording_failed(exc)
 
@@ -402,8 +417,9 @@ class WorldNode(Node):
         for pub, data in sent:
             pub.publish(data)
         if self.bag is not None:
-            for name, (_, data) in zip(self.state_topics, sent):
-                self._write(name, data, t_ns)
+            self.records += [(name, data, t_ns) for name, (_, data) in
+                             zip(self.state_topics, sent)]
+            self.flush_records()
         self.step_bytes = sent
 
     def _maybe_finish(self) -> None:
@@ -458,8 +474,8 @@ class WorldNode(Node):
         if now is not None:
             self.metrics_now = now
         if k % self.marker_every == 0 or last:
-            self._publish(self.marker_pub, swarm_markers(
-                self.q, self.p, leader.q, self.real.agents.informed, edges, stamp, FRAME,
+            self._publish(self.marker_pub, swarm_markers_cdr(
+                self.q, self.p, leader.q, self.real.agents.informed, edges, t_ns, FRAME,
                 0.1 * law.radius), t_ns)
         event = bool(self.leader_events) and self.leader_events[-1][0] == k
         if k % self.metrics_every == 0 or missing or last or event:
@@ -591,7 +607,8 @@ class WorldNode(Node):
                                     f'{exc.strerror or exc}')
 
     def close_bag(self) -> None:
-        """Finalise the bag (MCAP summary and metadata.yaml)."""
+        """Write what is queued, finalise the bag (MCAP summary and metadata.yaml)."""
+        self.flush_records()
         if self.bag is not None:
             bag, self.bag = self.bag, None
             try:
