@@ -21,12 +21,14 @@ goes to the file at once: a process killed while recording leaves an MCAP whose 
 """
 
 from importlib.metadata import PackageNotFoundError, version
+from itertools import chain
 from numbers import Integral
 import os
 from pathlib import Path
 import struct
 from typing import Any, BinaryIO, Iterable
 
+from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 from rclpy.qos import QoSProfile
@@ -167,6 +169,19 @@ class _FlushingFile:
 
     def close(self) -> None:
         self._file.close()
+
+
+class _PackedMessageIndex(MessageIndex):
+    """mcap's MessageIndex record, its entries packed at once instead of two ``write8``
+    calls each (a third of the recording cost of a 50-agent step; the same bytes)."""
+
+    def write(self, stream) -> None:
+        """Write the record (as ``MessageIndex.write`` does)."""
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(self.records) * 16)
+        stream.write(struct.pack(f'<{2 * len(self.records)}Q', *chain.from_iterable(self.records)))
+        stream.finish_record()
 
 
 class _Topic:
@@ -360,7 +375,11 @@ class BagWriter:
         :raises KeyError: if a topic was not added.
         """
         self._check_open()
-        messages = [(self._topic(topic), data) for topic, data in messages]
+        topics = self._topics
+        try:
+            messages = [(topics[topic], data) for topic, data in messages]
+        except (KeyError, TypeError):
+            messages = [(self._topic(topic), data) for topic, data in messages]
         if isinstance(t_ns, bool) or not isinstance(t_ns, Integral) or not 0 <= t_ns < 2**64:
             raise ValueError(f'message time must be a non-negative 64-bit ns count, got {t_ns!r}')
         if not messages:
@@ -372,28 +391,29 @@ class BagWriter:
                 self.write_serialized(entry.name, data, t_ns)
             return
         chunk, stats, limit, finish = fast
-        pack, counts = _MESSAGE_HEAD.pack, stats.channel_message_counts
+        # Writer.add_message's statistics (all messages have one time: once for the batch),
+        # ChunkBuilder.add_message's bookkeeping and Message.write's bytes per message, and
+        # the writer's chunk-size check after each, as mcap does.
+        if stats.message_count == 0:
+            stats.message_start_time = t_ns
+        else:
+            stats.message_start_time = min(t_ns, stats.message_start_time)
+        stats.message_end_time = max(t_ns, stats.message_end_time)
+        stats.message_count += len(messages)
+        if chunk.num_messages == 0:
+            chunk.message_start_time = t_ns
+        else:
+            chunk.message_start_time = min(chunk.message_start_time, t_ns)
+        chunk.message_end_time = max(chunk.message_end_time, t_ns)
+        pack, counts, indices = _MESSAGE_HEAD.pack, stats.channel_message_counts, \
+            chunk.message_indices
+        stream = chunk.record_writer._buffer
         for entry, data in messages:
-            # Writer.add_message's statistics, ChunkBuilder.add_message's bookkeeping and
-            # Message.write's bytes, then the writer's chunk-size check, per message.
-            if stats.message_count == 0:
-                stats.message_start_time = t_ns
-            else:
-                stats.message_start_time = min(t_ns, stats.message_start_time)
-            stats.message_end_time = max(t_ns, stats.message_end_time)
             channel = entry.channel_id
             counts[channel] += 1
-            stats.message_count += 1
-            if chunk.num_messages == 0:
-                chunk.message_start_time = t_ns
-            else:
-                chunk.message_start_time = min(chunk.message_start_time, t_ns)
-            chunk.message_end_time = max(chunk.message_end_time, t_ns)
-            index = chunk.message_indices.get(channel)
+            index = indices.get(channel)
             if index is None:
-                index = chunk.message_indices[channel] = MessageIndex(channel_id=channel,
-                                                                      records=[])
-            stream = chunk.record_writer._buffer
+                index = indices[channel] = _PackedMessageIndex(channel_id=channel, records=[])
             index.records.append((t_ns, stream.tell()))
             chunk.num_messages += 1
             stream.write(pack(0x05, _MESSAGE_FIELDS + len(data), channel, 0, t_ns, t_ns))
@@ -401,6 +421,9 @@ class BagWriter:
             entry.count += 1
             if stream.tell() > limit:
                 finish()
+                # A fresh chunk (reset by mcap): its first message is the batch's next.
+                stream = chunk.record_writer._buffer
+                chunk.message_start_time = chunk.message_end_time = t_ns
         self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
         self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
 

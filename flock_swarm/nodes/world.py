@@ -17,6 +17,8 @@ import json
 import os
 import sys
 import time
+from itertools import groupby
+from operator import itemgetter
 from pathlib import Path
 from typing import Callable
 
@@ -219,12 +221,8 @@ class WorldNode(Node):
         if self.bag is None or not queue:
             return
         try:
-            start = 0
-            for end in range(1, len(queue) + 1):
-                if end == len(queue) or queue[end][2] != queue[start][2]:
-                    self.bag.write_serialized_many(
-                        [(topic, data) for topic, data, _ in queue[start:end]], queue[start][2])
-                    start = end
+            for t_ns, run in groupby(queue, key=itemgetter(2)):
+                self.bag.write_serialized_many([(topic, data) for topic, data, _ in run], t_ns)
         except OSError as exc:
             self.recording_failed(exc)
 
