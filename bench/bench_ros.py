@@ -229,16 +229,18 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
         host = Node('floor_agents', context=context)
         pubs = [host.create_publisher(AccelStamped, cmd_topic(i), LOCKSTEP_QOS)
                 for i in agent_ids]
-        box = {'step': -1, 'odom': 0, 'leader': 0, 'answered': -1}
+        box = {'step': -1, 'odom': 0, 'leader': 0, 'answers': 0}
 
         def got(msg, kind):
             k = wire.step_of(msg)
             if k != box['step']:
-                box.update(step=k, odom=0, leader=0)
+                box.update(step=k, odom=0, leader=0, answers=0)
             box[kind] += 1
-            # ">=" and once per step: a re-offered step delivers some messages twice.
-            if box['odom'] >= n and box['leader'] >= 2 and box['answered'] != k:
-                box['answered'] = k
+            # Once per complete set of odometry: a step the world offers again (commands
+            # sent before its subscriptions matched are lost) is answered again, as the
+            # agents do.
+            if box['leader'] >= 2 and box['odom'] // n > box['answers']:
+                box['answers'] = box['odom'] // n
                 cmd = wire.command(k)
                 for pub in pubs:
                     pub.publish(cmd)

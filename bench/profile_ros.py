@@ -5,8 +5,10 @@
 Runs ``swarm demo`` in one process (world, leader and the agents' container on one
 EventsExecutor, as ``bench_ros.py --layouts one`` does) with a timer around each handler and
 hot function of the nodes, and prints microseconds per step for each, inclusive (nested
-rows are indented under the row that calls them), and the rest of the wall time: rclpy,
-DDS and the executor in the spinning thread, and the waits for the middleware's threads.
+rows are indented under the row that calls them), the recording's share (queueing and
+writing the bag's messages: a CPU-time measure of the recording cost, steadier than the
+difference of two runs' rates), and the rest of the wall time: decoding, rclpy, DDS and the
+executor in the spinning thread, and the waits for the middleware's threads.
 
 cProfile cannot say this: the EventsExecutor calls the Python callbacks from C++, so its
 cumulative times are lost, and py-spy cannot attach on these machines. The timers cost
@@ -33,7 +35,9 @@ TIMED = [
     ('flock_swarm.nodes.world', 'WorldNode', '_publish', 'markers and metrics out', 3),
     ('flock_swarm.nodes.world', 'WorldNode', 'advance', 'integrate', 2),
     ('flock_swarm.nodes.world', 'WorldNode', 'publish_states', '/clock and odometry out', 2),
-    ('flock_swarm.nodes.world', 'WorldNode', '_write', 'recording (in the rows above too)', 0),
+    ('flock_swarm.nodes.world', 'WorldNode', '_write', 'recording: queue a message', 0),
+    ('flock_swarm.bag.writer', 'BagWriter', 'write_serialized_many', 'recording: write to the bag',
+     0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_odom', 'agents: an odometry in', 0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'try_answer', 'agents: answer the step', 1),
     ('flock_swarm.nodes.agent', 'AgentController', 'command', 'graph and law', 2),
@@ -42,6 +46,10 @@ TIMED = [
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_leader_accel', 'agents: leader accel in', 0),
     ('flock_swarm.nodes.leader', 'LeaderNode', 'on_clock', 'leader: a tick', 0),
 ]
+
+
+#: Rows of the recording, timed inside the handlers above them (not added to their sum).
+RECORDING = ('_write', 'write_serialized_many')
 
 
 def instrument(totals: dict) -> None:
@@ -97,11 +105,14 @@ def main(argv: list[str] | None = None) -> int:
     top = 0.0
     for _, _, func, label, depth in TIMED:
         calls, seconds = totals[label]
-        if depth == 0 and func != '_write':
+        if depth == 0 and func not in RECORDING:
             top += seconds
         print(f'{"  " * depth}{label:<{44 - 2 * depth}} {seconds * per:8.1f} us/step  '
               f'({calls / steps:.1f} calls/step)')
     rest = wall - top
+    recording = sum(totals[label][1] for _, _, func, label, _ in TIMED if func in RECORDING)
+    print(f'{"recording in all (within the rows above)":<44} {recording * per:8.1f} us/step  '
+          f'({100 * recording / wall:.1f} % of the wall time)')
     print(f'{"rest: decoding, rclpy, DDS, executor, waits":<44} {rest * per:8.1f} us/step  '
           f'({100 * rest / wall:.0f} %)')
     return 0 if math.isfinite(wall) else 1
