@@ -290,9 +290,15 @@ def run_floor_role(args) -> int:
 # Orchestration
 
 
+#: ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (``--discovery``). With LOCALHOST, Fast DDS
+#: finds its peers through static localhost locators, and 52 processes (N = 50 in the
+#: ``processes`` layout) never all discovered one another here; SUBNET (multicast) does.
+DISCOVERY = ['LOCALHOST']
+
+
 def _env() -> dict:
     return dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN),
-                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+                ROS_AUTOMATIC_DISCOVERY_RANGE=DISCOVERY[0])
 
 
 def floor(layout: str, n: int, steps: int, raw: bool = False) -> float:
@@ -375,6 +381,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--memory', action='store_true',
                         help='also compare peak RSS of S and 10 S steps (one process)')
     parser.add_argument('--json', type=Path, help='write the results here')
+    parser.add_argument('--discovery', default='LOCALHOST', choices=['LOCALHOST', 'SUBNET'],
+                        help='ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (default: LOCALHOST; '
+                        'SUBNET for the processes layout beyond about 20 agents)')
     parser.add_argument('--role', choices=['one', 'world', 'leader', 'agents'],
                         help=argparse.SUPPRESS)
     parser.add_argument('--n', type=int, help=argparse.SUPPRESS)
@@ -385,6 +394,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.role is not None:
         return run_floor_role(args)
+    DISCOVERY[0] = args.discovery
     print(f'# bench_ros: {" ".join(sys.argv)}', flush=True)
     info = machine()
     print(f'# machine: {info}', flush=True)
