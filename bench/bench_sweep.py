@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.reproduce import (FIG3_FRACTIONS, FIG3_PAPER_REALISATIONS, FIG3_SIZES, Plan,
-                                   machine, run_simulations, terminal_line)
+                                   append_invocation, git_revision, machine, run_simulations,
+                                   terminal_line)
 
 #: The issue's target for the full sweep on a 2-core machine [min].
 TARGET_MIN = 60.0
@@ -72,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
         f' {shlex.quote(a)}' for a in (sys.argv[1:] if argv is None else argv))
     plan = Plan(False, args.realisations)
     host = machine()
+    started = time.strftime('%Y-%m-%d %H:%M', time.gmtime())
+    revision = git_revision()
     print(f'# {command}')
     print(f'# {host["nproc"]} CPUs ({host["cpu_model"]}), Python {platform.python_version()}, '
           f'load average {" ".join(f"{x:.2f}" for x in host["load_average"])} at the start')
@@ -90,6 +93,15 @@ def main(argv: list[str] | None = None) -> int:
         sims = run_simulations(plan, out, args.jobs, False, say, presets=False, live=live)
         wall, cpu = time.monotonic() - wall0, cpu_seconds() - cpu0
     load_end = list(os.getloadavg())
+    if args.out is not None and sims['executed']:
+        # The reproduction's report lists the invocations that computed its runs.
+        append_invocation(args.out, {
+            'command': command, 'date': started, 'git': revision, 'quick': False,
+            'realisations': args.realisations, 'wall_min': round(wall / 60.0, 2),
+            'sim_runs': sims['executed'], 'sim_cpu_min': round(cpu / 60.0, 2),
+            'sim_wall_min': round(wall / 60.0, 2), 'ros_runs': 0, 'ros_wall_min': 0.0,
+            'nproc': host['nproc'], 'cpu_model': host['cpu_model'],
+            'load_average': host['load_average']})
     runs = len(sims['fig3'])
     full_runs = runs // args.realisations * args.full_realisations
     measured = sims['executed'] == runs

@@ -2019,11 +2019,9 @@ def record_invocation(out: Path, meta: dict, plan: Plan) -> list[dict]:
              'ros_runs': meta['ros_executed'], 'ros_wall_min': round(meta['ros_wall_s'] / 60, 2),
              'nproc': meta['machine']['nproc'], 'cpu_model': meta['machine']['cpu_model'],
              'load_average': meta['machine']['load_average']}
-    path = out / 'invocations.jsonl'
-    with open(path, 'a') as log:
-        log.write(json.dumps(plain(entry)) + '\n')
+    append_invocation(out, entry)
     history = []
-    for line in path.read_text().splitlines():
+    for line in (out / 'invocations.jsonl').read_text().splitlines():
         try:
             item = json.loads(line)
         except ValueError:
@@ -2031,6 +2029,13 @@ def record_invocation(out: Path, meta: dict, plan: Plan) -> list[dict]:
         if item.get('quick') == plan.quick and (item.get('sim_runs') or item.get('ros_runs')):
             history.append(item)
     return history
+
+
+def append_invocation(out: Path, entry: dict) -> None:
+    """Append one invocation's record to ``out/invocations.jsonl`` (also ``bench_sweep``'s,
+    whose runs the report then uses)."""
+    with open(out / 'invocations.jsonl', 'a') as log:
+        log.write(json.dumps(plain(entry)) + '\n')
 
 
 def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, meta: dict,
