@@ -13,6 +13,7 @@ import shutil
 import signal
 import subprocess
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -148,6 +149,31 @@ def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):
 
 # ----------------------------------------------------------------------------------------------
 # The leader disappears and comes back
+
+
+def test_late_leader_is_waited_for_at_the_start(tmp_path, ros_domain):
+    """A leader that answers its first tick later than leader_timeout (slow discovery) is
+    waited for: the informed agents track it from step 0, the run is sim's run. (Once
+    failed in CI: two informed agents applied the uninformed law at step 0.)"""
+    path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
+                                           'record_every=1'])
+    with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=10.0,
+                        agent_params={'leader_timeout': 0.2}) as swarm:
+        swarm.remove(swarm.leader)
+        # The world opens step 0; the agents have its odometry but no leader state.
+        swarm.spin_until(lambda: swarm.agents.controller.pending.get(0) is not None
+                         and swarm.agents.controller.pending[0].has_odometry(4), RUN_TIMEOUT)
+        t0 = time.monotonic()
+        swarm.spin_until(lambda: time.monotonic() - t0 > 0.6, RUN_TIMEOUT)
+        assert swarm.agents.controller.answered == -1 and not swarm.agents.leader_lost
+        swarm.leader = swarm.add_leader()
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    assert summary['leader_events'] == []
+    ref = simulate(sc).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
 
 
 def test_lost_leader_fallback_and_return(tmp_path, ros_domain):

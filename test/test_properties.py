@@ -456,8 +456,8 @@ NODE_PARAMS = {
               'metrics_every', 'expect_subscribers', 'staleness', 'max_abs_position',
               'max_abs_velocity', 'max_abs_accel'),
     'leader': ('expect_subscribers', 'start_timeout'),
-    'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'max_abs_position', 'max_abs_velocity',
-              'max_abs_accel'),
+    'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'leader_start_timeout',
+              'max_abs_position', 'max_abs_velocity', 'max_abs_accel'),
 }
 COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor')
 #: Scenario keys given as ROS parameters (overrides of single values), and unknown ones.

@@ -39,7 +39,8 @@ from flock_swarm.sim import interaction_graph, static_graph
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
 MAX_PENDING = 8
 
-AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout'}
+AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout',
+                                               'leader_start_timeout'}
 
 
 @dataclass
@@ -201,6 +202,14 @@ class AgentNode(Node):
         if isinstance(self.leader_timeout, bool) or \
                 not isinstance(self.leader_timeout, (int, float)) or self.leader_timeout <= 0:
             raise ScenarioError('leader_timeout', f'must be > 0, got {self.leader_timeout!r}')
+        self.leader_start_timeout = declare(
+            self, 'leader_start_timeout', 30.0, 'lockstep: seconds to wait for the leader\'s '
+            'first state (it answers its first tick only once every node has matched its '
+            'topics, up to its own start_timeout) before the agents apply the uninformed law')
+        if not self.leader_start_timeout > 0:
+            raise ScenarioError('leader_start_timeout',
+                                f'must be > 0, got {self.leader_start_timeout!r}')
+        self.leader_ever_heard = False
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
                          for i in self.controller.ids]
@@ -297,6 +306,11 @@ class AgentNode(Node):
     def leader_heard(self, k: int) -> None:
         """Note a leader message of step ``k``; a lost leader is back."""
         self.leader_seen_at = time.monotonic()
+        self.leader_ever_heard = True
+        if self.waiting_since is not None:
+            # A step waiting for the leader's state has half of it now: the timeout counts
+            # from here, or its other half could be given up on the moment it is due.
+            self.waiting_since = self.leader_seen_at
         if self.leader_lost:
             self.leader_lost = False
             self.get_logger().info(f'leader back at step {k}: informed agents track it again')
@@ -345,7 +359,11 @@ class AgentNode(Node):
             now = time.monotonic()
             if self.waiting_since is None:
                 self.waiting_since = now
-            if now - self.waiting_since < self.leader_timeout:
+            # A leader not heard yet may still be matching the swarm's topics: it answers
+            # its first tick only then, which can take longer than leader_timeout.
+            patience = self.leader_timeout if self.leader_ever_heard \
+                else self.leader_start_timeout
+            if now - self.waiting_since < patience:
                 return
             self.lose_leader(k)
         self.waiting_since = None
