@@ -144,14 +144,21 @@ class SuParams(Protocol):
         """
         dq = qj - qi
         sq = pot.squared_norm(dq)
-        z = pot.sigma_norm(dq, self.eps, sq)
+        # sqrt(1 + eps ||dq||^2) is shared by the sigma-norm and n_ij; the sigma-norm in the
+        # cancellation-free form of pot.sigma_of_distance, from ||dq||^2 directly.
+        root = np.sqrt(1.0 + self.eps * sq)
+        z = sq / (root + 1.0)
         r_a, d_a = self.r_alpha, self.d_alpha
         # The bump of the action phi_alpha is a_ij: evaluated once for both terms.
         a_ij = pot.bump(z / r_a, self.h)
-        gradient = pot.rowwise(np.multiply, pot.sigma_grad(dq, self.eps, sq),
-                               pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b, a_ij))
-        consensus = pot.rowwise(np.multiply, pj - pi, a_ij)
-        return gradient + consensus
+        # phi_alpha n_ij = (phi_alpha / root) dq: one scalar per edge, then per component.
+        coef = pot.phi_alpha(z, r_a, d_a, self.h, self.a, self.b, a_ij)
+        coef /= root
+        out = np.empty_like(dq)
+        for k in range(dq.shape[1]):
+            np.multiply(dq[:, k], coef, out=out[:, k])
+            out[:, k] += (pj[:, k] - pi[:, k]) * a_ij
+        return out
 
     def combine(self, q, p, s, leader, agents, dt):
         """Add the navigational feedback of [Su09] eq. (7), (10), (33) or Section V.C."""
@@ -451,9 +458,13 @@ def pair_sums(law: Protocol, q: np.ndarray, p: np.ndarray, edges: EdgeList) -> n
     :return: the sums, shape ``(n, k)``.
     """
     n = q.shape[0]
-    # take() gathers rows several times faster than fancy indexing, with the same values.
-    qi, pi, qj, pj = q.take(edges.i, 0), p.take(edges.i, 0), q.take(edges.j, 0), p.take(edges.j, 0)
     i, j = edges.i, edges.j
+    # The edge ends gathered component by component (take() is several times faster than
+    # fancy indexing, with the same values): the (e, dim) arrays are then column-major, so
+    # the per-component arithmetic of the laws and the sums below run on contiguous memory
+    # (the values do not depend on the layout).
+    qt, pt = np.ascontiguousarray(q.T), np.ascontiguousarray(p.T)
+    qi, pi, qj, pj = qt.take(i, 1).T, pt.take(i, 1).T, qt.take(j, 1).T, pt.take(j, 1).T
     to_i = law.pair(qi, pi, qj, pj, edges.weight)
     out = np.empty((n, to_i.shape[1]))
     if law.antisymmetric:
