@@ -24,6 +24,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.node import Node
 
 from flock_swarm.analyze import main as analyze_main
+from flock_swarm.nodes import world as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
@@ -174,6 +175,33 @@ def test_late_leader_is_waited_for_at_the_start(tmp_path, ros_domain):
     ref = simulate(sc).series
     with np.load(out / 'timeseries.npz') as ros:
         assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
+
+
+def test_stalled_step_is_offered_again_with_backoff(tmp_path, ros_domain):
+    """A step left open is offered again after RESEND_PERIOD (or RESEND_SLOWER times the
+    step before, if longer), then after twice as long each time: an overloaded swarm is not
+    flooded with copies (50 agent processes once ran at 0.5 steps/s, 3 offers a step)."""
+    path, _, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=10',
+                                           'record_every=1'])
+    with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=30.0) as swarm:
+        world = swarm.world
+        swarm.spin_until(lambda: world.k >= 5, RUN_TIMEOUT)
+        swarm.remove(swarm.agents)
+        # The step in progress may still close (its commands were in); the next one stalls.
+        offers, stalled = [], None
+        while len(offers) < 3:
+            count = world.resends
+            swarm.spin_until(lambda: world.resends > count, RUN_TIMEOUT)
+            if stalled is None:
+                stalled, began, first_wait = world.k, world.step_began, max(
+                    world_module.RESEND_PERIOD, world_module.RESEND_SLOWER * world.last_step_s)
+            # When the world offered the step (it sets resend_at = then + resend_wait).
+            offers.append(world.resend_at - world.resend_wait)
+        assert world.k == stalled, 'no command came, so the step must still be open'
+    # Timers fire late, never early: each offer is at least its wait after the last one.
+    assert offers[0] - began >= first_wait
+    assert offers[1] - offers[0] >= 2.0 * first_wait
+    assert offers[2] - offers[1] >= 4.0 * first_wait
 
 
 def test_lost_leader_fallback_and_return(tmp_path, ros_domain):
