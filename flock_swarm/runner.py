@@ -8,6 +8,7 @@ file, prints progress, and ends when the world has recorded its last step. Outpu
 
 import argparse
 import json
+import math
 import os
 import shutil
 import signal
@@ -299,6 +300,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='realtime mode: simulated seconds per wall second')
     parser.add_argument('--step-timeout', type=float, default=2.0,
                         help='lockstep: seconds the world waits for a command')
+    parser.add_argument('--start-timeout', type=float, default=30.0,
+                        help='lockstep: seconds the world waits for every node to be '
+                        'discovered before step 0 (default: 30; tens of agent processes '
+                        'may need longer)')
     parser.add_argument('--executor', choices=('single', 'events'), default='events',
                         help='executor of the one-process run (events: rclpy.experimental.'
                         'EventsExecutor, about twice as fast here)')
@@ -320,6 +325,9 @@ def main(argv: list[str] | None = None) -> int:
                                 f'must be > 0, got {args.realtime_factor}')
         if args.step_timeout <= 0:
             raise ScenarioError('--step-timeout', f'must be > 0, got {args.step_timeout}')
+        if not args.start_timeout >= 0 or math.isinf(args.start_timeout):
+            raise ScenarioError('--start-timeout',
+                                f'must be finite and >= 0, got {args.start_timeout}')
         if args.container and not args.processes:
             raise ScenarioError('--container', 'goes with --processes (a one-process run '
                                 'always hosts the agents in one container node)')
@@ -344,7 +352,9 @@ def main(argv: list[str] | None = None) -> int:
         layout = 'separate processes (one per agent)'
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
-    world_params = {'record': False} if args.no_record else None
+    world_params = {'start_timeout': args.start_timeout}
+    if args.no_record:
+        world_params['record'] = False
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,

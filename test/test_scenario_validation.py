@@ -289,6 +289,9 @@ def test_exponents_in_files_are_numbers(tmp_path):
     ('swarm', ['demo', '--mode', 'warp'], 'swarm: error: --mode: invalid choice'),
     ('swarm', ['demo', '--container'], 'swarm: error: --container: goes with --processes'),
     ('swarm', [], 'swarm: error: scenario: required'),
+    ('swarm', ['demo', '--start-timeout', '-1'], 'swarm: error: --start-timeout: must be'),
+    ('swarm', ['demo', '--start-timeout', 'nan'], 'swarm: error: --start-timeout: must be'),
+    ('swarm', ['demo', '--step-timeout', '0'], 'swarm: error: --step-timeout: must be > 0'),
     ('analyze', ['bag', '--record-every', '0'], 'analyze: error: --record-every'),
     ('replay', ['bag', '--bogus'], 'replay: error: --bogus: unrecognized argument(s)'),
 ])
