@@ -29,7 +29,12 @@ machine the least disturbed one); every run is in the JSON.
 
 Layouts: ``one`` (every node in one process, the agents in one container node),
 ``container`` (three processes: world | leader | agents container), ``processes`` (world,
-leader and one process per agent, like ``ros2 run flock_swarm agent`` on robots).
+leader and one process per agent, like ``ros2 run flock_swarm agent`` on robots). The
+``processes`` layout runs ``max(50, 10 S / N)`` steps (S: ``--steps``), gives the world a
+60 s step timeout and a 300 s start timeout, and beyond 20 agents uses SUBNET discovery
+(``--discovery auto``, see :data:`LOCALHOST_PROCESS_AGENTS`). A (layout, N) whose runs fail
+(no summary, missed commands, or longer than 900 s) is reported as a failed row and the
+benchmark goes on.
 
 Targets (issue 5): pipeline >= 70 % of the floor's steps/s at every N (checked against
 both floors); N = 100 in one
@@ -290,32 +295,51 @@ def run_floor_role(args) -> int:
 # Orchestration
 
 
-#: ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (``--discovery``). With LOCALHOST, Fast DDS
-#: finds its peers through static localhost locators, and 52 processes (N = 50 in the
-#: ``processes`` layout) never all discovered one another here; SUBNET (multicast) does.
-DISCOVERY = ['LOCALHOST']
+#: ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (``--discovery``; ``auto``: see
+#: :func:`discovery_range`).
+DISCOVERY = ['auto']
+#: With LOCALHOST, rmw_fastrtps gives Fast DDS 127.0.0.1 as its one initial peer, and Fast
+#: DDS announces itself there to participant ids 0-3 only (``s_maximumInitialPeersRange``
+#: = 4): 52 processes (N = 50 in the ``processes`` layout) never all discovered one another
+#: here. ``auto`` switches to SUBNET (multicast, which reaches every participant) beyond
+#: this many agents in that layout.
+LOCALHOST_PROCESS_AGENTS = 20
+#: The world's step timeout in the ``processes`` layout [s]: tens of agent processes on two
+#: cores take seconds a step, and a command zeroed on the default 2 s would end the run as
+#: a failure instead of measuring it.
+PROCESS_STEP_TIMEOUT = 60.0
+#: The world's start timeout in the ``processes`` layout [s] (discovery of ~100 processes).
+PROCESS_START_TIMEOUT = 300.0
 
 
-def _env() -> dict:
+def discovery_range(layout: str, n: int) -> str:
+    """Return the ROS_AUTOMATIC_DISCOVERY_RANGE of a run of ``layout`` at ``n`` agents."""
+    if DISCOVERY[0] != 'auto':
+        return DISCOVERY[0]
+    return 'SUBNET' if layout == 'processes' and n > LOCALHOST_PROCESS_AGENTS else 'LOCALHOST'
+
+
+def _env(layout: str, n: int) -> dict:
     return dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN),
-                ROS_AUTOMATIC_DISCOVERY_RANGE=DISCOVERY[0])
+                ROS_AUTOMATIC_DISCOVERY_RANGE=discovery_range(layout, n))
 
 
 def floor(layout: str, n: int, steps: int, raw: bool = False) -> float:
     """Return the floor's steps/s for a layout (``raw``: serialised bytes, see :class:`Wire`)."""
     me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
           '--domain', str(DOMAIN)] + (['--raw'] if raw else [])
+    env = _env(layout, n)
     if layout == 'one':
         out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
-                             text=True, timeout=RUN_TIMEOUT, env=_env())
+                             text=True, timeout=RUN_TIMEOUT, env=env)
         return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
     hosts = [['--agent-ids'] + [str(i) for i in range(n)]] if layout == 'container' else [
         ['--agent-ids', str(i)] for i in range(n)]
-    procs = [subprocess.Popen(me + ['--role', 'leader'], env=_env())]
-    procs += [subprocess.Popen(me + ['--role', 'agents'] + ids, env=_env()) for ids in hosts]
+    procs = [subprocess.Popen(me + ['--role', 'leader'], env=env)]
+    procs += [subprocess.Popen(me + ['--role', 'agents'] + ids, env=env) for ids in hosts]
     try:
         out = subprocess.run(me + ['--role', 'world', '--hosts', str(len(hosts))],
-                             capture_output=True, text=True, timeout=RUN_TIMEOUT, env=_env())
+                             capture_output=True, text=True, timeout=RUN_TIMEOUT, env=env)
     finally:
         stop(procs, timeout=20)
     return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
@@ -330,21 +354,46 @@ def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> l
     if layout == 'container':
         cmd += ['--processes', '--container']
     elif layout == 'processes':
-        cmd += ['--processes']
+        cmd += ['--processes', '--step-timeout', str(PROCESS_STEP_TIMEOUT),
+                '--start-timeout', str(PROCESS_START_TIMEOUT)]
     if not record:
         cmd.append('--no-record')
     return cmd
+
+
+def wait_bounded(proc: subprocess.Popen, timeout: float):
+    """Wait for ``proc`` at most ``timeout`` s; return its resource usage, or ``None``.
+
+    ``None``: it was still running and has been stopped (SIGINT, so that the world closes
+    its outputs, then the runner's own teardown; SIGKILL after 30 s).
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            return usage
+        time.sleep(0.2)
+    stop([proc], timeout=30)
+    return None
 
 
 def pipeline(layout: str, n: int, steps: int, record: bool) -> dict:
     """Run the pipeline once; return steps/s, real-time factor and the child's peak RSS."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
-        proc = subprocess.Popen(swarm_command(layout, n, steps, out, record), env=_env(),
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        _, status, usage = os.wait4(proc.pid, 0)
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        summary = json.loads((out / 'summary.json').read_text())
+        proc = subprocess.Popen(swarm_command(layout, n, steps, out, record),
+                                env=_env(layout, n), stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        usage = wait_bounded(proc, RUN_TIMEOUT)
+        if usage is None:
+            raise RuntimeError(f'{layout} N={n}: did not finish within {RUN_TIMEOUT:g} s '
+                               '(stopped)')
+        summary_path = out / 'summary.json'
+        if not summary_path.is_file():
+            raise RuntimeError(f'{layout} N={n}: swarm exited {proc.returncode} without a '
+                               'summary')
+        summary = json.loads(summary_path.read_text())
     if summary['status'] != 'completed' or summary['missed_commands']:
         raise RuntimeError(f'{layout} N={n}: {summary["status"]}, '
                            f'{summary["missed_commands"]} missed commands')
@@ -381,9 +430,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--memory', action='store_true',
                         help='also compare peak RSS of S and 10 S steps (one process)')
     parser.add_argument('--json', type=Path, help='write the results here')
-    parser.add_argument('--discovery', default='LOCALHOST', choices=['LOCALHOST', 'SUBNET'],
-                        help='ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (default: LOCALHOST; '
-                        'SUBNET for the processes layout beyond about 20 agents)')
+    parser.add_argument('--discovery', default='auto', choices=['auto', 'LOCALHOST', 'SUBNET'],
+                        help='ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (default auto: '
+                        f'LOCALHOST, SUBNET for the processes layout beyond '
+                        f'{LOCALHOST_PROCESS_AGENTS} agents)')
     parser.add_argument('--role', choices=['one', 'world', 'leader', 'agents'],
                         help=argparse.SUPPRESS)
     parser.add_argument('--n', type=int, help=argparse.SUPPRESS)
@@ -398,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f'# bench_ros: {" ".join(sys.argv)}', flush=True)
     info = machine()
     print(f'# machine: {info}', flush=True)
-    rows = []
+    rows, failed = [], []
     print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"pipeline":>9} {"ratio":>6} '
           f'{"raw r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6}  [steps/s]', flush=True)
     for layout in args.layouts:
@@ -409,15 +459,25 @@ def main(argv: list[str] | None = None) -> int:
             # Interleaved repeats, best of each: the run least disturbed by whatever else the
             # shared machine was doing.
             fls, raws, fulls, bares = [], [], [], []
-            for _ in range(args.repeat):
-                fls.append(floor(layout, n, steps))
-                raws.append(floor(layout, n, steps, raw=True))
-                fulls.append(pipeline(layout, n, steps, record=True))
-                bares.append(pipeline(layout, n, steps, record=False))
+            try:
+                for _ in range(args.repeat):
+                    fls.append(floor(layout, n, steps))
+                    raws.append(floor(layout, n, steps, raw=True))
+                    fulls.append(pipeline(layout, n, steps, record=True))
+                    bares.append(pipeline(layout, n, steps, record=False))
+            except (RuntimeError, subprocess.TimeoutExpired, ValueError) as exc:
+                # Kept as a failed row (the other rows still count and are written).
+                failed.append({'layout': layout, 'n': n, 'steps': steps,
+                               'discovery': discovery_range(layout, n), 'error': str(exc),
+                               'floor_runs': fls, 'raw_floor_runs': raws,
+                               'pipeline_runs': [r['steps_per_s'] for r in fulls]})
+                print(f'{layout:>10} {n:>4} failed: {exc}', flush=True)
+                continue
             fl, raw = max(fls), max(raws)
             full = max(fulls, key=lambda r: r['steps_per_s'])
             bare = max(bares, key=lambda r: r['steps_per_s'])
             row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl, 'raw_floor': raw,
+                   'discovery': discovery_range(layout, n),
                    'floor_runs': fls, 'raw_floor_runs': raws,
                    'pipeline_runs': [r['steps_per_s'] for r in fulls],
                    'no_record_runs': [r['steps_per_s'] for r in bares],
@@ -437,6 +497,7 @@ def main(argv: list[str] | None = None) -> int:
                 r['recording_cost'] <= 0.10) for r in rows]
     checks += [(f'one N=100: >= 20 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 20)
                for r in rows if r['layout'] == 'one' and r['n'] == 100]
+    checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:
         short = pipeline('one', 30, args.steps, record=True)
@@ -452,7 +513,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{"PASS" if ok else "FAIL"}  {name}', flush=True)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({'machine': info, 'rows': rows, 'memory': memory,
+        args.json.write_text(json.dumps({'command': ' '.join(sys.argv), 'machine': info,
+                                         'rows': rows, 'failed': failed, 'memory': memory,
                                          'checks': checks}, indent=1))
     return 0
 
