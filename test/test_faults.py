@@ -181,8 +181,8 @@ def test_stalled_step_is_offered_again_with_backoff(tmp_path, ros_domain):
     """A step left open is offered again after RESEND_PERIOD (or RESEND_SLOWER times the
     step before, if longer), then after twice as long each time: an overloaded swarm is not
     flooded with copies (50 agent processes once ran at 0.5 steps/s, 3 offers a step)."""
-    path, _, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=10',
-                                           'record_every=1'])
+    overrides = ['n_agents=3', 'informed.count=1', 'duration=10', 'record_every=1']
+    path, _, out = scenario_of(tmp_path, overrides)
     with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=30.0) as swarm:
         world = swarm.world
         swarm.spin_until(lambda: world.k >= 5, RUN_TIMEOUT)
