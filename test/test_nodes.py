@@ -20,7 +20,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
-from flock_swarm.runner import executable, resolve_scenario, run_in_process, run_processes
+from flock_swarm.runner import (executable, resolve_scenario, run_in_process, run_processes,
+                                stop)
 from flock_swarm.sim import simulate
 from conftest import start_nodes, wait_for
 
@@ -276,14 +277,14 @@ def test_two_containers_split_the_swarm(tmp_path, ros_domain):
     try:
         world = subprocess.run(executable('world') + ros_args + ['-p', f'out_dir:={out}'],
                                env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f'the world did not finish within {RUN_TIMEOUT:g} s: {exc.stderr!r}')
     finally:
-        for proc in procs:
-            proc.send_signal(signal.SIGINT)
-        for proc in procs:
-            proc.wait(timeout=30)
+        # SIGINT, then SIGKILL after 30 s (shutdown on signals is test_signal_* 's subject).
+        stop(procs, timeout=30)
     assert world.returncode == 0, world.stderr
     summary = json.loads((out / 'summary.json').read_text())
-    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0, summary
     ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
     with np.load(out / 'timeseries.npz') as ros:
         assert_allclose(ros['q'], ref['q'], rtol=0, atol=1e-9)
