@@ -54,6 +54,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from flock_swarm.cli import accept_sigint
 from flock_swarm.runner import stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
@@ -418,6 +419,9 @@ def machine() -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark (or one floor process with ``--role``)."""
+    # Started in the background from a script, SIGINT would be ignored here and in every
+    # process started (their teardown then waits out stop()'s timeout on each).
+    accept_sigint()
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--sizes', type=int, nargs='+', default=[5, 10, 20, 50, 100])
     parser.add_argument('--layouts', nargs='+', default=['one', 'container', 'processes'],

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from flock_swarm.cli import OneLineParser
+from flock_swarm.cli import OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml
 from flock_swarm.scenarios import load_mapping
@@ -315,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``swarm`` from the command line; return the exit status."""
+    accept_sigint()
     args = build_parser().parse_args(argv)
     say = (lambda line: print(line, file=sys.stderr, flush=True))
     try:

@@ -212,6 +212,45 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
     assert f'[replay] done: {sum(counts.values())} messages on ' in res.stderr
 
 
+def test_sigint_stops_a_world_started_with_sigint_ignored(tmp_path, ros_domain):
+    """`cmd &` in a script starts the world with SIGINT ignored (and Python then raises no
+    KeyboardInterrupt): the world restores it, so SIGINT still closes the bag and writes
+    the summary instead of being ignored until a SIGKILL loses the index."""
+    out = tmp_path / 'bg'
+    scenario = resolve_scenario('demo', ['n_agents=2', 'informed.count=1', 'duration=1000'],
+                                None, out)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
+    quiet = {'env': env, 'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL}
+    procs = [subprocess.Popen(executable('leader') + ros_args, **quiet)]
+    procs += [subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                               **quiet) for i in range(2)]
+    world = subprocess.Popen(
+        executable('world') + ros_args + ['-p', f'out_dir:={out}'], env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        wait_for(lambda: (out / 'bag' / 'bag_0.mcap').is_file(), 120, 'the world to record')
+        wait_for(lambda: world.poll() is not None or _stepped(out), 120, 'steps')
+        world.send_signal(signal.SIGINT)
+        _, err = world.communicate(timeout=60)
+    finally:
+        stop(procs, timeout=30)
+        if world.poll() is None:
+            world.kill()
+            world.wait()
+    assert world.returncode == 0, err
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'interrupted'
+    assert not BagReader(out / 'bag').recovered  # finalised: summary section and index
+
+
+def _stepped(out) -> bool:
+    """Return whether the world's bag holds more than its first chunk's header."""
+    mcap = out / 'bag' / 'bag_0.mcap'
+    return mcap.is_file() and mcap.stat().st_size > 20_000
+
+
 @pytest.mark.parametrize('extra_env, args, key', [
     ({'AMENT_PREFIX_PATH': '/nonexistent'}, [], 'record'),
     ({}, ['-p', 'protocol.r:=-1.0'], 'protocol.r'),

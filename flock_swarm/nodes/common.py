@@ -20,6 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from flock_swarm.cli import accept_sigint
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.scenarios import load
@@ -319,6 +320,7 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     :param until: optional condition ending the spin (the world ends after its last step).
     :return: the exit status.
     """
+    accept_sigint()
     import rclpy
     from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.logging import LoggingSeverity, get_logger_level, set_logger_level
