@@ -324,8 +324,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.realtime_factor <= 0:
             raise ScenarioError('--realtime-factor',
                                 f'must be > 0, got {args.realtime_factor}')
-        if args.step_timeout <= 0:
-            raise ScenarioError('--step-timeout', f'must be > 0, got {args.step_timeout}')
+        if not args.step_timeout > 0 or math.isinf(args.step_timeout):
+            raise ScenarioError('--step-timeout',
+                                f'must be finite and > 0, got {args.step_timeout}')
         if not args.start_timeout >= 0 or math.isinf(args.start_timeout):
             raise ScenarioError('--start-timeout',
                                 f'must be finite and >= 0, got {args.start_timeout}')
