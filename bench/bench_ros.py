@@ -76,8 +76,6 @@ def scenario_overrides(n: int, steps: int) -> list[str]:
 # ----------------------------------------------------------------------------------------------
 # The messaging floor: the pipeline's topics and messages, empty callbacks
 
-#: Seconds after which the floor's world offers a stalled step again (as the world node does).
-RESEND_PERIOD = 0.5
 #: Steps before the floor's clock starts (discovery settles, first samples repaired).
 WARMUP = 10
 
@@ -162,8 +160,10 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
     from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
                                           LOCKSTEP_QOS, cmd_topic, odom_topic)
+    from flock_swarm.nodes.world import RESEND_PERIOD, RESEND_SLOWER
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
-                        'started': False, 'stall': 0.0}
+                        'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
+                        'began': 0.0, 'last_step_s': 0.0, 'resends': 0}
     wire = Wire(raw, n, WARMUP + steps)
     kw = {'raw': True} if raw else {}
 
@@ -173,8 +173,18 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
         odom_pubs = [world.create_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                      for i in range(n)]
 
-        def tick():
-            state['stall'] = time.monotonic() + RESEND_PERIOD
+        def tick(again: bool = False):
+            # The world node's rule for a stalled step (``WorldNode.resend_step``): offered
+            # again after max(RESEND_PERIOD, RESEND_SLOWER x the previous step), then with
+            # doubling waits, so an overloaded layout is not flooded with copies.
+            now = time.monotonic()
+            if again:
+                state['resends'] += 1
+                state['wait'] *= 2.0
+            else:
+                state['began'] = now
+                state['wait'] = max(RESEND_PERIOD, RESEND_SLOWER * state['last_step_s'])
+            state['stall'] = now + state['wait']
             clock, odom = wire.states(state['step'])
             clock_pub.publish(clock)
             for pub, msg in zip(odom_pubs, odom):
@@ -186,6 +196,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
             state[kind] += 1
             if state['cmds'] >= n and state['leader'] >= 2:
                 state['cmds'] = state['leader'] = 0
+                state['last_step_s'] = time.monotonic() - state['began']
                 state['step'] += 1
                 if state['step'] == WARMUP:
                     state['t0'] = time.perf_counter()
@@ -206,7 +217,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
             if state['started']:
                 if state['t1'] is None and time.monotonic() > state['stall']:
                     state['cmds'] = state['leader'] = 0
-                    tick()
+                    tick(again=True)
                 return
             if all(p.get_subscription_count() >= hosts for p in odom_pubs) \
                     and clock_pub.get_subscription_count() >= 1 \
@@ -283,8 +294,8 @@ def run_floor_role(args) -> int:
     except KeyboardInterrupt:
         pass
     if state['t1'] is not None:
-        print(json.dumps({'steps_per_s': args.steps / (state['t1'] - state['t0'])}),
-              flush=True)
+        print(json.dumps({'steps_per_s': args.steps / (state['t1'] - state['t0']),
+                          'resent_steps': state['resends']}), flush=True)
     ex.shutdown()
     for node in nodes:
         node.destroy_node()
@@ -325,15 +336,16 @@ def _env(layout: str, n: int) -> dict:
                 ROS_AUTOMATIC_DISCOVERY_RANGE=discovery_range(layout, n))
 
 
-def floor(layout: str, n: int, steps: int, raw: bool = False) -> float:
-    """Return the floor's steps/s for a layout (``raw``: serialised bytes, see :class:`Wire`)."""
+def floor(layout: str, n: int, steps: int, raw: bool = False) -> dict:
+    """Return the floor's steps/s and re-offered steps for a layout (``raw``: serialised
+    bytes, see :class:`Wire`)."""
     me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
           '--domain', str(DOMAIN)] + (['--raw'] if raw else [])
     env = _env(layout, n)
     if layout == 'one':
         out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
                              text=True, timeout=RUN_TIMEOUT, env=env)
-        return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
+        return json.loads(out.stdout.strip().splitlines()[-1])
     hosts = [['--agent-ids'] + [str(i) for i in range(n)]] if layout == 'container' else [
         ['--agent-ids', str(i)] for i in range(n)]
     procs = [subprocess.Popen(me + ['--role', 'leader'], env=env)]
@@ -343,7 +355,7 @@ def floor(layout: str, n: int, steps: int, raw: bool = False) -> float:
                              capture_output=True, text=True, timeout=RUN_TIMEOUT, env=env)
     finally:
         stop(procs, timeout=20)
-    return json.loads(out.stdout.strip().splitlines()[-1])['steps_per_s']
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> list[str]:
@@ -400,7 +412,13 @@ def pipeline(layout: str, n: int, steps: int, record: bool) -> dict:
                            f'{summary["missed_commands"]} missed commands')
     rate = summary['steps'] / summary['wall_time_s']
     return {'steps_per_s': rate, 'rtf': rate * summary['dt'],
+            'resent_steps': summary['resent_steps'],
             'peak_rss_mib': usage.ru_maxrss / 1024.0}
+
+
+def rates(runs: list[dict]) -> list[float]:
+    """Return the steps/s of each run."""
+    return [r['steps_per_s'] for r in runs]
 
 
 def machine() -> dict:
@@ -473,18 +491,21 @@ def main(argv: list[str] | None = None) -> int:
                 # Kept as a failed row (the other rows still count and are written).
                 failed.append({'layout': layout, 'n': n, 'steps': steps,
                                'discovery': discovery_range(layout, n), 'error': str(exc),
-                               'floor_runs': fls, 'raw_floor_runs': raws,
-                               'pipeline_runs': [r['steps_per_s'] for r in fulls]})
+                               'floor_runs': rates(fls), 'raw_floor_runs': rates(raws),
+                               'pipeline_runs': rates(fulls)})
                 print(f'{layout:>10} {n:>4} failed: {exc}', flush=True)
                 continue
-            fl, raw = max(fls), max(raws)
+            fl, raw = max(rates(fls)), max(rates(raws))
             full = max(fulls, key=lambda r: r['steps_per_s'])
             bare = max(bares, key=lambda r: r['steps_per_s'])
             row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl, 'raw_floor': raw,
                    'discovery': discovery_range(layout, n),
-                   'floor_runs': fls, 'raw_floor_runs': raws,
-                   'pipeline_runs': [r['steps_per_s'] for r in fulls],
-                   'no_record_runs': [r['steps_per_s'] for r in bares],
+                   'floor_runs': rates(fls), 'raw_floor_runs': rates(raws),
+                   'pipeline_runs': rates(fulls), 'no_record_runs': rates(bares),
+                   # Steps offered again (stalled: see WorldNode.resend_step), per run.
+                   'resent_steps': {name: [r['resent_steps'] for r in runs] for name, runs in
+                                    (('floor', fls), ('raw_floor', raws),
+                                     ('pipeline', fulls), ('no_record', bares))},
                    'pipeline': full['steps_per_s'], 'rtf': full['rtf'],
                    'no_record': bare['steps_per_s'],
                    'ratio': full['steps_per_s'] / fl, 'raw_ratio': full['steps_per_s'] / raw,

@@ -212,13 +212,18 @@ def executable(name: str) -> list[str]:
 
 
 def stop(procs: list, timeout: float = 10.0) -> None:
-    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``."""
+    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``.
+
+    One deadline for all: a hundred agent processes that ignore SIGINT are killed after
+    ``timeout``, not after ``timeout`` each.
+    """
     for proc in procs:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + timeout
     for proc in procs:
         try:
-            proc.wait(timeout=timeout)
+            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()

@@ -418,3 +418,26 @@ def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_dom
     reader = BagReader(out / 'bag')
     assert reader.recovered
     assert reader.message_counts()['/agent_0/odom'] > 10
+
+
+def test_stop_kills_processes_that_ignore_sigint_on_one_deadline():
+    """``stop`` gives every process the same deadline: five stubborn processes are killed
+    after ``timeout`` in all (one ``timeout`` each would take five times as long)."""
+    import sys
+    code = ('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+            'print("up", flush=True); time.sleep(120)')
+    procs = [subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
+             for _ in range(5)]
+    try:
+        assert [p.stdout.readline() for p in procs] == ['up\n'] * 5
+        began = time.monotonic()
+        stop(procs, timeout=1.0)
+        elapsed = time.monotonic() - began
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+            p.wait()
+            p.stdout.close()
+    assert [p.returncode for p in procs] == [-signal.SIGKILL] * 5
+    assert elapsed < 4.0
