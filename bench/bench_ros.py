@@ -78,6 +78,8 @@ def scenario_overrides(n: int, steps: int) -> list[str]:
 
 #: Steps before the floor's clock starts (discovery settles, first samples repaired).
 WARMUP = 10
+#: Seconds between the floor world's reports while it waits for discovery.
+REPORT_PERIOD = 30.0
 
 
 class Wire:
@@ -163,7 +165,8 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
     from flock_swarm.nodes.world import RESEND_PERIOD, RESEND_SLOWER
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
-                        'began': 0.0, 'last_step_s': 0.0, 'resends': 0}
+                        'began': 0.0, 'last_step_s': 0.0, 'resends': 0,
+                        'report': time.monotonic() + REPORT_PERIOD}
     wire = Wire(raw, n, WARMUP + steps)
     kw = {'raw': True} if raw else {}
 
@@ -225,6 +228,17 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                     and world.count_publishers(f'/{LEADER_ODOM}'):
                 state['started'] = True
                 tick()
+            elif time.monotonic() > state['report']:
+                # Progress of discovery, for layouts that take minutes to discover.
+                state['report'] = time.monotonic() + REPORT_PERIOD
+                matched = min(p.get_subscription_count() for p in odom_pubs)
+                commands = sum(world.count_publishers(f'/{cmd_topic(i)}') > 0
+                               for i in range(n))
+                print(f'floor world: waiting for discovery: every odometry matched by >= '
+                      f'{matched} of {hosts} hosts, /clock by '
+                      f'{clock_pub.get_subscription_count()}, command publishers {commands} '
+                      f'of {n}, leader {world.count_publishers(f"/{LEADER_ODOM}")}',
+                      file=sys.stderr, flush=True)
 
         world.create_timer(0.01, on_timer)
         nodes.append(world)
@@ -345,17 +359,25 @@ def floor(layout: str, n: int, steps: int, raw: bool = False) -> dict:
     if layout == 'one':
         out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
                              text=True, timeout=RUN_TIMEOUT, env=env)
-        return json.loads(out.stdout.strip().splitlines()[-1])
+        return last_json(out.stdout)
     hosts = [['--agent-ids'] + [str(i) for i in range(n)]] if layout == 'container' else [
         ['--agent-ids', str(i)] for i in range(n)]
     procs = [subprocess.Popen(me + ['--role', 'leader'], env=env)]
     procs += [subprocess.Popen(me + ['--role', 'agents'] + ids, env=env) for ids in hosts]
     try:
         out = subprocess.run(me + ['--role', 'world', '--hosts', str(len(hosts))],
-                             capture_output=True, text=True, timeout=RUN_TIMEOUT, env=env)
+                             stdout=subprocess.PIPE, text=True, timeout=RUN_TIMEOUT, env=env)
     finally:
         stop(procs, timeout=20)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return last_json(out.stdout)
+
+
+def last_json(stdout: str) -> dict:
+    """Return the last JSON line a floor world printed (Fast DDS logs to stdout too)."""
+    for line in reversed(stdout.splitlines()):
+        if line.startswith('{'):
+            return json.loads(line)
+    raise RuntimeError('the floor world printed no result')
 
 
 def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> list[str]:
