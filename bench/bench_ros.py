@@ -17,7 +17,9 @@ For each layout and N it runs, in fresh processes and one after the other:
     and N odometry messages per step and waiting for N commands and the leader's two
     messages; a leader answering each tick; agent hosts answering once they have every
     odometry and the leader's state. Messages are built once and reused; subscriptions
-    deliver rclpy messages (the typed API every rclpy node uses by default).
+    deliver rclpy messages (the typed API every rclpy node uses by default). A stalled step
+    is offered again by the world node's rule (``WorldNode.resend_step``: after max(0.5 s,
+    3x the previous step), then doubling); re-offered steps are counted for every run.
 ``raw floor``
     the same with serialised bytes: every message of the run serialised before the clock
     starts, raw subscriptions (``raw=True``) reading the step off the bytes. This is how the
