@@ -12,6 +12,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 
@@ -423,7 +424,6 @@ def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_dom
 def test_stop_kills_processes_that_ignore_sigint_on_one_deadline():
     """``stop`` gives every process the same deadline: five stubborn processes are killed
     after ``timeout`` in all (one ``timeout`` each would take five times as long)."""
-    import sys
     code = ('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
             'print("up", flush=True); time.sleep(120)')
     procs = [subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
