@@ -164,7 +164,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
     from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
                                           LOCKSTEP_QOS, cmd_topic, odom_topic)
-    from flock_swarm.nodes.world import RESEND_PERIOD, RESEND_SLOWER
+    from flock_swarm.nodes.world import RESEND_PERIOD, first_resend_wait
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
                         'began': 0.0, 'last_step_s': 0.0, 'resends': 0,
@@ -180,7 +180,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
         def tick(again: bool = False):
             # The world node's rule for a stalled step (``WorldNode.resend_step``): offered
-            # again after max(RESEND_PERIOD, RESEND_SLOWER x the previous step), then with
+            # again after first_resend_wait(the previous step), then with
             # doubling waits, so an overloaded layout is not flooded with copies.
             now = time.monotonic()
             if again:
@@ -188,7 +188,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                 state['wait'] *= 2.0
             else:
                 state['began'] = now
-                state['wait'] = max(RESEND_PERIOD, RESEND_SLOWER * state['last_step_s'])
+                state['wait'] = first_resend_wait(state['last_step_s'])
             state['stall'] = now + state['wait']
             clock, odom = wire.states(state['step'])
             clock_pub.publish(clock)

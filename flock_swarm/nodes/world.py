@@ -54,6 +54,12 @@ RESEND_PERIOD = 0.5
 #: and each further offer of the same step waits twice as long as the last.
 RESEND_SLOWER = 3.0
 
+
+def first_resend_wait(last_step_s: float) -> float:
+    """Seconds before a step is first offered again, given the previous step's duration."""
+    return max(RESEND_PERIOD, RESEND_SLOWER * last_step_s)
+
+
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
     'expect_subscribers', 'staleness'}
@@ -418,7 +424,7 @@ class WorldNode(Node):
         now = time.monotonic()
         self.step_began = now
         self.deadline = now + self.step_timeout
-        self.resend_wait = max(RESEND_PERIOD, RESEND_SLOWER * self.last_step_s)
+        self.resend_wait = first_resend_wait(self.last_step_s)
         self.resend_at = now + self.resend_wait
         self.publish_states(self.clock.ns(self.k))
 
