@@ -164,7 +164,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
     from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
                                           LOCKSTEP_QOS, cmd_topic, odom_topic)
-    from flock_swarm.nodes.world import RESEND_PERIOD, first_resend_wait
+    from flock_swarm.nodes.world import RESEND_PERIOD, first_resend_wait, next_resend_wait
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
                         'began': 0.0, 'last_step_s': 0.0, 'resends': 0,
@@ -185,7 +185,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
             now = time.monotonic()
             if again:
                 state['resends'] += 1
-                state['wait'] *= 2.0
+                state['wait'] = next_resend_wait(state['wait'], state['last_step_s'])
             else:
                 state['began'] = now
                 state['wait'] = first_resend_wait(state['last_step_s'])

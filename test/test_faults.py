@@ -441,3 +441,14 @@ def test_stop_kills_processes_that_ignore_sigint_on_one_deadline():
             p.stdout.close()
     assert [p.returncode for p in procs] == [-signal.SIGKILL] * 5
     assert elapsed < 4.0
+
+
+def test_step_zero_is_offered_at_a_steady_period():
+    """Before any step has finished, a stalled step is a reader not yet matched, not an
+    overloaded swarm: it is offered every RESEND_PERIOD (four offers inside the 2 s default
+    step timeout), and the doubling begins once a step duration is known."""
+    wait = world_module.first_resend_wait(0.0)
+    assert wait == world_module.RESEND_PERIOD
+    assert world_module.next_resend_wait(wait, 0.0) == wait
+    assert world_module.next_resend_wait(wait, 0.01) == 2.0 * wait
+    assert world_module.first_resend_wait(1.0) == world_module.RESEND_SLOWER * 1.0

@@ -60,6 +60,16 @@ def first_resend_wait(last_step_s: float) -> float:
     return max(RESEND_PERIOD, RESEND_SLOWER * last_step_s)
 
 
+def next_resend_wait(wait: float, last_step_s: float) -> float:
+    """Seconds before the next offer of a step offered again after ``wait``.
+
+    Doubling once a step's duration is known (an overloaded swarm); before the first step
+    has finished (``last_step_s`` 0) a lost sample means a reader not yet matched, and the
+    step is offered every ``wait`` as long as it stalls.
+    """
+    return 2.0 * wait if last_step_s > 0 else wait
+
+
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
     'expect_subscribers', 'staleness'}
@@ -407,13 +417,14 @@ class WorldNode(Node):
         stalled step is offered again until its timeout: the leader answers a repeated tick,
         and agents repeat the commands they already sent. A step counts as stalled after
         ``RESEND_PERIOD`` or ``RESEND_SLOWER`` times the previous step's duration, whichever
-        is longer, and every further offer waits twice as long: an overloaded swarm (tens of
+        is longer, and every further offer waits twice as long (once a step has finished,
+        see ``next_resend_wait``): an overloaded swarm (tens of
         agent processes on two cores, a second or more a step) is not flooded with copies of
         every message, which made it slower still (measured: 100 steps of 50 agent processes
         at 0.5 steps/s, 303 offers, 1919 commands timed out).
         """
         self.resends += 1
-        self.resend_wait *= 2.0
+        self.resend_wait = next_resend_wait(self.resend_wait, self.last_step_s)
         self.resend_at = time.monotonic() + self.resend_wait
         for pub, data in self.step_bytes:
             pub.publish(data)
