@@ -307,8 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='lockstep: seconds the world waits for a command')
     parser.add_argument('--start-timeout', type=float, default=30.0,
                         help='lockstep: seconds the world waits for every node to be '
-                        'discovered before step 0 (default: 30; tens of agent processes '
-                        'may need longer)')
+                        'discovered and to answer step 0 (default: 30; tens of agent '
+                        'processes may need longer)')
     parser.add_argument('--executor', choices=('single', 'events'), default='events',
                         help='executor of the one-process run (events: rclpy.experimental.'
                         'EventsExecutor, about twice as fast here)')

@@ -30,8 +30,10 @@ from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
+from flock_swarm.nodes.agent import AgentNode
 from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,
                                       make_odometry)
+from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.sim import interaction_graph, simulate, static_graph
 from conftest import start_nodes, wait_for
@@ -203,6 +205,63 @@ def test_stalled_step_is_offered_again_with_backoff(tmp_path, ros_domain):
     assert offers[0] - began >= first_wait
     assert offers[1] - offers[0] >= 2.0 * first_wait
     assert offers[2] - offers[1] >= 4.0 * first_wait
+
+
+class LosesOffers(AgentNode):
+    """An agent node that loses every odometry message of step ``step`` arriving within
+    ``seconds`` of the first (DDS drops a sample that reaches a reader not matched yet)."""
+
+    def __init__(self, step: int, seconds: float, **kwargs) -> None:
+        """Create the node; the other arguments are :class:`AgentNode`'s."""
+        super().__init__(**kwargs)
+        self.step, self.seconds = step, seconds
+        self.first: float | None = None
+        self.lost = 0
+
+    def on_odom(self, j: int, data: bytes) -> None:
+        """Drop the message if it is one of the lost ones; handle it otherwise."""
+        if self.clock.step_at(decode_odometry(data)[0]) == self.step:
+            now = time.monotonic()
+            self.first = now if self.first is None else self.first
+            if now - self.first < self.seconds:
+                self.lost += 1
+                return
+        super().on_odom(j, data)
+
+
+def run_losing_offers(tmp_path, ros_domain, step: int, seconds: float) -> tuple[dict, int]:
+    """Run 3 agents (agent 0 in a :class:`LosesOffers` node) with a 0.3 s step timeout,
+    below RESEND_PERIOD; return the summary and how many messages agent 0 lost."""
+    path, _, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=0.5',
+                                          'record_every=1'])
+    with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=0.3, agents=[1, 2],
+                        world_params={'start_timeout': 10.0}) as swarm:
+        lossy = swarm.add(LosesOffers(step, seconds, node_name='agent_0',
+                                      context=swarm.context,
+                                      parameter_overrides=swarm.parameters(agent_ids=[0])))
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+    return json.loads((out / 'summary.json').read_text()), lossy.lost
+
+
+def test_step_is_offered_again_within_a_short_step_timeout(tmp_path, ros_domain):
+    """With a step timeout (0.3 s) below RESEND_PERIOD a step is still offered again
+    before its commands are zeroed (after half the timeout): an agent that lost the first
+    offer of step 3 answers the second. (A CI run once zeroed an agent's command this way
+    3 s after another agent's process was restarted.)"""
+    summary, lost = run_losing_offers(tmp_path, ros_domain, step=3, seconds=0.05)
+    assert lost == 3, 'agent 0 loses the first offer of step 3 (3 odometry topics)'
+    assert summary['status'] == 'completed'
+    assert summary['missed_commands'] == 0 and summary['resent_steps'] >= 1
+
+
+def test_step_zero_waits_out_the_start_timeout(tmp_path, ros_domain):
+    """Step 0 completes the start: an agent whose readers match the world's writers a
+    second late (3 step timeouts) still answers step 0, which is offered again until
+    start_timeout (10 s here) is over. (A CI run once zeroed steps 0-7 of every agent.)"""
+    summary, lost = run_losing_offers(tmp_path, ros_domain, step=0, seconds=1.0)
+    assert lost >= 3 * 3, 'step 0 is offered every 0.15 s, lost for a second'
+    assert summary['status'] == 'completed'
+    assert summary['missed_commands'] == 0 and summary['leader_missed'] == 0
 
 
 def test_lost_leader_fallback_and_return(tmp_path, ros_domain):
@@ -446,9 +505,13 @@ def test_stop_kills_processes_that_ignore_sigint_on_one_deadline():
 def test_step_zero_is_offered_at_a_steady_period():
     """Before any step has finished, a stalled step is a reader not yet matched, not an
     overloaded swarm: it is offered every RESEND_PERIOD (four offers inside the 2 s default
-    step timeout), and the doubling begins once a step duration is known."""
+    step timeout), and the doubling begins once a step duration is known. The first offer
+    again comes after at most half the step timeout."""
     wait = world_module.first_resend_wait(0.0)
     assert wait == world_module.RESEND_PERIOD
     assert world_module.next_resend_wait(wait, 0.0) == wait
     assert world_module.next_resend_wait(wait, 0.01) == 2.0 * wait
     assert world_module.first_resend_wait(1.0) == world_module.RESEND_SLOWER * 1.0
+    assert world_module.first_resend_wait(0.0, step_timeout=2.0) == world_module.RESEND_PERIOD
+    assert world_module.first_resend_wait(0.0, step_timeout=0.3) == 0.15
+    assert world_module.first_resend_wait(1.0, step_timeout=2.0) == 1.0

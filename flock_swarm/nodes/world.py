@@ -55,9 +55,15 @@ RESEND_PERIOD = 0.5
 RESEND_SLOWER = 3.0
 
 
-def first_resend_wait(last_step_s: float) -> float:
-    """Seconds before a step is first offered again, given the previous step's duration."""
-    return max(RESEND_PERIOD, RESEND_SLOWER * last_step_s)
+def first_resend_wait(last_step_s: float, step_timeout: float = float('inf')) -> float:
+    """Seconds before a step is first offered again, given the previous step's duration.
+
+    At most half the step timeout, so that every step is offered at least twice before a
+    missing command is zeroed: with a step timeout below ``RESEND_PERIOD`` a sample DDS
+    dropped (a reader not matched yet, a participant that joined or died) was never offered
+    again, and the agent lost the step.
+    """
+    return min(max(RESEND_PERIOD, RESEND_SLOWER * last_step_s), step_timeout / 2)
 
 
 def next_resend_wait(wait: float, last_step_s: float) -> float:
@@ -96,7 +102,7 @@ class WorldNode(Node):
                                     'agent gets a zero command')
         self.start_timeout = declare(self, 'start_timeout', 30.0,
                                      'lockstep: seconds to wait for agents and leader to '
-                                     'appear before starting anyway')
+                                     'appear and answer step 0 before starting anyway')
         self.marker_every = declare(self, 'marker_every', 10, 'publish markers every N steps')
         self.metrics_every = declare(self, 'metrics_every', 10, 'publish metrics every N steps')
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
@@ -155,7 +161,7 @@ class WorldNode(Node):
         self.resends = 0
         self.step_began = 0.0
         self.last_step_s = 0.0
-        self.t_wall0 = time.monotonic()
+        self.t_created = self.t_wall0 = time.monotonic()
         self.t_last_progress = self.t_wall0
         self.metrics_now: dict = {}
 
@@ -396,7 +402,7 @@ class WorldNode(Node):
             return
         now = time.monotonic()
         if not self.started:
-            if self.ready_to_start() or now - self.t_wall0 >= self.start_timeout:
+            if self.ready_to_start() or now - self.t_created >= self.start_timeout:
                 if not self.ready_to_start():
                     self.get_logger().warning('start timeout: starting without every agent '
                                               'or the leader')
@@ -417,7 +423,8 @@ class WorldNode(Node):
         stalled step is offered again until its timeout: the leader answers a repeated tick,
         and agents repeat the commands they already sent. A step counts as stalled after
         ``RESEND_PERIOD`` or ``RESEND_SLOWER`` times the previous step's duration, whichever
-        is longer, and every further offer waits twice as long (once a step has finished,
+        is longer but at most half the step timeout (``first_resend_wait``), and every
+        further offer waits twice as long (once a step has finished,
         see ``next_resend_wait``): an overloaded swarm (tens of
         agent processes on two cores, a second or more a step) is not flooded with copies of
         every message, which made it slower still (measured: 100 steps of 50 agent processes
@@ -435,7 +442,12 @@ class WorldNode(Node):
         now = time.monotonic()
         self.step_began = now
         self.deadline = now + self.step_timeout
-        self.resend_wait = first_resend_wait(self.last_step_s)
+        if self.k == 0:
+            # Step 0 completes the start: the world has matched the others' endpoints, but
+            # an agent's reader may not have matched the world's writers yet (DDS matches
+            # each side on its own), so step 0 waits out what is left of start_timeout.
+            self.deadline = max(self.deadline, self.t_created + self.start_timeout)
+        self.resend_wait = first_resend_wait(self.last_step_s, self.step_timeout)
         self.resend_at = now + self.resend_wait
         self.publish_states(self.clock.ns(self.k))
 
