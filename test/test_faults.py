@@ -335,6 +335,10 @@ class Lines:
 
 
 def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
+    """SIGKILL to an agent process: its commands are zeroed until it restarts, the others'
+    never. The step timeout (5 s) stays well above the stalls of DDS itself when a
+    participant dies or joins (up to 2 s measured on a loaded 2-core machine, docs/ros.md
+    "Faults"): with 0.3 s, CI runs zeroed commands of the other agents."""
     path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=60'])
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
     ros_args = ['--ros-args', '-p', f'scenario:={path}']
@@ -347,7 +351,7 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     agents = [agent(i) for i in range(3)]
     world = subprocess.Popen(executable('world') + ros_args + [
-        '-p', f'out_dir:={out}', '-p', 'step_timeout:=0.3'], env=env,
+        '-p', f'out_dir:={out}', '-p', 'step_timeout:=5.0'], env=env,
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     log = Lines(world.stderr)
     restarted = None
@@ -365,7 +369,8 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed'
     missed = summary['missed_commands_per_agent']
-    assert missed[0] == missed[2] == 0 and 0 < missed[1] < sc.steps // 2
+    warnings = [line for line in log.lines if '[WARN]' in line or '[ERROR]' in line]
+    assert missed[0] == missed[2] == 0 and 0 < missed[1] < sc.steps // 2, ''.join(warnings)
     # Every missed step is in the log; the restarted agent answered the last step.
     clock = StepClock(sc.dt)
     stamps = [clock.step_of(msg.header.stamp)
