@@ -338,14 +338,19 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
     """SIGKILL to an agent process: its commands are zeroed until it restarts, the others'
     never. The step timeout (5 s) stays well above the stalls of DDS itself when a
     participant dies or joins (up to 2 s measured on a loaded 2-core machine, docs/ros.md
-    "Faults"): with 0.3 s, CI runs zeroed commands of the other agents."""
+    "Faults"): with 0.3 s, CI runs zeroed commands of the other agents. DDS runs over UDP
+    only: with Fast DDS's shared memory a restarted process once stayed deaf for the rest of
+    a run (the Fast DDS restart problem docs/ros.md names), which is not what this tests."""
     path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=60'])
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
     ros_args = ['--ros-args', '-p', f'scenario:={path}']
+    logs = []
 
     def agent(i):
-        return subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
-                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        logs.append(tmp_path / f'agent_{i}_{len(logs)}.log')
+        with logs[-1].open('w') as err:
+            return subprocess.Popen(executable('agent') + ros_args + ['-p', f'agent_id:={i}'],
+                                    env=env, stdout=subprocess.DEVNULL, stderr=err)
 
     procs = [subprocess.Popen(executable('leader') + ros_args, env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
@@ -362,7 +367,12 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
         wait_for(lambda: log.has('no command from agent(s) [1]'), 30,
                  'the world to miss agent 1')
         restarted = agent(1)
-        world.wait(timeout=RUN_TIMEOUT)
+        try:
+            world.wait(timeout=RUN_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f'the world did not finish in {RUN_TIMEOUT:g} s; it logged\n'
+                        + ''.join(log.lines[-5:]) + 'and the restarted agent\n'
+                        + logs[-1].read_text()[-2000:])
     finally:
         stop(procs + agents + [world] + ([restarted] if restarted else []), timeout=20)
     assert world.returncode == 0, ''.join(log.lines[-20:])
