@@ -111,7 +111,10 @@ class FaultyPublisher(Node):
 def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain, capfd):
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=2',
                                            'record_every=1'])
-    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+    # The faulty node publishes agent 1's commands, so the world counts it as a host of
+    # agents that never subscribes to the odometry: it starts after its start timeout.
+    with InProcessSwarm(path, out, domain_id=ros_domain,
+                        world_params={'start_timeout': 3.0}) as swarm:
         faulty = swarm.add(FaultyPublisher(swarm.world, context=swarm.context))
         swarm.spin_until(lambda: False, RUN_TIMEOUT)
         assert faulty.sent > 20
