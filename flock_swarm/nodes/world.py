@@ -423,12 +423,11 @@ class WorldNode(Node):
         stalled step is offered again until its timeout: the leader answers a repeated tick,
         and agents repeat the commands they already sent. A step counts as stalled after
         ``RESEND_PERIOD`` or ``RESEND_SLOWER`` times the previous step's duration, whichever
-        is longer but at most half the step timeout (``first_resend_wait``), and every
-        further offer waits twice as long (once a step has finished,
-        see ``next_resend_wait``): an overloaded swarm (tens of
-        agent processes on two cores, a second or more a step) is not flooded with copies of
-        every message, which made it slower still (measured: 100 steps of 50 agent processes
-        at 0.5 steps/s, 303 offers, 1919 commands timed out).
+        is longer but at most half the step timeout (``first_resend_wait``). Once a step has
+        finished, every further offer waits twice as long (``next_resend_wait``), so an
+        overloaded swarm (tens of agent processes on two cores, a second or more a step) is
+        not flooded with copies of every message, which made it slower still (measured: 100
+        steps of 50 agent processes at 0.5 steps/s, 303 offers, 1919 commands timed out).
         """
         self.resends += 1
         self.resend_wait = next_resend_wait(self.resend_wait, self.last_step_s)
