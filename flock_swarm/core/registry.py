@@ -116,6 +116,12 @@ def _problem(group: str, name: str, cls) -> str | None:
     return None
 
 
+def describe(cls: type) -> str:
+    """Return a plugin's citation, or the first line of its docstring."""
+    doc = (cls.__doc__ or '').strip().splitlines()
+    return cls.citation or (doc[0] if doc else '')
+
+
 def names(group: str) -> list[str]:
     """Return the registered names of a group, sorted."""
     return list(entries(group))

@@ -170,12 +170,6 @@ class Law:
         """Return the explicit-step stability bounds the scenario's ``dt`` violates."""
         return []
 
-    @classmethod
-    def describe(cls) -> str:
-        """Return the citation, or the first line of the docstring."""
-        doc = (cls.__doc__ or '').strip().splitlines()
-        return cls.citation or (doc[0] if doc else '')
-
 
 def pair_sums(law: Law, q: np.ndarray, p: np.ndarray, edges: EdgeList) -> np.ndarray:
     """Return ``s_i = sum_{j in N_i} pair(i <- j)`` for every agent of an undirected graph.

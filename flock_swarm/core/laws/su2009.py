@@ -58,6 +58,14 @@ class SuParams(Law):
         """Return ``d_alpha = ||d||_sigma``."""
         return float(pot.sigma_of_distance(self.d, self.eps))
 
+    @property
+    def com_closed_form(self) -> bool:
+        """Return whether the centre of mass obeys (45) exactly ([Su09] Theorem 2 (iii)).
+
+        So it does under protocol (33): every agent informed, ``f_gamma`` fed forward.
+        """
+        return self.feedforward and not self.partial
+
     def validate(self, ctx):
         """Check ``0 < d < r``, ``eps > 0``, ``0 < h < 1``, ``0 < a <= b``, ``c1, c2 > 0``."""
         k = 'protocol.'
