@@ -32,13 +32,13 @@ from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
-from flock_swarm.nodes.common import (LOCKSTEP_QOS, StepClock, make_accel,
-                                      make_odometry)
+from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock
 from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from conftest import start_nodes, wait_for
+from ros_messages import make_accel, make_odometry
 
 pytestmark = pytest.mark.ros
 
