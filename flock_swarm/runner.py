@@ -19,12 +19,11 @@ from pathlib import Path
 
 import yaml
 
-from flock_swarm.cli import OneLineParser, accept_sigint
+from flock_swarm.cli import EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml
+from flock_swarm.core.run import check_law_output
+from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml, realize
 from flock_swarm.scenarios import load_mapping
-
-EXIT_USAGE = 2
 
 
 def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Path) -> Path:
@@ -44,7 +43,8 @@ def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Pat
         if seed < 0:
             raise ScenarioError('--seed', f'must be >= 0, got {seed}')
         data['seed'] = seed
-    parse_scenario(data)
+    sc = parse_scenario(data)
+    check_law_output(sc, realize(sc))
     out.mkdir(parents=True, exist_ok=True)
     path = out / 'scenario.yaml'
     path.write_text(yaml.safe_dump(data, sort_keys=False))

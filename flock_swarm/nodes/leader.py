@@ -1,7 +1,7 @@
 """The virtual leader node: publishes ``/leader/odom`` and ``/leader/accel`` every tick.
 
 Lockstep mode: driven by ``/clock``; on tick ``t_k`` the leader advances its model to step
-``k`` (RK4, the same :class:`~flock_swarm.core.dynamics.VirtualLeader` as ``sim``) and
+``k`` (RK4, the same :class:`~flock_swarm.core.leaders.base.VirtualLeader` as ``sim``) and
 publishes its state stamped ``t_k``. Realtime mode: a wall-clock timer of period ``dt``
 advances and publishes.
 """

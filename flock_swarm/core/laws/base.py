@@ -106,8 +106,6 @@ class Law:
     graph_types: ClassVar[tuple[str, ...]] = ('disk', 'fixed', 'barabasi_albert')
     #: Whether the law uses the scenario's ``observers`` groups ([Yu10] eq. (6)-(7)).
     uses_observers: ClassVar[bool] = False
-    #: Whether the law uses the leader's acceleration ``f_gamma`` (``/leader/accel``).
-    uses_leader_acceleration: ClassVar[bool] = False
     #: Default ``metrics.eta_tolerance`` [m/s] of its scenarios.
     eta_tolerance: ClassVar[float] = 0.1
     #: Summary keys for the final value of adaptive state: ``{state key: summary key}``.

@@ -163,7 +163,6 @@ class SuAccel(SuParams):
     name: ClassVar[str] = 'su_accel'
     citation: ClassVar[str] = 'Su, Wang, Lin 2009, eq. (33): leader acceleration fed forward'
     feedforward: ClassVar[bool] = True
-    uses_leader_acceleration: ClassVar[bool] = True
 
 
 @dataclass(frozen=True)
@@ -181,7 +180,6 @@ class SuInformedAccel(SuParams):
                                'f_gamma fed forward')
     partial: ClassVar[bool] = True
     feedforward: ClassVar[bool] = True
-    uses_leader_acceleration: ClassVar[bool] = True
 
     feedforward_to: str = 'informed'
 
