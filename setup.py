@@ -39,5 +39,8 @@ setup(
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
         ],
+        # The launch-free testing API's fixtures (ros_domain, flock_swarm_run...) for every
+        # pytest run in an environment holding flock_swarm.
+        'pytest11': ['flock_swarm = flock_swarm.testing'],
     },
 )

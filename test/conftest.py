@@ -1,42 +1,17 @@
-"""Shared fixtures: unique ROS domain ids so concurrent runs never see each other."""
+"""Fixtures specific to this repository's tests.
 
-import itertools
+The generic ones (``ros_domain``, ``other_ros_domain``, ``flock_swarm_run``,
+``in_process_swarm``) and the wait helpers come from :mod:`flock_swarm.testing`, the pytest
+plugin every user's tests get too.
+"""
+
 import os
 import subprocess
-import time
-
-import pytest
-
-_counter = itertools.count()
 
 # DDS discovery stays on this machine unless the caller asked otherwise (scripts/env.sh sets
-# the same default), so a test run never talks to, or hears from, another host.
+# the same default), so a test run never talks to, or hears from, another host, also in the
+# tests that start processes without a ros_domain fixture.
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-
-
-def _unique_domain() -> int:
-    """Return a ROS domain id unique within this pytest process, in [1, 200].
-
-    Ids are spread over the range by process id, so two pytest processes on one machine are
-    unlikely to collide.
-    """
-    return 1 + (os.getpid() * 37 + next(_counter)) % 200
-
-
-@pytest.fixture
-def ros_domain() -> int:
-    """Return a ROS domain id unique to this test within this pytest process.
-
-    Ids are spread over [1, 200] by process id, so two pytest processes on one machine are
-    unlikely to collide; discovery is limited to localhost by scripts/env.sh (and above).
-    """
-    return _unique_domain()
-
-
-@pytest.fixture
-def other_ros_domain(ros_domain) -> int:
-    """Return a second domain id for the same test, different from :func:`ros_domain`'s."""
-    return _unique_domain()
 
 
 def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
@@ -57,12 +32,3 @@ def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
                              env=env, stdout=subprocess.DEVNULL, stderr=world_stderr,
                              text=True)
     return others, world
-
-
-def wait_for(condition, timeout: float, what: str) -> None:
-    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)

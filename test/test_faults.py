@@ -36,7 +36,8 @@ from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock,
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.sim import interaction_graph, simulate, static_graph
-from conftest import start_nodes, wait_for
+from flock_swarm.testing import wait_for
+from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
 
