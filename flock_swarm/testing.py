@@ -323,7 +323,8 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
 
     The other parameters are :func:`run_swarm`'s.
     """
-    from flock_swarm.sim import json_text, simulate
+    from flock_swarm.core.run import simulate
+    from flock_swarm.outputs import json_text
 
     run = run_swarm(scenario, out, overrides, seed, domain_id, timeout, mode='lockstep',
                     **swarm_args)
