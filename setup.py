@@ -39,6 +39,26 @@ setup(
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
         ],
+        # The built-in laws and leader models, registered exactly as a user's package
+        # registers its own (docs/extending.md): one registry, one code path.
+        'flock_swarm.laws': [
+            'olfati_saber_2006 = flock_swarm.core.laws.su2009:OlfatiSaber2006',
+            'su_informed = flock_swarm.core.laws.su2009:SuInformed',
+            'su_accel = flock_swarm.core.laws.su2009:SuAccel',
+            'su_informed_accel = flock_swarm.core.laws.su2009:SuInformedAccel',
+            'os2003_sink = flock_swarm.core.laws.os2003:OlfatiSaber2003Sink',
+            'zhou_pseudo_leader = flock_swarm.core.laws.zhou2012:ZhouPseudoLeader',
+            'yu_pinning_observer = flock_swarm.core.laws.yu2010:YuPinningObserver',
+            'jadbabaie_leader = flock_swarm.core.laws.jadbabaie2003:JadbabaieLeader',
+        ],
+        'flock_swarm.leaders': [
+            'constant_velocity = flock_swarm.core.leaders.models:ConstantVelocity',
+            'constant_acceleration = flock_swarm.core.leaders.models:ConstantAcceleration',
+            'lorenz = flock_swarm.core.leaders.models:Lorenz',
+            'lu = flock_swarm.core.leaders.models:Lu',
+            'linear = flock_swarm.core.leaders.models:Linear',
+            'sink = flock_swarm.core.leaders.models:Sink',
+        ],
         # The launch-free testing API's fixtures (ros_domain, flock_swarm_run...) for every
         # pytest run in an environment holding flock_swarm.
         'pytest11': ['flock_swarm = flock_swarm.testing'],

@@ -26,9 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from flock_swarm.core.dynamics import VirtualLeader, step_agents
+from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.protocols import SuParams, swarm_control
+from flock_swarm.core.laws.base import swarm_control
+from flock_swarm.core.laws.su2009 import SuParams
+from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.reproduce import machine
 from flock_swarm.scenarios import load
@@ -108,7 +110,7 @@ def time_baseline(sc: Scenario, steps: int) -> float:
     """Check the baseline against ``sim``'s law, then return its mean step time."""
     real = realize(sc)
     q, p = real.q0.copy(), real.p0.copy()
-    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity).state
+    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity).state
     informed = real.agents.informed.tolist()
     reference = swarm_control(sc.law, q, p, disk_graph(q, sc.law.radius), leader,
                               real.agents, sc.dt)

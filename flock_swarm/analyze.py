@@ -25,7 +25,7 @@ import numpy as np
 from flock_swarm.cli import OneLineParser
 from flock_swarm import __version__
 from flock_swarm.bag import BagError, BagReader
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics

@@ -35,11 +35,11 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import components, diffusive_matrix, disk_graph
 from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.potentials import psi_alpha
-from flock_swarm.core.protocols import heading
+from flock_swarm.core.laws.jadbabaie2003 import heading
 from flock_swarm.core.pseudo_leaders import minor_lambda_max, select_pseudo_leaders
 from flock_swarm.core.run import simulate, simulate_stack
 from flock_swarm.core.scenario import Scenario, realize
@@ -376,7 +376,7 @@ def analyse_su_lorenz(sc: Scenario, summary: dict, series: dict) -> dict:
         'components_final': summary['components_final'],
         'collisions': summary['collisions'],
     }
-    if sc.law.name == 'su_accel':
+    if getattr(sc.law, 'com_closed_form', False):
         e_cf, v_cf = com_closed_form(series['t'], e[0], v[0], sc.law.c1, sc.law.c2)
         out['closed_form_position_dev'] = float(np.linalg.norm(e - e_cf, axis=1).max())
         out['closed_form_velocity_dev'] = float(np.linalg.norm(v - v_cf, axis=1).max())
@@ -953,7 +953,7 @@ def figure_su_informed(sc: Scenario, summary: dict, series: dict, m: dict,
                    '(cf. plot (f))')
     t = series['t']
     ax2.plot(t, series['metric_eta'], color='tab:green', label='eta (ours)')
-    paper = 0.89 if sc.law.name == 'su_informed_accel' else 0.86
+    paper = 0.89 if sc.name == 'su2009_fig7' else 0.86
     ax2.axhline(paper, color='tab:green', ls=':', label=f'paper: {paper:g}')
     ax2.set_ylim(-0.02, 1.02)
     ax2.set_xlabel('t [s]')
@@ -976,7 +976,7 @@ def figure_su_lorenz(sc: Scenario, summary: dict, series: dict, m: dict,
     t = series['t']
     fig, axes = plt.subplots(1, 2, figsize=FIG_SIZE)
     closed = None
-    if sc.law.name == 'su_accel':
+    if getattr(sc.law, 'com_closed_form', False):
         closed = com_closed_form(t, e[0], v[0], sc.law.c1, sc.law.c2)
     for ax, err, k, label in ((axes[0], e, 0, '‖qbar - q_gamma‖ [m]'),
                               (axes[1], v, 1, '‖pbar - p_gamma‖ [m/s]')):

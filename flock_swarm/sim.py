@@ -12,7 +12,8 @@ from pathlib import Path
 
 from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.run import simulate
+from flock_swarm.core import registry
+from flock_swarm.core.run import check_law_output, simulate
 from flock_swarm.core.scenario import realize
 from flock_swarm.core.stability import check_step
 from flock_swarm.outputs import ensure_writable, write_outputs
@@ -38,14 +39,36 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def listing() -> str:
+    """Return the ``sim --list`` text: presets, laws and leader models with their sources.
+
+    :raises ScenarioError: when a registered plugin cannot be loaded (named).
+    """
+    from flock_swarm.scenarios import preset_names
+    lines = ['presets (sim NAME):']
+    lines += [f'  {name}' for name in preset_names()]
+    for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
+                         ('leader models (leader.model):', registry.LEADER_GROUP)):
+        found = registry.entries(group)
+        width = max((len(name) for name in found), default=0)
+        lines += ['', title]
+        for name, entry in found.items():
+            cls = registry.load(group, name)
+            lines.append(f'  {name:<{width}}  [{entry.package}]  {registry.describe(cls)}')
+    return '\n'.join(lines) + '\n'
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``sim`` from the command line; return the exit status."""
     parser = build_parser()
     if argv is None:
         argv = sys.argv[1:]
     if argv and argv[0] == '--list':
-        from flock_swarm.scenarios import preset_names
-        print('\n'.join(preset_names()))
+        try:
+            print(listing(), end='')
+        except ScenarioError as exc:
+            print(f'sim: error: {exc}', file=sys.stderr)
+            return EXIT_USAGE
         return 0
     try:
         args = parser.parse_args(argv)
@@ -57,7 +80,9 @@ def main(argv: list[str] | None = None) -> int:
         sc = load(args.scenario, args.overrides, args.seed)
         if args.seed is not None and args.seed < 0:
             raise ScenarioError('--seed', f'must be >= 0, got {args.seed}')
-        violations = check_step(sc, realize(sc))
+        real = realize(sc)
+        check_law_output(sc, real)
+        violations = check_step(sc, real)
         if violations and not args.allow_unstable:
             raise ScenarioError('dt', violations[0].message(sc.dt).split(': ', 1)[1])
     except ScenarioError as exc:

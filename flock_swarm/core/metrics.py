@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from flock_swarm.core import potentials as pot
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, components, disk_graph, pair_sq_distances
 
 #: The names of the per-step metrics, in the order of :func:`step_metrics`.
@@ -166,7 +166,7 @@ def su_energy(q: np.ndarray, p: np.ndarray, leader: LeaderState, law, informed: 
     :param q: positions, shape ``(n, dim)``.
     :param p: velocities, shape ``(n, dim)``.
     :param leader: the virtual leader.
-    :param law: a :class:`~flock_swarm.core.protocols.SuParams` law.
+    :param law: a :class:`~flock_swarm.core.laws.su2009.SuParams` law.
     :param informed: ``h_i`` as booleans.
     :param c1: the position gain.
     :return: ``Q``.

@@ -100,20 +100,23 @@ def select_for_graph(edges: EdgeList, w: float, alpha: float) -> PseudoLeaderSel
 def reselect(law, agents, edges: EdgeList) -> PseudoLeaderSelection:
     """Re-apply Theorem 1 to the current graph (Section 4.4), in place.
 
-    Agents that become pseudo-leaders start from the initial gain ``law.h0``; those that stay
-    keep their adapted gain.
+    Agents that become pseudo-leaders start from the law's initial adaptive state (``h0``);
+    those that stay keep their adapted state.
 
-    :param law: a :class:`~flock_swarm.core.protocols.ZhouPseudoLeader` law.
-    :param agents: per-agent data of the whole swarm (``informed``, ``adaptive``), updated.
+    :param law: a law with pseudo-leader gains (:meth:`~flock_swarm.core.laws.base.Law.
+        pseudo_leader_gains`), such as [Zhou12]'s.
+    :param agents: per-agent data of the whole swarm (``informed``, ``state``), updated.
     :param edges: the current graph; edges of zero weight are not couplings.
     :return: the new selection.
     """
     keep = edges.weight > 0
     coupled = EdgeList(edges.n, edges.i[keep], edges.j[keep], edges.weight[keep])
-    chosen = select_for_graph(coupled, law.w, law.alpha)
+    chosen = select_for_graph(coupled, *law.pseudo_leader_gains())
     new = np.zeros_like(agents.informed)
     new[list(chosen.ids)] = True
-    agents.adaptive[new & ~agents.informed] = law.h0
+    fresh = new & ~agents.informed
+    for key, start in law.initial_state(new.shape[0]).items():
+        agents.state[key][fresh] = start[fresh]
     agents.informed[:] = new
     return chosen
 
@@ -125,7 +128,7 @@ class Reselector:
     """
 
     def __init__(self, law) -> None:
-        """Create it for a :class:`~flock_swarm.core.protocols.ZhouPseudoLeader` law."""
+        """Create it for a law with pseudo-leader gains (such as [Zhou12]'s)."""
         self.law = law
         self.previous: tuple[bytes, bytes] | None = None
         self.count = 0

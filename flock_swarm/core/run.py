@@ -4,7 +4,7 @@
 to its end; :class:`RunLog` is the bookkeeping of a run (whole-run metrics and the subsampled
 time series) shared by ``sim``, the world node and ``analyze``; :func:`build_summary` assembles
 ``summary.json`` (see ``docs/outputs.md``). The step uses the same law functions as the agent
-node (:mod:`flock_swarm.core.protocols`). No file I/O here: :mod:`flock_swarm.outputs` writes.
+node (:mod:`flock_swarm.core.laws`). No file I/O here: :mod:`flock_swarm.outputs` writes.
 """
 
 import ctypes
@@ -15,12 +15,14 @@ from typing import Callable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
+from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
-from flock_swarm.core.protocols import AgentData, advance_adaptive, swarm_control
+from flock_swarm.core.laws.base import AgentData, advance_state, output_problem, swarm_control
+from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.pseudo_leaders import Reselector
+from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
 
 #: glibc's mallopt() parameters (malloc.h) and the values simulate() sets: blocks below
@@ -141,6 +143,32 @@ def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
     return fixed_graph(real.adjacency)
 
 
+def check_law_output(sc: Scenario, real: Realization) -> None:
+    """Evaluate the scenario's law once at the initial state; raise if its output is unusable.
+
+    A law from a plugin is code this package has never seen: an exception, a wrong shape or
+    non-finite values are reported before the run as one line naming its entry point, not
+    as a traceback or a silently diverged run.
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :raises PluginError: naming the entry point and what went wrong.
+    """
+    entry = entries(LAW_GROUP).get(sc.law.name)
+    label = entry.label if entry is not None else sc.law.name
+    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity).state
+    try:
+        with np.errstate(all='ignore'):
+            edges = interaction_graph(sc, real, real.q0, static_graph(sc, real))
+            u = swarm_control(sc.law, real.q0, real.p0, edges, leader, real.agents, sc.dt)
+    except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
+        raise PluginError('protocol.name', f'{label}: raised {type(exc).__name__} at the '
+                          f'initial state: {exc}') from None
+    problem = output_problem(u, sc.n_agents, sc.dim)
+    if problem is not None:
+        raise PluginError('protocol.name', f'{label}: {problem}')
+
+
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
              progress_every: float = 2.0) -> SimResult:
     """Run a scenario to its end and return the summary and the recorded time series.
@@ -180,8 +208,8 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     keep_freed_memory()
     sc = scenarios[0]
     reals = [realize(s) for s in scenarios]
-    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
-    intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
+    intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
     stack = _Stack(scenarios, reals, static_graph(sc, reals[0]) if len(reals) == 1 else None)
     started = time.monotonic()
     # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
@@ -242,7 +270,6 @@ def stack_mismatch(scenarios: list[Scenario]) -> str | None:
                 'metrics': (sc.eta_tolerance, sc.collision_distance)
                 == (first.eta_tolerance, first.collision_distance),
                 'leader': sc.leader.model == first.leader.model
-                and sc.leader.field == first.leader.field
                 and np.array_equal(sc.leader.position, first.leader.position)
                 and np.array_equal(sc.leader.velocity, first.leader.velocity),
                 'observers': bool(sc.observers) == bool(first.observers)}
@@ -316,15 +343,12 @@ class _Stack:
 
     def extra(self, rows: slice) -> dict:
         """Return the per-agent protocol state to record for some rows."""
-        return {} if self.agents.adaptive is None else {'h': self.agents.adaptive[rows]}
+        return {key: value[rows] for key, value in self.agents.state.items()}
 
 
 def stack_agents(parts: list[AgentData]) -> AgentData:
     """Return the per-agent data of several realisations, stacked in order."""
-    def joined(arrays):
-        return None if arrays[0] is None else np.concatenate(arrays)
-    return AgentData(np.concatenate([a.informed for a in parts]),
-                     joined([a.nav_gains for a in parts]), joined([a.adaptive for a in parts]))
+    return AgentData.concatenate(parts)
 
 
 def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every):
@@ -369,7 +393,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                                **stack.extra(rows))
             if step == steps:
                 break
-            advance_adaptive(law, q, p, state, stack.agents, dt)
+            advance_state(law, q, p, state, stack.agents, dt)
             stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
             leader.step(dt)
             now = time.monotonic()
@@ -426,6 +450,6 @@ def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics
         summary['pseudo_leader_certificate'] = {
             'lambda_max': real.selection.lambda_max, 'alpha': real.selection.alpha,
             'satisfied': real.selection.satisfied, 'components': real.selection.components}
-    if 'h' in series:
-        summary['adaptive_gain_final'] = [float(x) for x in series['h'][-1]]
+    for key, name in sc.law.state_summary.items():
+        summary[name] = [float(x) for x in series[key][-1]]
     return summary

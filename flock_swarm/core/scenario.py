@@ -10,7 +10,6 @@ Agent ids are 0-based everywhere (``agent_0`` is the papers' agent 1).
 """
 
 import dataclasses
-import math
 import re
 from dataclasses import dataclass
 from typing import Any
@@ -18,31 +17,23 @@ from typing import Any
 import numpy as np
 import yaml
 
-from flock_swarm.core.dynamics import FieldSpec
+from flock_swarm.core import registry
+from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, only, positive,
+                                     require, text, vector)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
-from flock_swarm.core.protocols import PROTOCOLS, AgentData, Protocol
+from flock_swarm.core.laws.base import AgentData, Law, LawContext
+from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
 
 TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
             'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
             'intrinsic', 'metrics')
-LEADER_MODELS = ('constant_velocity', 'constant_acceleration', 'lorenz', 'lu', 'linear', 'sink')
-INTRINSIC_MODELS = ('none', 'same_as_leader', 'lorenz', 'lu', 'linear')
+#: ``intrinsic.model`` values besides the registered autonomous leader models.
+INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
 INFORMED_SELECT = ('all', 'random', 'first', 'ids', 'pseudo_leaders')
 
-
-# --------------------------------------------------------------------------------------------
-# Low-level checks
-
-#: The largest float; a YAML integer beyond it cannot be converted (OverflowError).
-_FLOAT_MAX = int(np.finfo(float).max)
-#: The largest magnitude of any scenario number (positions in m, velocities in m/s, gains,
-#: radii). Finite but huge values overflow float64 in the laws' squares and pair sums
-#: (``||q_i - q_j||^2`` of 1e300 is inf) long before they mean anything physical; 1e12 keeps
-#: squares, products and sums over a million agents far inside the float range.
-MAX_MAGNITUDE = 1e12
 #: The most agents a scenario may have: ten times the largest swarm the simulator is
 #: benchmarked on (bench/bench_sim.py); beyond it NumPy refuses the arrays or memory runs out.
 MAX_AGENTS = 1_000_000
@@ -52,84 +43,9 @@ MIN_DT = 1e-9
 MAX_DURATION = 2 ** 31 - 1
 
 
-def _number(value: Any, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(key, f'expected a number, got {value!r}')
-    if isinstance(value, int) and abs(value) > _FLOAT_MAX:
-        raise ScenarioError(key, f'must be finite, got an integer of {value.bit_length()} bits '
-                            '(beyond the float range)')
-    if not math.isfinite(value):
-        raise ScenarioError(key, f'must be finite, got {value!r}')
-    if abs(value) > MAX_MAGNITUDE:
-        raise ScenarioError(key, f'magnitude must be <= {MAX_MAGNITUDE:g}, got {value!r}')
-    return float(value)
-
-
-def _integer(value: Any, key: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        raise ScenarioError(key, f'expected an integer, got {value!r}')
-    return int(value)
-
-
-def _positive(value: Any, key: str) -> float:
-    x = _number(value, key)
-    if x <= 0.0:
-        raise ScenarioError(key, f'must be > 0, got {value!r}')
-    return x
-
-
-def _vector(value: Any, key: str, length: int) -> np.ndarray:
-    if not isinstance(value, (list, tuple)):
-        raise ScenarioError(key, f'expected a list of {length} numbers, got {value!r}')
-    if len(value) != length:
-        raise ScenarioError(key, f'expected {length} values (dim = {length}), got {len(value)}')
-    return np.array([_number(v, f'{key}[{k}]') for k, v in enumerate(value)])
-
-
-def _matrix(value: Any, key: str, rows: int, cols: int) -> np.ndarray:
-    if not isinstance(value, (list, tuple)) or len(value) != rows:
-        raise ScenarioError(key, f'expected a {rows} x {cols} matrix (list of {rows} rows)')
-    return np.array([_vector(row, f'{key}[{k}]', cols) for k, row in enumerate(value)])
-
-
-def _text(value: Any, key: str, default: str) -> str:
-    # Numbers and booleans read as text (``name: 2009``); dates, binary and containers would
-    # not survive the scenario's JSON copies (scenario.json, the bag's metadata).
-    if value is None:
-        return default
-    if not isinstance(value, (str, int, float)) or (isinstance(value, float)
-                                                    and not math.isfinite(value)):
-        raise ScenarioError(key, f'expected text, got {value!r}'[:200])
-    return str(value)
-
-
-def _mapping(value: Any, key: str) -> dict:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise ScenarioError(key, f'expected a mapping, got {value!r}')
-    return value
-
-
-def _only(section: dict, allowed, prefix: str) -> None:
-    for name in section:
-        if name not in allowed:
-            raise ScenarioError(f'{prefix}{name}',
-                                f'unknown key (expected one of: {", ".join(allowed)})')
-
-
-def _choice(value: Any, key: str, options) -> str:
-    if value not in options:
-        raise ScenarioError(key, f'unknown value {value!r} '
-                            f'(expected one of: {", ".join(options)})')
-    return value
-
-
 def _box(value: Any, key: str, dim: int) -> np.ndarray:
     # + 0.0 turns -0.0 into 0.0: NumPy's uniform(0.0, -0.0) raises 'high - low < 0'.
-    box = _matrix(value, key, dim, 2) + 0.0
+    box = matrix(value, key, dim, 2) + 0.0
     for k in range(dim):
         if box[k, 0] > box[k, 1]:
             raise ScenarioError(f'{key}[{k}]',
@@ -143,10 +59,9 @@ def _box(value: Any, key: str, dim: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LeaderSpec:
-    """The virtual leader: velocity field and initial state."""
+    """The virtual leader: its model and initial state."""
 
-    model: str
-    field: FieldSpec
+    model: LeaderModel
     position: np.ndarray
     velocity: np.ndarray
 
@@ -184,7 +99,7 @@ class Scenario:
     duration: float
     seed: int
     record_every: int
-    law: Protocol
+    law: Law
     graph_type: str
     graph: dict
     informed: InformedSpec
@@ -194,7 +109,7 @@ class Scenario:
     positions: np.ndarray | None
     velocities: np.ndarray | None
     leader: LeaderSpec
-    intrinsic: FieldSpec | None
+    intrinsic: LeaderModel | None
     eta_tolerance: float
     collision_distance: float
     raw: dict
@@ -212,53 +127,57 @@ def parse_scenario(data: Any) -> Scenario:
     :return: the scenario.
     :raises ScenarioError: on the first invalid value.
     """
-    data = _mapping(data, '<scenario>')
-    _only(data, TOP_KEYS, '')
+    data = mapping(data, '<scenario>')
+    only(data, TOP_KEYS, '')
     for key in ('dim', 'n_agents', 'dt', 'duration', 'protocol', 'leader'):
         if key not in data:
             raise ScenarioError(key, 'missing required key')
-    name = _text(data.get('name'), 'name', 'unnamed')
+    name = text(data.get('name'), 'name', 'unnamed')
     # The name is the default output directory (out/<name>, out/<name>_ros): one plain
     # path component, so a scenario file cannot send the outputs anywhere else.
     if name in ('', '.', '..') or any(c in name for c in '/\\\0'):
         raise ScenarioError('name', f'must be usable as a directory name (no /, \\ or NUL, '
                             f'not . or ..), got {name!r}')
-    dim = _integer(data['dim'], 'dim')
+    dim = integer(data['dim'], 'dim')
     if dim not in (2, 3):
         raise ScenarioError('dim', f'must be 2 or 3, got {dim}')
-    n = _integer(data['n_agents'], 'n_agents')
+    n = integer(data['n_agents'], 'n_agents')
     # Two at least: the closest approach, collisions and graph components of summary.json are
     # pair metrics, and with one agent they have no finite value to write.
     if not 2 <= n <= MAX_AGENTS:
         raise ScenarioError('n_agents', f'must be in [2, {MAX_AGENTS}], got {n}')
-    dt = _positive(data['dt'], 'dt')
+    dt = positive(data['dt'], 'dt')
     if dt < MIN_DT:
         raise ScenarioError('dt', f'must be >= {MIN_DT:g} s (ROS stamps count whole '
                             f'nanoseconds), got {dt!r}')
-    duration = _positive(data['duration'], 'duration')
+    duration = positive(data['duration'], 'duration')
     if duration > MAX_DURATION:
         raise ScenarioError('duration', f'must be <= {MAX_DURATION} s (ROS stamps count '
                             f'seconds in 32 bits), got {duration!r}')
     if duration < dt:
         raise ScenarioError('duration', f'must be >= dt ({dt}), got {duration}')
-    seed = _integer(data.get('seed', 0), 'seed')
+    seed = integer(data.get('seed', 0), 'seed')
     if seed < 0:
         raise ScenarioError('seed', f'must be >= 0, got {seed}')
-    record_every = _integer(data.get('record_every', 1), 'record_every')
+    record_every = integer(data.get('record_every', 1), 'record_every')
     if record_every < 1:
         raise ScenarioError('record_every', f'must be >= 1, got {record_every}')
 
-    law = _parse_law(_mapping(data['protocol'], 'protocol'), dim)
-    graph_type, graph = _parse_graph(_mapping(data.get('graph'), 'graph'), n)
-    if law.name == 'jadbabaie_leader' and graph_type != 'disk':
-        raise ScenarioError('graph.type', 'jadbabaie_leader supports only the disk graph')
-    informed = _parse_informed(_mapping(data.get('informed'), 'informed'), n, law)
+    protocol = mapping(data['protocol'], 'protocol')
+    graph_type, graph = _parse_graph(mapping(data.get('graph'), 'graph'), n)
+    leader_raw = data['leader'].get('model') if isinstance(data['leader'], dict) else None
+    law = _parse_law(protocol, LawContext(dim, n, graph_type,
+                                          leader_raw if isinstance(leader_raw, str) else None))
+    if graph_type not in law.graph_types:
+        raise ScenarioError('graph.type', f'{law.name} supports only the '
+                            f'{" or ".join(law.graph_types)} graph')
+    informed = _parse_informed(mapping(data.get('informed'), 'informed'), n, law)
     observers = _parse_observers(data.get('observers'), n, dim, law)
-    init = _mapping(data.get('initial'), 'initial')
-    _only(init, ('position_box', 'velocity_box', 'positions', 'velocities'), 'initial.')
-    positions = (_matrix(init['positions'], 'initial.positions', n, dim)
+    init = mapping(data.get('initial'), 'initial')
+    only(init, ('position_box', 'velocity_box', 'positions', 'velocities'), 'initial.')
+    positions = (matrix(init['positions'], 'initial.positions', n, dim)
                  if 'positions' in init else None)
-    velocities = (_matrix(init['velocities'], 'initial.velocities', n, dim)
+    velocities = (matrix(init['velocities'], 'initial.velocities', n, dim)
                   if 'velocities' in init else None)
     position_box = _box(init['position_box'], 'initial.position_box', dim) \
         if 'position_box' in init else None
@@ -268,104 +187,58 @@ def parse_scenario(data: Any) -> Scenario:
         raise ScenarioError('initial.position_box', 'missing (or give initial.positions)')
     if velocities is None and velocity_box is None:
         raise ScenarioError('initial.velocity_box', 'missing (or give initial.velocities)')
-    leader = _parse_leader(_mapping(data['leader'], 'leader'), dim)
-    intrinsic = _parse_intrinsic(_mapping(data.get('intrinsic'), 'intrinsic'), dim, leader)
-    metrics = _mapping(data.get('metrics'), 'metrics')
-    _only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
-    eta_tol = _positive(metrics.get('eta_tolerance', 0.1), 'metrics.eta_tolerance')
-    coll = _positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
-    return Scenario(name, _text(data.get('description'), 'description', ''),
-                    _text(data.get('reference'), 'reference', ''),
+    leader = _parse_leader(mapping(data['leader'], 'leader'), dim)
+    intrinsic = _parse_intrinsic(mapping(data.get('intrinsic'), 'intrinsic'), dim, leader)
+    metrics = mapping(data.get('metrics'), 'metrics')
+    only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
+    eta_tol = positive(metrics.get('eta_tolerance', law.eta_tolerance), 'metrics.eta_tolerance')
+    coll = positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
+    return Scenario(name, text(data.get('description'), 'description', ''),
+                    text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
                     intrinsic, eta_tol, coll, data)
 
 
-def _parse_law(section: dict, dim: int) -> Protocol:
+def _parse_law(section: dict, ctx: LawContext) -> Law:
     if 'name' not in section:
-        raise ScenarioError('protocol.name', f'missing (expected one of: {", ".join(PROTOCOLS)})')
-    # A list or mapping here is not hashable: check the type before the lookup.
-    cls = PROTOCOLS.get(section['name']) if isinstance(section['name'], str) else None
-    if cls is None:
-        raise ScenarioError('protocol.name', f'unknown protocol {section["name"]!r} '
-                            f'(expected one of: {", ".join(PROTOCOLS)})')
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    _only(section, ('name', *fields), 'protocol.')
+        raise ScenarioError('protocol.name', 'missing (expected one of: '
+                            f'{", ".join(registry.names(registry.LAW_GROUP))})')
+    cls = registry.law_class(section['name'])
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    only(section, ('name', *fields), 'protocol.')
     values = {}
     for key, value in section.items():
         if key == 'name':
             continue
         if fields[key].type in (int, 'int'):
-            values[key] = _integer(value, f'protocol.{key}')
+            values[key] = integer(value, f'protocol.{key}')
         else:
-            values[key] = _number(value, f'protocol.{key}')
+            values[key] = number(value, f'protocol.{key}')
     law = cls(**values)
-    _check_law(law, dim)
+    law.validate(ctx)
     return law
 
 
-def _require(cond: bool, key: str, reason: str) -> None:
-    if not cond:
-        raise ScenarioError(key, reason)
-
-
-def _check_law(law: Protocol, dim: int) -> None:
-    """Raise :class:`ScenarioError` for law parameters outside their papers' domain."""
-    v = dataclasses.asdict(law)
-    k = 'protocol.'
-    if law.name in ('olfati_saber_2006', 'su_informed', 'su_accel', 'su_informed_accel'):
-        _require(v['r'] > 0, k + 'r', f'must be > 0, got {v["r"]}')
-        _require(0 < v['d'] < v['r'], k + 'd', f'must satisfy 0 < d < r = {v["r"]}, got {v["d"]}')
-        _require(v['eps'] > 0, k + 'eps', f'must be > 0, got {v["eps"]}')
-        _require(0 < v['h'] < 1, k + 'h', f'must be in (0, 1), got {v["h"]}')
-        _require(v['a'] > 0, k + 'a', f'must be > 0, got {v["a"]}')
-        _require(v['b'] >= v['a'], k + 'b', f'must be >= a = {v["a"]}, got {v["b"]}')
-        _require(v['c1'] > 0, k + 'c1', f'must be > 0, got {v["c1"]}')
-        _require(v['c2'] > 0, k + 'c2', f'must be > 0, got {v["c2"]}')
-    elif law.name == 'os2003_sink':
-        _require(v['d'] > 0, k + 'd', f'must be > 0, got {v["d"]}')
-        _require(v['r'] > v['d'], k + 'r', f'must be > d = {v["d"]}, got {v["r"]}')
-        _require(v['a'] > 0, k + 'a', f'must be > 0, got {v["a"]}')
-        _require(v['b'] > v['a'], k + 'b', f'must be > a = {v["a"]} (eq. (20)), got {v["b"]}')
-        _require(0 < v['delta'] < 1, k + 'delta', f'must be in (0, 1), got {v["delta"]}')
-        _require(v['k'] >= 1, k + 'k', f'must be a positive integer, got {v["k"]}')
-        for name in ('c_d', 'c1', 'c2'):
-            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
-    elif law.name == 'zhou_pseudo_leader':
-        for name in ('sigma', 'c1', 'c2', 'w', 'k', 'r'):
-            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
-        _require(v['h0'] >= 0, k + 'h0', f'must be >= 0, got {v["h0"]}')
-        _require(v['alpha'] >= 0, k + 'alpha', f'must be >= 0, got {v["alpha"]}')
-    elif law.name == 'yu_pinning_observer':
-        for name in ('a', 'c_bar', 'r_s'):
-            _require(v[name] > 0, k + name, f'must be > 0, got {v[name]}')
-        _require(v['b'] > v['a'], k + 'b', f'must be > a = {v["a"]}, got {v["b"]}')
-        _require(v['c'] >= 0, k + 'c', f'must be >= 0, got {v["c"]}')
-    elif law.name == 'jadbabaie_leader':
-        _require(dim == 2, 'dim', 'jadbabaie_leader is a planar (dim = 2) heading model')
-        _require(v['r'] > 0, k + 'r', f'must be > 0, got {v["r"]}')
-        _require(v['speed'] > 0, k + 'speed', f'must be > 0, got {v["speed"]}')
-
-
 def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
-    kind = _choice(section.get('type', 'disk'), 'graph.type', GRAPH_TYPES)
+    kind = choice(section.get('type', 'disk'), 'graph.type', GRAPH_TYPES)
     if kind == 'disk':
-        _only(section, ('type',), 'graph.')
+        only(section, ('type',), 'graph.')
         return kind, {}
     if kind == 'fixed':
-        _only(section, ('type', 'adjacency'), 'graph.')
+        only(section, ('type', 'adjacency'), 'graph.')
         if 'adjacency' not in section:
             raise ScenarioError('graph.adjacency', 'missing (required for a fixed graph)')
-        adj = _matrix(section['adjacency'], 'graph.adjacency', n, n)
+        adj = matrix(section['adjacency'], 'graph.adjacency', n, n)
         if not np.allclose(adj, adj.T):
             raise ScenarioError('graph.adjacency', 'must be symmetric')
         off = adj - np.diag(np.diag(adj))
         if (off < 0).any():
             raise ScenarioError('graph.adjacency', 'off-diagonal weights must be >= 0')
         return kind, {'adjacency': off}
-    _only(section, ('type', 'm0', 'm'), 'graph.')
-    m0 = _integer(section.get('m0', 5), 'graph.m0')
-    m = _integer(section.get('m', 5), 'graph.m')
+    only(section, ('type', 'm0', 'm'), 'graph.')
+    m0 = integer(section.get('m0', 5), 'graph.m0')
+    m = integer(section.get('m', 5), 'graph.m')
     if not 1 <= m0 <= n:
         raise ScenarioError('graph.m0', f'must be in [1, n_agents = {n}], got {m0}')
     if not 1 <= m <= m0:
@@ -373,26 +246,26 @@ def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
     return kind, {'m0': m0, 'm': m}
 
 
-def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
-    _only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
-    select = _choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
+def _parse_informed(section: dict, n: int, law: Law) -> InformedSpec:
+    only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
+    select = choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
     # Every value given is validated, also those the selection does not use: the scenario is
     # recorded as run (scenario.json, the bag's metadata), so it must hold only sound values.
     count = fraction = None
     ids: tuple[int, ...] = ()
     if 'count' in section:
-        count = _integer(section['count'], 'informed.count')
+        count = integer(section['count'], 'informed.count')
         if not 0 <= count <= n:
             raise ScenarioError('informed.count', f'must be in [0, {n}], got {count}')
     if 'fraction' in section:
-        fraction = _number(section['fraction'], 'informed.fraction')
+        fraction = number(section['fraction'], 'informed.fraction')
         if not 0.0 <= fraction <= 1.0:
             raise ScenarioError('informed.fraction', f'must be in [0, 1], got {fraction}')
     if 'ids' in section or select == 'ids':
         raw = section.get('ids')
         if not isinstance(raw, (list, tuple)):
             raise ScenarioError('informed.ids', f'expected a list of agent ids, got {raw!r}')
-        ids = tuple(_integer(v, f'informed.ids[{k}]') for k, v in enumerate(raw))
+        ids = tuple(integer(v, f'informed.ids[{k}]') for k, v in enumerate(raw))
         for k, v in enumerate(ids):
             if not 0 <= v < n:
                 raise ScenarioError(f'informed.ids[{k}]', f'agent id must be in [0, {n - 1}], '
@@ -407,9 +280,9 @@ def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
         count = fraction = None
     if select != 'ids':
         ids = ()
-    if select == 'pseudo_leaders' and law.name != 'zhou_pseudo_leader':
-        raise ScenarioError('informed.select', 'pseudo_leaders needs protocol '
-                            'zhou_pseudo_leader (it uses w and alpha)')
+    if select == 'pseudo_leaders' and law.pseudo_leader_gains() is None:
+        raise ScenarioError('informed.select', f'pseudo_leaders needs a law with the gains '
+                            f'(w, alpha) of Zhou et al. Theorem 1; {law.name} has none')
     reselect = section.get('reselect', False)
     if not isinstance(reselect, bool):
         raise ScenarioError('informed.reselect', f'expected true or false, got {reselect!r}')
@@ -418,26 +291,27 @@ def _parse_informed(section: dict, n: int, law: Protocol) -> InformedSpec:
     return InformedSpec(select, count, fraction, ids, reselect)
 
 
-def _parse_observers(value: Any, n: int, dim: int, law: Protocol) -> tuple[ObserverSpec, ...]:
+def _parse_observers(value: Any, n: int, dim: int, law: Law) -> tuple[ObserverSpec, ...]:
     if value is None:
         return ()
-    if law.name != 'yu_pinning_observer':
-        raise ScenarioError('observers', 'only used by protocol yu_pinning_observer')
+    if not law.uses_observers:
+        raise ScenarioError('observers', f'not used by protocol {law.name} (only by laws '
+                            'with pinned observers, such as yu_pinning_observer)')
     if not isinstance(value, list):
         raise ScenarioError('observers', 'expected a list of observer groups')
     groups = []
     seen: set[int] = set()
     for g, raw in enumerate(value):
         key = f'observers[{g}]'
-        section = _mapping(raw, key)
-        _only(section, ('ids', 'H', 'H_tilde', 'D', 'D_tilde'), key + '.')
+        section = mapping(raw, key)
+        only(section, ('ids', 'H', 'H_tilde', 'D', 'D_tilde'), key + '.')
         for name in ('ids', 'H', 'H_tilde', 'D', 'D_tilde'):
             if name not in section:
                 raise ScenarioError(f'{key}.{name}', 'missing')
         ids_raw = section['ids']
         if not isinstance(ids_raw, list) or not ids_raw:
             raise ScenarioError(f'{key}.ids', 'expected a non-empty list of agent ids')
-        ids = tuple(_integer(v, f'{key}.ids[{k}]') for k, v in enumerate(ids_raw))
+        ids = tuple(integer(v, f'{key}.ids[{k}]') for k, v in enumerate(ids_raw))
         for k, v in enumerate(ids):
             if not 0 <= v < n:
                 raise ScenarioError(f'{key}.ids[{k}]', f'agent id must be in [0, {n - 1}]')
@@ -448,68 +322,45 @@ def _parse_observers(value: Any, n: int, dim: int, law: Protocol) -> tuple[Obser
         m = len(h) if isinstance(h, list) else 0
         if m < 1:
             raise ScenarioError(f'{key}.H', 'expected an m x dim matrix with m >= 1')
-        mats = {'H': _matrix(h, f'{key}.H', m, dim),
-                'H_tilde': _matrix(section['H_tilde'], f'{key}.H_tilde', m, dim),
-                'D': _matrix(section['D'], f'{key}.D', dim, m),
-                'D_tilde': _matrix(section['D_tilde'], f'{key}.D_tilde', dim, m)}
+        mats = {'H': matrix(h, f'{key}.H', m, dim),
+                'H_tilde': matrix(section['H_tilde'], f'{key}.H_tilde', m, dim),
+                'D': matrix(section['D'], f'{key}.D', dim, m),
+                'D_tilde': matrix(section['D_tilde'], f'{key}.D_tilde', dim, m)}
         groups.append(ObserverSpec(ids, mats['D'] @ mats['H'], mats['D_tilde'] @ mats['H_tilde']))
     return tuple(groups)
 
 
-def _parse_field(section: dict, model: str, prefix: str, dim: int) -> FieldSpec:
-    if model in ('lorenz', 'lu'):
-        _require(dim == 3, 'dim', f'the {model} model needs dim = 3, got {dim}')
-        params = _mapping(section.get('params'), prefix + 'params')
-        allowed = ('sigma', 'rho', 'beta') if model == 'lorenz' else ('a', 'b', 'c')
-        _only(params, allowed, prefix + 'params.')
-        return FieldSpec(model, {k: _number(v, f'{prefix}params.{k}') for k, v in params.items()})
-    if model == 'linear':
-        if 'A' not in section:
-            raise ScenarioError(prefix + 'A', 'missing (required for the linear model)')
-        return FieldSpec('linear', {'A': _matrix(section['A'], prefix + 'A', dim, dim).tolist()})
-    raise AssertionError(model)
-
-
 def _parse_leader(section: dict, dim: int) -> LeaderSpec:
-    model = _choice(section.get('model'), 'leader.model', LEADER_MODELS)
-    allowed = {'constant_velocity': ('model', 'position', 'velocity'),
-               'constant_acceleration': ('model', 'position', 'velocity', 'acceleration'),
-               'lorenz': ('model', 'position', 'velocity', 'params'),
-               'lu': ('model', 'position', 'velocity', 'params'),
-               'linear': ('model', 'position', 'velocity', 'A'),
-               'sink': ('model', 'position')}[model]
-    _only(section, allowed, 'leader.')
+    cls = registry.leader_class(section.get('model'))
+    state = ('model', 'position', 'velocity') if cls.moving else ('model', 'position')
+    model = parse_model(cls, section, dim, 'leader.', state)
     if 'position' not in section:
         raise ScenarioError('leader.position', 'missing')
-    position = _vector(section['position'], 'leader.position', dim)
-    if model == 'sink':
-        return LeaderSpec(model, FieldSpec('zero'), position, np.zeros(dim))
+    position = vector(section['position'], 'leader.position', dim)
+    if not cls.moving:
+        return LeaderSpec(model, position, np.zeros(dim))
     if 'velocity' not in section:
         raise ScenarioError('leader.velocity', 'missing')
-    velocity = _vector(section['velocity'], 'leader.velocity', dim)
-    if model == 'constant_velocity':
-        spec = FieldSpec('zero')
-    elif model == 'constant_acceleration':
-        if 'acceleration' not in section:
-            raise ScenarioError('leader.acceleration', 'missing')
-        acc = _vector(section['acceleration'], 'leader.acceleration', dim)
-        spec = FieldSpec('constant', {'acceleration': acc.tolist()})
-    else:
-        spec = _parse_field(section, model, 'leader.', dim)
-    return LeaderSpec(model, spec, position, velocity)
+    return LeaderSpec(model, position, vector(section['velocity'], 'leader.velocity', dim))
 
 
-def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> FieldSpec | None:
-    model = _choice(section.get('model', 'none'), 'intrinsic.model', INTRINSIC_MODELS)
-    allowed = {'none': ('model',), 'same_as_leader': ('model',),
-               'lorenz': ('model', 'params'), 'lu': ('model', 'params'),
-               'linear': ('model', 'A')}[model]
-    _only(section, allowed, 'intrinsic.')
-    if model == 'none':
+def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> LeaderModel | None:
+    """Return the agents' intrinsic dynamics ``f(p)``: ``None`` for the plain double integrator."""
+    autonomous = [name for name, cls in registry.leader_models().items()
+                  if cls.autonomous and not cls.still]
+    name = choice(section.get('model', 'none'), 'intrinsic.model',
+                  (*INTRINSIC_SPECIAL, *autonomous))
+    if name == 'none':
+        only(section, ('model',), 'intrinsic.')
         return None
-    if model == 'same_as_leader':
-        return None if leader.field.kind == 'zero' else leader.field
-    return _parse_field(section, model, 'intrinsic.', dim)
+    if name == 'same_as_leader':
+        only(section, ('model',), 'intrinsic.')
+        if not leader.model.autonomous:
+            raise ScenarioError('intrinsic.model', f'same_as_leader needs a leader model that '
+                                f'depends on the velocity only; {leader.model.name} does not')
+        return None if leader.model.still else leader.model
+    return parse_model(registry.leader_class(name, 'intrinsic.model'), section, dim,
+                       'intrinsic.', ('model',))
 
 
 # --------------------------------------------------------------------------------------------
@@ -648,31 +499,25 @@ def realize(sc: Scenario) -> Realization:
         informed[list(spec.ids)] = True
     else:
         adj = unit_adj if unit_adj is not None else _disk_adjacency(q0, sc.law)
-        selection = select_pseudo_leaders(adj, sc.law.w, sc.law.alpha)
+        selection = select_pseudo_leaders(adj, *sc.law.pseudo_leader_gains())
         informed[list(selection.ids)] = True
-    nav_gains = None
-    if sc.observers:
-        nav_gains = np.zeros((n, 2, dim, dim))
-        for group in sc.observers:
-            for i in group.ids:
-                nav_gains[i, 0] = group.pos_gain
-                nav_gains[i, 1] = group.vel_gain
-                informed[i] = True
-    adaptive = np.full(n, sc.law.h0) if sc.law.name == 'zhou_pseudo_leader' else None
+    for group in sc.observers:
+        informed[list(group.ids)] = True
+    agents = AgentData(informed, sc.law.agent_data(sc, informed), sc.law.initial_state(n))
     weights = None
     if unit_adj is not None:
-        weights = unit_adj * (sc.law.w if sc.law.name == 'zhou_pseudo_leader' else 1.0)
-    return Realization(q0, p0, AgentData(informed, nav_gains, adaptive), weights, selection)
+        weights = unit_adj * sc.law.coupling_weight
+    return Realization(q0, p0, agents, weights, selection)
 
 
-def _disk_adjacency(q: np.ndarray, law: Protocol) -> np.ndarray:
+def _disk_adjacency(q: np.ndarray, law: Law) -> np.ndarray:
     edges = disk_graph(q, law.radius, law.strict_radius)
     adj = np.zeros((q.shape[0], q.shape[0]))
     adj[edges.i, edges.j] = adj[edges.j, edges.i] = 1.0
     return adj
 
 
-def all_pairs_weights(n: int, weights: np.ndarray | None, q: np.ndarray, law: Protocol):
+def all_pairs_weights(n: int, weights: np.ndarray | None, q: np.ndarray, law: Law):
     """Return the complete graph with coupling weights (for laws acting on all pairs).
 
     :param n: number of agents.
@@ -682,5 +527,5 @@ def all_pairs_weights(n: int, weights: np.ndarray | None, q: np.ndarray, law: Pr
     :return: the edge list.
     """
     full = complete_graph(n)
-    mat = weights if weights is not None else law.w * _disk_adjacency(q, law)
+    mat = weights if weights is not None else law.coupling_weight * _disk_adjacency(q, law)
     return dataclasses.replace(full, weight=mat[full.i, full.j])

@@ -17,11 +17,14 @@ The gradient (spring) terms are not checked: their stiffness depends on the conf
 """
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from flock_swarm.core.graphs import diffusive_matrix
-from flock_swarm.core.scenario import Realization, Scenario
+
+if TYPE_CHECKING:  # pragma: no cover - types only: the laws import this module
+    from flock_swarm.core.scenario import Realization, Scenario
 
 #: RK4 is stable for ``dt lambda`` in ``[-2.785, 0]`` on the real axis.
 RK4_REAL_LIMIT = 2.78
@@ -70,61 +73,61 @@ def packing_degree(r: float, spacing: float, dim: int) -> int:
     return max(int(((r + 0.5 * spacing) / (0.5 * spacing)) ** dim) - 1, 1)
 
 
-def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
+def consensus_bounds(sc: 'Scenario', real: 'Realization', kp: float, kv: float,
+                     coupling: float, spacing: float) -> list[StepViolation]:
+    """Return the violated bounds of a PD navigation term plus velocity consensus.
+
+    The consensus Laplacian is bounded by its exact spectrum on a fixed graph, or on an
+    r-disk graph by ``2 deg_max`` with ``deg_max`` from :func:`packing_degree` for agents at
+    least ``spacing`` apart.
+
+    :param sc: the scenario.
+    :param real: its realisation (the fixed graph, if any).
+    :param kp: the position gain of the navigation term.
+    :param kv: its velocity gain.
+    :param coupling: the gain of the velocity consensus term.
+    :param spacing: the law's desired distance between neighbours.
+    :return: the violations (empty when ``dt`` is fine).
+    """
+    if real.adjacency is not None:
+        lam = float(-np.linalg.eigvalsh(diffusive_matrix(real.adjacency))[0])
+        source = 'fixed graph Laplacian'
+    else:
+        lam = 2.0 * packing_degree(sc.law.radius, spacing, sc.dim)
+        source = f'r-disk Laplacian <= {lam:g} for agents >= {spacing:.3g} apart'
+    found = []
+    for part, kv_total, detail in (
+            ('navigation feedback', kv, f'k_p = {kp:g}, k_v = {kv:g}'),
+            ('velocity consensus', kv + coupling * lam,
+             f'k_v = {kv:g} + {coupling:g} x {source}')):
+        bound = pd_dt_max(kp, kv_total)
+        if sc.dt >= bound:
+            found.append(StepViolation(part, bound, detail))
+    return found
+
+
+def check_step(sc: 'Scenario', real: 'Realization') -> list[StepViolation]:
     """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
+
+    The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`), then RK4's
+    for the leader model and the intrinsic dynamics.
 
     :param sc: the scenario.
     :param real: its realisation (fixed graphs, gains).
     :return: the violations.
     """
-    law, dt = sc.law, sc.dt
-    found: list[StepViolation] = []
-
-    def pd(part: str, kp: float, kv: float, detail: str) -> None:
-        bound = pd_dt_max(kp, kv)
-        if dt >= bound:
-            found.append(StepViolation(part, bound, detail))
-
-    name = law.name
-    if name in ('olfati_saber_2006', 'su_informed', 'su_accel', 'su_informed_accel',
-                'os2003_sink', 'yu_pinning_observer'):
-        spacing = law.d
-        coupling = {'os2003_sink': 'c_d', 'yu_pinning_observer': 'c'}.get(name)
-        coupling = getattr(law, coupling) if coupling else 1.0
-        if real.adjacency is not None:
-            lam = float(-np.linalg.eigvalsh(diffusive_matrix(real.adjacency))[0])
-            source = 'fixed graph Laplacian'
-        else:
-            lam = 2.0 * packing_degree(law.radius, spacing, sc.dim)
-            source = f'r-disk Laplacian <= {lam:g} for agents >= {spacing:.3g} apart'
-        kp = getattr(law, 'c1', 0.0)
-        kv = getattr(law, 'c2', 0.0)
-        if name == 'yu_pinning_observer' and real.agents.nav_gains is not None:
-            gains = real.agents.nav_gains
-            kp = float(np.max(np.abs(np.linalg.eigvals(gains[:, 0])))) if gains.size else 0.0
-            kv = float(np.max(np.abs(np.linalg.eigvals(gains[:, 1])))) if gains.size else 0.0
-        pd('navigation feedback', kp, kv, f'k_p = {kp:g}, k_v = {kv:g}')
-        pd('velocity consensus', kp, kv + coupling * lam,
-           f'k_v = {kv:g} + {coupling:g} x {source}')
-    elif name == 'zhou_pseudo_leader':
-        weights = real.adjacency
-        if weights is not None:
-            gain = np.where(real.agents.informed, law.h0, 0.0)
-            lam = float(-np.linalg.eigvalsh(diffusive_matrix(weights) - np.diag(gain))[0])
-            bound = 2.0 / lam if lam > 0 else float('inf')
-            if dt >= bound:
-                found.append(StepViolation(
-                    'velocity coupling', bound,
-                    f'|lambda_min(W - H)| = {lam:.4g} with W = {law.w:g} B; the explicit '
-                    'update v += dt (W - H) v needs dt < 2 / |lambda_min|'))
-    for part, spec, p0 in (('leader model', sc.leader.field, sc.leader.velocity),
-                           ('intrinsic dynamics', sc.intrinsic, sc.leader.velocity)):
-        if spec is None or spec.kind in ('zero', 'constant'):
+    found = list(sc.law.step_bounds(sc, real))
+    for part, model, p0 in (('leader model', sc.leader.model, sc.leader.velocity),
+                            ('intrinsic dynamics', sc.intrinsic, sc.leader.velocity)):
+        if model is None:
             continue
-        rate = max(float(np.max(np.abs(np.linalg.eigvals(spec.jacobian(x)))))
-                   for x in (np.asarray(p0, dtype=float), np.zeros(sc.dim)))
+        jacobians = [model.jacobian(x) for x in (np.asarray(p0, dtype=float),
+                                                  np.zeros(sc.dim))]
+        if any(j is None for j in jacobians):
+            continue
+        rate = max(float(np.max(np.abs(np.linalg.eigvals(j)))) for j in jacobians)
         bound = RK4_REAL_LIMIT / rate if rate > 0 else float('inf')
-        if dt >= bound:
+        if sc.dt >= bound:
             found.append(StepViolation(part, bound,
                                        f'RK4 with spectral radius {rate:.4g} of the Jacobian'))
     return found

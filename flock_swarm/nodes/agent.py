@@ -3,7 +3,7 @@
 An agent node subscribes to the odometry of every agent (one topic per agent, as real robots
 would broadcast it), selects the neighbours within ``r`` (or the scenario's fixed graph), adds
 the leader's state if informed, and calls the same law functions as ``sim``
-(:func:`flock_swarm.core.protocols.group_control`). Each command is stamped with the
+(:func:`flock_swarm.core.laws.base.group_control`). Each command is stamped with the
 odometry stamp it answers. Adaptive state (Zhou's gain ``h_i``) lives here.
 
 One node hosts one agent (``ros2 run flock_swarm agent --ros-args -p agent_id:=3``, the
@@ -24,9 +24,9 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.protocols import advance_adaptive, group_control
+from flock_swarm.core.laws.base import advance_state, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -165,9 +165,10 @@ class AgentController:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
         u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
-        if group.adaptive is not None:
-            advance_adaptive(law, q[ids], p[ids], leader, group, self.sc.dt)
-            self.swarm.adaptive[ids] = group.adaptive
+        if group.state:
+            advance_state(law, q[ids], p[ids], leader, group, self.sc.dt)
+            for key, value in group.state.items():
+                self.swarm.state[key][ids] = value
         return u
 
 

@@ -14,7 +14,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.core.dynamics import VirtualLeader
+from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
                                       declare, declare_common, load_scenario, run_node,
@@ -35,7 +35,7 @@ class LeaderNode(Node):
         declare_common(self)
         self.scenario = sc = load_scenario(self, LEADER_PARAMS)
         self.clock = StepClock(sc.dt)
-        self.model = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
+        self.model = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
         self.step = 0
         self.target = -1
         # Lockstep: hold the first tick until every agent and the world have matched the

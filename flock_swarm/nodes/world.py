@@ -32,7 +32,8 @@ from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
 from flock_swarm import __version__
-from flock_swarm.core.dynamics import LeaderState, step_agents
+from flock_swarm.core.dynamics import step_agents
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import step_metrics
@@ -126,7 +127,7 @@ class WorldNode(Node):
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
         self.real = realize(sc)
         self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
-        self.intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+        self.intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
         self.clock = StepClock(sc.dt)
         n = sc.n_agents
         self.k = 0

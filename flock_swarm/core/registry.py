@@ -1,0 +1,155 @@
+"""The registry of laws and leader models: Python entry points, read once per process.
+
+Laws are registered in the entry-point group ``flock_swarm.laws``, leader models in
+``flock_swarm.leaders``, by this package (setup.py) and by any other installed package, in
+the same way: ``name = module:Class``. One registry, one code path: the built-in laws are
+looked up exactly as a user's. docs/extending.md walks through writing and registering one.
+
+A plugin that cannot be imported, is not a subclass of the base class, lacks a method, or
+names itself differently from its entry point raises :class:`PluginError` (a
+:class:`~flock_swarm.core.errors.ScenarioError`, so every command reports it as one line and
+exits with status 2), naming the entry point and the reason.
+"""
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib import metadata
+
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.laws.base import Law
+from flock_swarm.core.leaders.base import LeaderModel
+
+#: Entry-point group of the laws (``protocol.name``).
+LAW_GROUP = 'flock_swarm.laws'
+#: Entry-point group of the leader models (``leader.model``, ``intrinsic.model``).
+LEADER_GROUP = 'flock_swarm.leaders'
+
+_BASES = {LAW_GROUP: Law, LEADER_GROUP: LeaderModel}
+#: What a plugin class must define itself (not inherit from the base class).
+_REQUIRED = {LAW_GROUP: ('radius', 'pair', 'combine'), LEADER_GROUP: ('acceleration',)}
+
+
+class PluginError(ScenarioError):
+    """A registered law or leader model that cannot be used; names its entry point."""
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One registered plugin: its name, where it points and which package registered it."""
+
+    group: str
+    name: str
+    value: str
+    package: str
+    point: metadata.EntryPoint = field(repr=False, compare=False)
+
+    @property
+    def label(self) -> str:
+        """Return ``group:name (module:Class)``, how errors name the entry point."""
+        return f'{self.group}:{self.name} ({self.value})'
+
+
+@lru_cache(maxsize=None)
+def entries(group: str) -> dict[str, Entry]:
+    """Return the registered plugins of a group by name.
+
+    The same distribution found twice (an editable install and a colcon install side by
+    side) counts once, the first on ``sys.path`` winning; two distributions registering one
+    name is an error, since which one runs would depend on the path order.
+
+    :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
+    :return: ``{name: Entry}`` in name order.
+    :raises PluginError: when two packages register the same name.
+    """
+    found: dict[str, Entry] = {}
+    for ep in metadata.entry_points(group=group):
+        dist = getattr(ep, 'dist', None)
+        package = dist.metadata['Name'] if dist is not None else '?'
+        entry = Entry(group, ep.name, ep.value, package, ep)
+        old = found.get(ep.name)
+        if old is not None and old.package != package:
+            raise PluginError(_key(group), f'{entry.label}: the name {ep.name!r} is also '
+                              f'registered by package {old.package} ({old.value})')
+        found.setdefault(ep.name, entry)
+    return dict(sorted(found.items()))
+
+
+def _key(group: str) -> str:
+    return 'protocol.name' if group == LAW_GROUP else 'leader.model'
+
+
+@lru_cache(maxsize=None)
+def load(group: str, name: str) -> type:
+    """Return the class registered as ``name`` in ``group``, imported and checked.
+
+    :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
+    :param name: the entry-point name.
+    :return: the class.
+    :raises PluginError: when it is missing, cannot be imported or is not a valid plugin.
+    """
+    entry = entries(group).get(name)
+    if entry is None:
+        raise PluginError(_key(group), f'no entry point {group}:{name}')
+    try:
+        cls = entry.point.load()
+    except Exception as exc:  # noqa: BLE001 - any failure of a plugin's import is reported
+        raise PluginError(_key(group), f'{entry.label}: cannot be imported: '
+                          f'{type(exc).__name__}: {exc}') from None
+    problem = _problem(group, name, cls)
+    if problem:
+        raise PluginError(_key(group), f'{entry.label}: {problem}')
+    return cls
+
+
+def _problem(group: str, name: str, cls) -> str | None:
+    base = _BASES[group]
+    if not isinstance(cls, type) or not issubclass(cls, base):
+        return f'is not a subclass of {base.__module__}.{base.__name__}'
+    if not dataclasses.is_dataclass(cls) or not cls.__dataclass_params__.frozen:
+        return 'is not a frozen dataclass (@dataclass(frozen=True))'
+    for attr in _REQUIRED[group]:
+        if getattr(cls, attr) is getattr(base, attr):
+            return f'does not define {attr}'
+    if cls.name != name:
+        return f'names itself {cls.name!r}, not {name!r} (set name: ClassVar[str] = {name!r})'
+    return None
+
+
+def describe(cls: type) -> str:
+    """Return a plugin's citation, or the first line of its docstring."""
+    doc = (cls.__doc__ or '').strip().splitlines()
+    return cls.citation or (doc[0] if doc else '')
+
+
+def names(group: str) -> list[str]:
+    """Return the registered names of a group, sorted."""
+    return list(entries(group))
+
+
+def law_class(name: str) -> type[Law]:
+    """Return the law registered as ``name`` (``protocol.name``)."""
+    return _lookup(LAW_GROUP, name, 'protocol.name', 'protocol')
+
+
+def leader_class(name: str, key: str = 'leader.model') -> type[LeaderModel]:
+    """Return the leader model registered as ``name`` (``leader.model``)."""
+    return _lookup(LEADER_GROUP, name, key, 'leader model')
+
+
+def _lookup(group: str, name, key: str, what: str) -> type:
+    known = names(group)
+    if not isinstance(name, str) or name not in known:
+        raise ScenarioError(key, f'unknown {what} {name!r} (expected one of: '
+                            f'{", ".join(known) or "none registered: is flock_swarm installed?"})')
+    return load(group, name)
+
+
+def laws() -> dict[str, type[Law]]:
+    """Return every registered law by name (each imported and checked)."""
+    return {name: law_class(name) for name in names(LAW_GROUP)}
+
+
+def leader_models() -> dict[str, type[LeaderModel]]:
+    """Return every registered leader model by name (each imported and checked)."""
+    return {name: leader_class(name) for name in names(LEADER_GROUP)}
