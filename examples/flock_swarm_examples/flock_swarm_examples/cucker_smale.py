@@ -17,7 +17,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.plugin import Law, LawContext, require
+from flock_swarm.core.checks import require
+from flock_swarm.core.laws.base import Law, LawContext
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.plugin import LeaderModel, require
+from flock_swarm.core.checks import require
+from flock_swarm.core.leaders.base import LeaderModel
 
 
 @dataclass(frozen=True)
