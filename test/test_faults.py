@@ -27,8 +27,8 @@ from rclpy.node import Node
 from flock_swarm.analyze import main as analyze_main
 from flock_swarm.nodes import world as world_module
 from flock_swarm.bag import BagReader
-from flock_swarm.core.dynamics import LeaderState
-from flock_swarm.core.protocols import swarm_control
+from flock_swarm.core.leaders.base import LeaderState
+from flock_swarm.core.laws.base import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
 from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,

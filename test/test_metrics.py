@@ -8,9 +8,9 @@ import pytest
 
 from flock_swarm.core import metrics as mt
 from flock_swarm.core import potentials as pot
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
-from flock_swarm.core.protocols import PROTOCOLS
+from flock_swarm.core.registry import laws
 
 
 def hand_configuration():
@@ -131,7 +131,7 @@ def su_energy_double_loop(q, p, leader, law, informed, c1):
 @pytest.mark.parametrize('dim', [2, 3])
 def test_su_energy_matches_double_loop(name, dim):
     rng = np.random.default_rng(41 + dim)
-    law = PROTOCOLS[name]()
+    law = laws()[name]()
     n = 9
     q = rng.uniform(0.0, 8.0, size=(n, dim))
     p = rng.uniform(-1.0, 1.0, size=(n, dim))
@@ -144,7 +144,7 @@ def test_su_energy_matches_double_loop(name, dim):
 def test_su_energy_two_agents_at_rest_at_desired_distance():
     # psi_alpha(d_alpha) = 0, both at rest with the leader, leader at agent 0, agent 1 uninformed:
     # Q = 1/2 [0 + 0] + 1/2 [0 + 0] = 0; informing agent 1 adds 1/2 c1 d^2.
-    law = PROTOCOLS['su_informed']()
+    law = laws()['su_informed']()
     q = np.array([[0.0, 0.0], [law.d, 0.0]])
     p = np.array([[1.0, 1.0], [1.0, 1.0]])
     leader = LeaderState(np.zeros(2), np.array([1.0, 1.0]), np.zeros(2))

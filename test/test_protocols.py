@@ -1,4 +1,4 @@
-"""Unit tests of the flocking laws in ``flock_swarm.core.protocols``.
+"""Unit tests of the flocking laws in ``flock_swarm.core.laws``.
 
 The agent node calls :func:`group_control`, the simulator :func:`swarm_control`, and a robot
 that only has its neighbours' states :func:`local_control`; the first block of tests checks
@@ -12,10 +12,14 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from flock_swarm.core import protocols as pr
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.laws import base as pr
+from flock_swarm.core.laws import jadbabaie2003 as jad
 from flock_swarm.core.graphs import EdgeList, disk_graph
-from flock_swarm.core.protocols import AgentData, PROTOCOLS
+from flock_swarm.core.laws.base import AgentData
+from flock_swarm.core.leaders.base import LeaderState
+from flock_swarm.core.registry import laws
+
+PROTOCOLS = laws()
 
 DT = 0.1
 # Every law in 2-D, and in 3-D where it allows (Jadbabaie's headings are planar).
@@ -61,7 +65,9 @@ def make_swarm(name, dim, seed, n=24):
     leader = LeaderState(rng.uniform(0.0, side, size=dim), rng.uniform(-1.0, 1.0, size=dim),
                          rng.uniform(-0.5, 0.5, size=dim))
     edges = build_edges(law, q)
-    return law, q, p, edges, leader, AgentData(informed, nav_gains, adaptive)
+    return law, q, p, edges, leader, AgentData(
+        informed, {} if nav_gains is None else {'nav_gains': nav_gains},
+        {} if adaptive is None else {'h': adaptive})
 
 
 def build_edges(law, q):
@@ -133,8 +139,8 @@ def test_lost_leader_is_the_uninformed_law(name, dim):
         nobody = AgentData(np.zeros_like(agents.informed))
         assert_allclose(u, pr.swarm_control(law, q, p, edges, leader, nobody, DT),
                         rtol=0, atol=1e-12)
-    rate = law.adaptive_rate(q, p, None, agents)
-    assert rate is None or not rate.any()
+    rates = law.state_rate(q, p, None, agents)
+    assert not any(rate.any() for rate in rates.values())
 
 
 # --------------------------------------------------------------------------------------------
@@ -409,12 +415,12 @@ def test_zhou_pseudo_leader_feedback_and_adaptive_rate(dim):
     law = PROTOCOLS['zhou_pseudo_leader']()
     q, p, leader, informed = isolated_swarm(dim, seed=22)
     h = np.linspace(0.5, 3.0, q.shape[0])
-    agents = AgentData(informed, None, h.copy())
+    agents = AgentData(informed, state={'h': h.copy()})
     u = pr.swarm_control(law, q, p, empty_edges(q.shape[0]), leader, agents, DT)
     err = p - leader.p
     # Zhou12 eq. (4): u3 = -h_i (v_i - v_l) for pseudo-leaders, 0 otherwise.
     assert_allclose(u, np.where(informed[:, None], -h[:, None] * err, 0.0), rtol=1e-14)
-    rate = law.adaptive_rate(q, p, leader, agents)
+    rate = law.state_rate(q, p, leader, agents)['h']
     expected = np.where(informed, 0.01 * np.sum(err * err, axis=1), 0.0)
     assert_allclose(rate, expected, rtol=1e-14)
 
@@ -427,7 +433,7 @@ def test_yu_observer_feedback_acts_on_observed_component_only(dim):
     gains = np.zeros((3, 2, dim, dim))
     gains[0, :, 0, 0] = 1.0
     gains[1, :, 1, 1] = 1.0
-    agents = AgentData(np.array([True, True, False]), gains)
+    agents = AgentData(np.array([True, True, False]), {'nav_gains': gains})
     u = pr.swarm_control(law, q, p, empty_edges(3), leader, agents, DT)
     dq, dp = q - leader.q, p - leader.p
     expected = np.zeros((3, dim))
@@ -444,7 +450,7 @@ def test_yu_observer_feedback_with_different_position_and_velocity_gains():
     gains[0, 1, 1, 1] = 3.0
     leader = LeaderState(np.array([1.0, 1.0]), np.array([0.5, 0.5]), np.zeros(2))
     u = pr.swarm_control(law, np.array([[2.0, 5.0]]), np.array([[4.0, 1.5]]), empty_edges(1),
-                         leader, AgentData(np.array([True]), gains), DT)
+                         leader, AgentData(np.array([True]), {'nav_gains': gains}), DT)
     # (-2 (2 - 1), -3 (1.5 - 0.5)) = (-2, -3).
     assert_allclose(u, [[-2.0, -3.0]], rtol=1e-15)
 
@@ -469,7 +475,7 @@ def unit_velocity(theta):
 ])
 @pytest.mark.parametrize('speed', [1.0, 2.5])
 def test_jadbabaie_isolated_agent_follows_leader(theta_i, theta_0, expected, speed):
-    law = pr.JadbabaieLeader(r=5.0, speed=speed)
+    law = jad.JadbabaieLeader(r=5.0, speed=speed)
     q = np.array([[0.0, 0.0]])
     p = 0.7 * unit_velocity(theta_i)[None, :]
     # Leader exactly on the circle (3-4-5 triangle): "in or on" counts it (eq. (38), b_i = 1).
@@ -480,7 +486,7 @@ def test_jadbabaie_isolated_agent_follows_leader(theta_i, theta_0, expected, spe
 
 
 def test_jadbabaie_leader_out_of_range_is_ignored():
-    law = pr.JadbabaieLeader(r=5.0, speed=2.0)
+    law = jad.JadbabaieLeader(r=5.0, speed=2.0)
     p = 0.5 * unit_velocity(1.0)[None, :]
     leader = LeaderState(np.array([3.0, 4.0 + 1e-9]), unit_velocity(3.0), np.zeros(2))
     u = pr.swarm_control(law, np.zeros((1, 2)), p, empty_edges(1), leader,
@@ -492,7 +498,7 @@ def test_jadbabaie_leader_out_of_range_is_ignored():
 def test_jadbabaie_average_of_neighbours():
     # Agents 0, 1 neighbours (distance 0.5 <= r = 1), agent 2 alone; leader far away.
     # Headings 0.01 and 2 pi - 0.01 average to pi (Jadbabaie03 Section VI's example).
-    law = pr.JadbabaieLeader(r=1.0, speed=1.0)
+    law = jad.JadbabaieLeader(r=1.0, speed=1.0)
     q = np.array([[0.0, 0.0], [0.5, 0.0], [10.0, 0.0]])
     p = np.stack((unit_velocity(0.01), unit_velocity(2.0 * math.pi - 0.01), unit_velocity(2.0)))
     leader = LeaderState(np.array([100.0, 100.0]), unit_velocity(0.0), np.zeros(2))
@@ -506,7 +512,7 @@ def test_jadbabaie_average_of_neighbours():
 
 def test_jadbabaie_three_way_average_with_leader():
     # Agent 0 with neighbour 1 (heading 1.0) and the leader (heading 2.0) in range: (0.5+1+2)/3.
-    law = pr.JadbabaieLeader(r=1.0, speed=1.0)
+    law = jad.JadbabaieLeader(r=1.0, speed=1.0)
     q = np.array([[0.0, 0.0], [0.0, 0.9]])
     p = np.stack((unit_velocity(0.5), unit_velocity(1.0)))
     leader = LeaderState(np.array([0.0, -0.9]), unit_velocity(2.0), np.zeros(2))
@@ -520,20 +526,20 @@ def test_jadbabaie_three_way_average_with_leader():
 def test_heading_range_and_values():
     rng = np.random.default_rng(30)
     p = rng.normal(size=(500, 2))
-    theta = pr.heading(p)
+    theta = jad.heading(p)
     assert np.all((theta >= 0.0) & (theta < 2.0 * math.pi))
     assert_allclose(np.cos(theta), p[:, 0] / np.linalg.norm(p, axis=1), rtol=1e-12, atol=1e-12)
     assert_allclose(np.sin(theta), p[:, 1] / np.linalg.norm(p, axis=1), rtol=1e-12, atol=1e-12)
     # Hand values: east 0, north pi/2, west pi, south 3 pi/2.
     axes = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
-    assert_allclose(pr.heading(axes), [0.0, math.pi / 2, math.pi, 1.5 * math.pi], rtol=1e-15)
+    assert_allclose(jad.heading(axes), [0.0, math.pi / 2, math.pi, 1.5 * math.pi], rtol=1e-15)
 
 
 @pytest.mark.parametrize('tiny', [1e-17, 1e-300])
 def test_heading_stays_below_two_pi_for_tiny_negative_angles(tiny):
     # Jadbabaie03 Section II: headings are represented in [0, 2 pi). A velocity just below the
     # positive x-axis has atan2 = -tiny; mod 2 pi rounds 2 pi - tiny to 2 pi itself.
-    theta = pr.heading(np.array([[1.0, -tiny]]))
+    theta = jad.heading(np.array([[1.0, -tiny]]))
     assert 0.0 <= theta[0] < 2.0 * math.pi
 
 
@@ -546,10 +552,10 @@ def test_advance_adaptive_increments_informed_only():
     q = np.zeros((3, 3))
     p = np.array([[1.0, 2.0, 2.0], [3.0, 0.0, 4.0], [0.0, 0.0, 1.0]])
     leader = LeaderState(np.zeros(3), np.zeros(3), np.zeros(3))
-    agents = AgentData(np.array([True, False, True]), None, np.array([1.0, 1.0, 2.0]))
-    pr.advance_adaptive(law, q, p, leader, agents, 0.2)
+    agents = AgentData(np.array([True, False, True]), state={'h': np.array([1.0, 1.0, 2.0])})
+    pr.advance_state(law, q, p, leader, agents, 0.2)
     # ||e_v||^2 = 9, 25, 1: h += 0.2 * 0.05 * (9, -, 1) = (0.09, 0, 0.01).
-    assert_allclose(agents.adaptive, [1.09, 1.0, 2.01], rtol=1e-15)
+    assert_allclose(agents.state['h'], [1.09, 1.0, 2.01], rtol=1e-15)
 
 
 def test_advance_adaptive_repeated_steps():
@@ -557,17 +563,17 @@ def test_advance_adaptive_repeated_steps():
     q = np.zeros((2, 2))
     p = np.array([[3.0, 4.0], [1.0, 0.0]])
     leader = LeaderState(np.zeros(2), np.zeros(2), np.zeros(2))
-    agents = AgentData(np.array([True, True]), None, np.ones(2))
+    agents = AgentData(np.array([True, True]), state={'h': np.ones(2)})
     for _ in range(10):
-        pr.advance_adaptive(law, q, p, leader, agents, 0.1)
+        pr.advance_state(law, q, p, leader, agents, 0.1)
     # 10 steps of 0.1 * 0.01 * (25, 1).
-    assert_allclose(agents.adaptive, [1.25, 1.01], rtol=1e-13)
+    assert_allclose(agents.state['h'], [1.25, 1.01], rtol=1e-13)
 
 
 @pytest.mark.parametrize('name', [n for n in sorted(PROTOCOLS) if n != 'zhou_pseudo_leader'])
 def test_advance_adaptive_noop_for_laws_without_adaptation(name):
     law = PROTOCOLS[name]()
-    agents = AgentData(np.array([True, True]), None, np.array([1.0, 2.0]))
+    agents = AgentData(np.array([True, True]), state={'h': np.array([1.0, 2.0])})
     leader = LeaderState(np.zeros(2), np.zeros(2), np.zeros(2))
-    pr.advance_adaptive(law, np.zeros((2, 2)), np.ones((2, 2)), leader, agents, 0.1)
-    assert_allclose(agents.adaptive, [1.0, 2.0], rtol=0.0)
+    pr.advance_state(law, np.zeros((2, 2)), np.ones((2, 2)), leader, agents, 0.1)
+    assert_allclose(agents.state['h'], [1.0, 2.0], rtol=0.0)

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from flock_swarm.core.dynamics import VirtualLeader, step_agents
+from flock_swarm.core.dynamics import step_agents
+from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.graphs import diffusive_matrix, disk_graph
-from flock_swarm.core.protocols import AgentData, advance_adaptive, local_control
+from flock_swarm.core.laws.base import AgentData, advance_state, local_control
 from flock_swarm.core.pseudo_leaders import minor_lambda_max
 from flock_swarm.core.scenario import realize
 from flock_swarm.core import run
@@ -74,11 +75,10 @@ def test_simulator_equals_a_per_agent_loop(preset, overrides):
     real = realize(sc)
     law, dt = sc.law, sc.dt
     q, p = real.q0.copy(), real.p0.copy()
-    agents = AgentData(real.agents.informed.copy(),
-                       None if real.agents.nav_gains is None else real.agents.nav_gains,
-                       None if real.agents.adaptive is None else real.agents.adaptive.copy())
-    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
-    intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+    agents = AgentData(real.agents.informed.copy(), real.agents.data,
+                       {key: value.copy() for key, value in real.agents.state.items()})
+    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
+    intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
     n = sc.n_agents
     for step in range(sc.steps):
         state = leader.state
@@ -95,7 +95,7 @@ def test_simulator_equals_a_per_agent_loop(preset, overrides):
             u[i] = local_control(law, q[i], p[i], q[others], p[others], weights[i, others],
                                  state, agents.subset(np.array([i])), dt)
         assert_allclose(u, result.series['u'][step], rtol=1e-9, atol=1e-9)
-        advance_adaptive(law, q, p, state, agents, dt)
+        advance_state(law, q, p, state, agents, dt)
         q, p = step_agents(q, p, u, dt, intrinsic)
         leader.step(dt)
     assert_allclose(q, result.series['q'][-1], rtol=1e-9, atol=1e-9)

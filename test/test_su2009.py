@@ -27,7 +27,7 @@ from scipy.optimize import brentq
 from scipy.sparse.csgraph import connected_components
 
 from flock_swarm.core import potentials
-from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.scenarios import load

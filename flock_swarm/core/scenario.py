@@ -19,7 +19,7 @@ import yaml
 
 from flock_swarm.core import registry
 from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, only, positive,
-                                     require, text, vector)
+                                     text, vector)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
 from flock_swarm.core.laws.base import AgentData, Law, LawContext

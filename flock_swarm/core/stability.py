@@ -121,8 +121,8 @@ def check_step(sc: 'Scenario', real: 'Realization') -> list[StepViolation]:
                             ('intrinsic dynamics', sc.intrinsic, sc.leader.velocity)):
         if model is None:
             continue
-        jacobians = [model.jacobian(x) for x in (np.asarray(p0, dtype=float),
-                                                  np.zeros(sc.dim))]
+        points = (np.asarray(p0, dtype=float), np.zeros(sc.dim))
+        jacobians = [model.jacobian(x) for x in points]
         if any(j is None for j in jacobians):
             continue
         rate = max(float(np.max(np.abs(np.linalg.eigvals(j)))) for j in jacobians)

@@ -27,6 +27,10 @@ class ConstantVelocity(LeaderModel):
         """Return zero."""
         return np.zeros_like(p)
 
+    def jacobian(self, p):
+        """Return zero."""
+        return np.zeros((p.shape[-1], p.shape[-1]))
+
 
 @dataclass(frozen=True)
 class Sink(ConstantVelocity):
@@ -71,6 +75,10 @@ class ConstantAcceleration(LeaderModel):
     def acceleration(self, t, q, p):
         """Return ``f_gamma`` broadcast to ``p``'s shape."""
         return np.broadcast_to(self._acc, p.shape).copy()
+
+    def jacobian(self, p):
+        """Return zero."""
+        return np.zeros((p.shape[-1], p.shape[-1]))
 
 
 def lorenz(p: np.ndarray, sigma: float, rho: float, beta: float) -> np.ndarray:
