@@ -17,8 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.core.checks import require
-from flock_swarm.core.laws.base import Law, LawContext
+from flock_swarm.plugin import Law, LawContext, require
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.core.checks import require
-from flock_swarm.core.leaders.base import LeaderModel
+from flock_swarm.plugin import LeaderModel, require
 
 
 @dataclass(frozen=True)
