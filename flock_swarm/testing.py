@@ -175,15 +175,16 @@ class Swarm:
         self.out = Path(out)
         self.domain_id = unique_domain() if domain_id is None else domain_id
         self.scenario_path = resolve_scenario(str(scenario), list(overrides), seed, self.out)
-        self.nodes = InProcessSwarm(self.scenario_path, self.out, domain_id=self.domain_id,
-                                    **swarm_args)
+        #: The :class:`~flock_swarm.runner.InProcessSwarm` this wraps.
+        self.in_process = InProcessSwarm(self.scenario_path, self.out,
+                                         domain_id=self.domain_id, **swarm_args)
         self.closed = False
 
     def __getattr__(self, name: str):
-        """Reach the in-process swarm's nodes and methods."""
-        if name == 'nodes':
+        """Reach the in-process swarm's nodes and methods (``swarm.world``...)."""
+        if name == 'in_process':
             raise AttributeError(name)
-        return getattr(self.nodes, name)
+        return getattr(self.in_process, name)
 
     def spin_until(self, condition: Callable[[], Any], timeout: float,
                    what: str = 'the condition') -> None:
@@ -194,7 +195,7 @@ class Swarm:
         :param what: what is awaited, for the failure message.
         :raises AssertionError: on the timeout, or when the world finished first.
         """
-        world = self.nodes.world
+        world = self.in_process.world
         deadline = time.monotonic() + timeout
         while not condition():
             if world.done:
@@ -203,14 +204,14 @@ class Swarm:
             if time.monotonic() > deadline:
                 raise AssertionError(f'timed out after {timeout:g} s waiting for {what} '
                                      f'(the world is at step {world.k})')
-            self.nodes.executor.spin_once(timeout_sec=0.1)
+            self.in_process.executor.spin_once(timeout_sec=0.1)
 
     def run(self, timeout: float = RUN_TIMEOUT) -> SwarmRun:
         """Spin until the world has recorded its last step; close; return the outputs.
 
         :param timeout: wall-clock bound [s] of the rest of the run.
         """
-        world = self.nodes.world
+        world = self.in_process.world
         self.spin_until(lambda: world.done, timeout, 'the world to finish')
         self.close()
         return self.result()
@@ -223,7 +224,7 @@ class Swarm:
         """Let the world write what it recorded; destroy every node and the context (once)."""
         if not self.closed:
             self.closed = True
-            self.nodes.close()
+            self.in_process.close()
 
     def __enter__(self) -> Swarm:
         """Return the swarm."""
