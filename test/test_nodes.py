@@ -53,6 +53,12 @@ def ros_run(tmp_path, domain, preset, overrides, **kwargs):
     ('yu2010_sec41', ['n_agents=10', 'duration=0.5']),
     # a fixed graph: Zhou's Section 5.1 (Lu dynamics, adaptive gains in the agents)
     ('zhou2012_sec51', ['duration=0.1']),
+    # the reproduction's variants: bounded navigational feedback, f_gamma to every agent,
+    # Zhou's pseudo-leaders of highest degree
+    ('su2009_fig7', ['n_agents=8', 'informed.count=3', 'protocol.navigation=bounded',
+                     'protocol.feedforward_to=all',
+                     'initial.position_box=[[0, 12], [0, 12]]', 'duration=3']),
+    ('zhou2012_sec51', ['informed={select: highest_degree, count: 2}', 'duration=0.1']),
 ])
 def test_ros_run_reproduces_sim(tmp_path, ros_domain, preset, overrides):
     sc, summary, out = ros_run(tmp_path, ros_domain, preset, overrides + ['record_every=1'],

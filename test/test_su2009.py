@@ -27,6 +27,10 @@ from scipy.optimize import brentq
 from scipy.sparse.csgraph import connected_components
 
 from flock_swarm.core import potentials
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.graphs import EdgeList
+from flock_swarm.core.laws.base import AgentData, swarm_control
+from flock_swarm.core.laws.su2009 import OlfatiSaber2006, SuInformedAccel
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.scenario import parse_scenario
@@ -420,3 +424,54 @@ def test_no_collision_below_psi_alpha_zero(protocol, leader, informed):
     assert bound > 0.5
     closest = np.linalg.norm(s['q'][:, 1] - s['q'][:, 0], axis=-1).min()
     assert bound <= closest < 0.7 * D
+
+
+# --------------------------------------------------------------------------------------------
+# The variants the paper's text allows (scenario options)
+
+
+def lone_agent(law, q, p, informed, leader):
+    """Return the input of one agent without neighbours."""
+    none = np.zeros(0, dtype=np.intp)
+    edges = EdgeList(len(q), none, none, np.zeros(0))
+    return swarm_control(law, np.array(q, float), np.array(p, float), edges, leader,
+                         AgentData(np.array(informed)), 0.02)
+
+
+def test_bounded_navigational_feedback_by_hand():
+    """Olfati-Saber 2006's gamma-agent: -c1 z / sqrt(1 + ||z||^2) - c2 (p - p_gamma)."""
+    leader = LeaderState(np.array([1.0, 1.0]), np.array([1.0, 0.0]), np.zeros(2))
+    # z = (3, 4), ||z|| = 5: sigma_1(z) = (3, 4) / sqrt(26); p - p_gamma = (-1, 2).
+    law = OlfatiSaber2006(c1=2.0, c2=0.5, navigation='bounded')
+    u = lone_agent(law, [[4.0, 5.0]], [[0.0, 2.0]], [True], leader)
+    expected = -2.0 * np.array([3.0, 4.0]) / np.sqrt(26.0) - 0.5 * np.array([-1.0, 2.0])
+    assert_allclose(u[0], expected, rtol=1e-14)
+    # Far away the pull saturates at c1, where the linear feedback grows without bound.
+    far = lone_agent(law, [[1001.0, 1.0]], [[1.0, 0.0]], [True], leader)
+    assert_allclose(far[0], [-2.0 * 1000.0 / np.sqrt(1.0 + 1e6), 0.0], rtol=1e-14)
+    linear = lone_agent(OlfatiSaber2006(c1=2.0, c2=0.5), [[1001.0, 1.0]], [[1.0, 0.0]],
+                        [True], leader)
+    assert_allclose(linear[0], [-2000.0, 0.0], rtol=1e-14)
+
+
+@pytest.mark.parametrize('feedforward_to, uninformed', [
+    ('informed', [0.0, 0.0]), ('all', [-0.3, 0.3])])
+def test_who_receives_the_leader_acceleration(feedforward_to, uninformed):
+    """Section V.C: ``h_i [f_gamma + ...]`` as printed, or ``f_gamma + h_i [...]``."""
+    leader = LeaderState(np.zeros(2), np.array([1.0, 1.0]), np.array([-0.3, 0.3]))
+    law = SuInformedAccel(feedforward_to=feedforward_to)   # c1 = c2 = 0.5
+    q, p = [[2.0, 0.0], [50.0, 50.0]], [[1.0, 1.0], [1.0, 1.0]]
+    u = lone_agent(law, q, p, [True, False], leader)
+    # The informed agent: f_gamma - c1 (q - q_gamma) = (-0.3 - 1, 0.3) either way.
+    assert_allclose(u[0], [-1.3, 0.3], rtol=1e-14)
+    assert_allclose(u[1], uninformed, rtol=0, atol=0)
+
+
+def test_variant_values_are_validated():
+    with pytest.raises(ScenarioError, match='protocol.navigation: unknown value'):
+        load('su2009_fig2', ['protocol.navigation=quadratic'])
+    with pytest.raises(ScenarioError, match='protocol.feedforward_to: unknown value'):
+        load('su2009_fig7', ['protocol.feedforward_to=some'])
+    # f_gamma goes to a subset only under Section V.C's law.
+    with pytest.raises(ScenarioError, match='protocol.feedforward_to: unknown key'):
+        load('su2009_fig6', ['protocol.feedforward_to=all'])

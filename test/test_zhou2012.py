@@ -10,7 +10,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from flock_swarm.core.scenario import realize
+from flock_swarm.core.scenario import highest_degree, realize
 from flock_swarm.scenarios import load
 from flock_swarm.core.run import simulate
 
@@ -141,3 +141,22 @@ def test_pseudo_leader_selection_has_a_valid_certificate():
     lam = np.linalg.eigvalsh(W_COUPLING * B_51[np.ix_(keep, keep)])[-1]
     assert_allclose(cert.lambda_max, lam, rtol=1e-9)
     assert lam + ALPHA < 0.0
+
+
+def test_highest_degree_pseudo_leaders_by_hand():
+    """Section 5.2 pins the agents of largest degree: a star plus a path, ties to lower ids."""
+    adj = np.zeros((6, 6))
+    for i, j in ((0, 1), (0, 2), (0, 3), (3, 4), (4, 5)):
+        adj[i, j] = adj[j, i] = 1.0
+    # Degrees: 0 -> 3, 3 -> 2, 4 -> 2, 1, 2, 5 -> 1.
+    assert highest_degree(adj, 3).tolist() == [0, 3, 4]
+    assert highest_degree(adj, 4).tolist() == [0, 3, 4, 1]
+
+
+def test_highest_degree_selection_in_a_scenario():
+    sc = load('zhou2012_sec52', ['informed={select: highest_degree, count: 6}'])
+    real = realize(sc)
+    degree = (real.adjacency > 0).sum(axis=1)
+    chosen = np.flatnonzero(real.agents.informed)
+    assert len(chosen) == 6
+    assert degree[chosen].min() >= np.sort(degree)[-6]

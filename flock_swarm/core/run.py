@@ -451,5 +451,7 @@ def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics
             'lambda_max': real.selection.lambda_max, 'alpha': real.selection.alpha,
             'satisfied': real.selection.satisfied, 'components': real.selection.components}
     for key, name in sc.law.state_summary.items():
-        summary[name] = [float(x) for x in series[key][-1]]
+        # The world node does not see the agents' adaptive state: only sim records it.
+        if key in series:
+            summary[name] = [float(x) for x in series[key][-1]]
     return summary

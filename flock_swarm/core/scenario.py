@@ -32,7 +32,7 @@ TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'durati
 #: ``intrinsic.model`` values besides the registered autonomous leader models.
 INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
-INFORMED_SELECT = ('all', 'random', 'first', 'ids', 'pseudo_leaders')
+INFORMED_SELECT = ('all', 'random', 'first', 'highest_degree', 'ids', 'pseudo_leaders')
 
 #: The most agents a scenario may have: ten times the largest swarm the simulator is
 #: benchmarked on (bench/bench_sim.py); beyond it NumPy refuses the arrays or memory runs out.
@@ -213,6 +213,8 @@ def _parse_law(section: dict, ctx: LawContext) -> Law:
             continue
         if fields[key].type in (int, 'int'):
             values[key] = integer(value, f'protocol.{key}')
+        elif fields[key].type in (str, 'str'):
+            values[key] = text(value, f'protocol.{key}', '')
         else:
             values[key] = number(value, f'protocol.{key}')
     law = cls(**values)
@@ -272,7 +274,7 @@ def _parse_informed(section: dict, n: int, law: Law) -> InformedSpec:
                                     f'got {v}')
         if len(set(ids)) != len(ids):
             raise ScenarioError('informed.ids', 'duplicate agent ids')
-    if select in ('random', 'first'):
+    if select in ('random', 'first', 'highest_degree'):
         if (count is None) == (fraction is None):
             raise ScenarioError('informed.count', f'give exactly one of count or fraction '
                                 f'for select: {select}')
@@ -490,10 +492,15 @@ def realize(sc: Scenario) -> Realization:
     spec = sc.informed
     if spec.select == 'all':
         informed[:] = True
-    elif spec.select in ('random', 'first'):
+    elif spec.select in ('random', 'first', 'highest_degree'):
         count = spec.count if spec.count is not None else int(round(spec.fraction * n))
-        chosen = rng.choice(n, size=count, replace=False) if spec.select == 'random' \
-            else np.arange(count)
+        if spec.select == 'random':
+            chosen = rng.choice(n, size=count, replace=False)
+        elif spec.select == 'first':
+            chosen = np.arange(count)
+        else:
+            chosen = highest_degree(unit_adj if unit_adj is not None
+                                    else _disk_adjacency(q0, sc.law), count)
         informed[chosen] = True
     elif spec.select == 'ids':
         informed[list(spec.ids)] = True
@@ -508,6 +515,20 @@ def realize(sc: Scenario) -> Realization:
     if unit_adj is not None:
         weights = unit_adj * sc.law.coupling_weight
     return Realization(q0, p0, agents, weights, selection)
+
+
+def highest_degree(adjacency: np.ndarray, count: int) -> np.ndarray:
+    """Return the ``count`` agents of highest degree, ties to the lower id ([Zhou12] 5.2).
+
+    Section 5.2 of Zhou et al. 2012 pins "the 6 nodes with the largest degrees" of its
+    Barabasi-Albert graph.
+
+    :param adjacency: the unit adjacency matrix (weights > 0 are edges).
+    :param count: how many.
+    :return: their ids, highest degree first.
+    """
+    degree = (adjacency > 0).sum(axis=1)
+    return np.argsort(-degree, kind='stable')[:count]
 
 
 def _disk_adjacency(q: np.ndarray, law: Law) -> np.ndarray:

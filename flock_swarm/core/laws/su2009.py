@@ -10,9 +10,12 @@ from typing import ClassVar
 import numpy as np
 
 from flock_swarm.core import potentials as pot
-from flock_swarm.core.checks import require
+from flock_swarm.core.checks import choice, require
 from flock_swarm.core.laws.base import Law
 from flock_swarm.core.stability import consensus_bounds
+
+#: The navigational feedbacks on the position error (:attr:`SuParams.navigation`).
+NAVIGATION = ('linear', 'bounded')
 
 
 @dataclass(frozen=True)
@@ -27,6 +30,11 @@ class SuParams(Law):
     :ivar b: repulsion limit of ``phi``.
     :ivar c1: position navigation gain.
     :ivar c2: velocity navigation gain.
+    :ivar navigation: the navigational feedback on the position error ``z = q_i - q_gamma``:
+        ``linear``, ``-c1 z`` as printed in [Su09] eq. (7) and (10) (the default), or
+        ``bounded``, ``-c1 sigma_1(z)`` with ``sigma_1(z) = z / sqrt(1 + ||z||^2)``, the
+        gamma-agent's feedback of Olfati-Saber 2006 (IEEE TAC 51(3), Section VI), whose pull
+        saturates at ``c1`` far from the leader.
     """
 
     r: float = 4.0
@@ -37,6 +45,7 @@ class SuParams(Law):
     b: float = 5.0
     c1: float = 0.5
     c2: float = 0.5
+    navigation: str = 'linear'
 
     #: Whether only informed agents (``h_i = 1``) get navigational feedback.
     partial: ClassVar[bool] = False
@@ -62,9 +71,10 @@ class SuParams(Law):
     def com_closed_form(self) -> bool:
         """Return whether the centre of mass obeys (45) exactly ([Su09] Theorem 2 (iii)).
 
-        So it does under protocol (33): every agent informed, ``f_gamma`` fed forward.
+        So it does under protocol (33): every agent informed, ``f_gamma`` fed forward, the
+        linear navigational feedback.
         """
-        return self.feedforward and not self.partial
+        return self.feedforward and not self.partial and self.navigation == 'linear'
 
     def validate(self, ctx):
         """Check ``0 < d < r``, ``eps > 0``, ``0 < h < 1``, ``0 < a <= b``, ``c1, c2 > 0``."""
@@ -77,6 +87,7 @@ class SuParams(Law):
         require(self.b >= self.a, k + 'b', f'must be >= a = {self.a}, got {self.b}')
         require(self.c1 > 0, k + 'c1', f'must be > 0, got {self.c1}')
         require(self.c2 > 0, k + 'c2', f'must be > 0, got {self.c2}')
+        choice(self.navigation, k + 'navigation', NAVIGATION)
 
     def pair(self, qi, pi, qj, pj, w):
         """Return ``phi_alpha(||q_j - q_i||_sigma) n_ij + a_ij (p_j - p_i)``.
@@ -103,15 +114,23 @@ class SuParams(Law):
             out[:, k] += (pj[:, k] - pi[:, k]) * a_ij
         return out
 
+    #: Whether ``f_gamma`` reaches the uninformed agents too (Section V.C's variant).
+    feedforward_all: ClassVar[bool] = False
+
     def combine(self, q, p, s, leader, agents, dt):
         """Add the navigational feedback of [Su09] eq. (7), (10), (33) or Section V.C."""
         if leader is None:
             return s
-        nav = -self.c1 * (q - leader.q) - self.c2 * (p - leader.p)
-        if self.feedforward:
+        z = q - leader.q
+        if self.navigation == 'bounded':
+            z = z / np.sqrt(1.0 + np.einsum('nk,nk->n', z, z))[:, None]
+        nav = -self.c1 * z - self.c2 * (p - leader.p)
+        if self.feedforward and not self.feedforward_all:
             nav = nav + leader.a
         if self.partial:
             nav = agents.informed[:, None] * nav
+        if self.feedforward_all:
+            nav = nav + leader.a
         return s + nav
 
     def step_bounds(self, sc, real):
@@ -149,7 +168,13 @@ class SuAccel(SuParams):
 
 @dataclass(frozen=True)
 class SuInformedAccel(SuParams):
-    """[Su09] Section V.C: ``h_i [f_gamma + c1 (q_gamma - q_i) + c2 (p_gamma - p_i)]``."""
+    """[Su09] Section V.C: ``h_i [f_gamma + c1 (q_gamma - q_i) + c2 (p_gamma - p_i)]``.
+
+    :ivar feedforward_to: who receives ``f_gamma``: ``informed``, as printed (``h_i``
+        multiplies it, the default), or ``all``, the reading under which an accelerating
+        leader changes nothing relative to Fig. 2 seen from the leader's frame:
+        ``f_gamma + h_i [c1 (q_gamma - q_i) + c2 (p_gamma - p_i)]``.
+    """
 
     name: ClassVar[str] = 'su_informed_accel'
     citation: ClassVar[str] = ('Su, Wang, Lin 2009, Section V.C: informed agents, '
@@ -157,3 +182,15 @@ class SuInformedAccel(SuParams):
     partial: ClassVar[bool] = True
     feedforward: ClassVar[bool] = True
     uses_leader_acceleration: ClassVar[bool] = True
+
+    feedforward_to: str = 'informed'
+
+    @property
+    def feedforward_all(self) -> bool:
+        """Return whether every agent receives ``f_gamma`` (``feedforward_to: all``)."""
+        return self.feedforward_to == 'all'
+
+    def validate(self, ctx):
+        """Check the parameters of :class:`SuParams` and ``feedforward_to``."""
+        super().validate(ctx)
+        choice(self.feedforward_to, 'protocol.feedforward_to', ('informed', 'all'))
