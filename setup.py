@@ -59,5 +59,8 @@ setup(
             'linear = flock_swarm.core.leaders.models:Linear',
             'sink = flock_swarm.core.leaders.models:Sink',
         ],
+        # The launch-free testing API's fixtures (ros_domain, flock_swarm_run...) for every
+        # pytest run in an environment holding flock_swarm.
+        'pytest11': ['flock_swarm = flock_swarm.testing'],
     },
 )

@@ -1,42 +1,28 @@
-"""Shared fixtures: unique ROS domain ids so concurrent runs never see each other."""
+"""Fixtures specific to this repository's tests.
 
-import itertools
+The generic ones (``ros_domain``, ``other_ros_domain``, ``flock_swarm_run``,
+``in_process_swarm``) and the wait helpers come from :mod:`flock_swarm.testing`, the pytest
+plugin every user's tests get too.
+"""
+
 import os
+from pathlib import Path
+import shutil
 import subprocess
-import time
-
-import pytest
-
-_counter = itertools.count()
+import sys
 
 # DDS discovery stays on this machine unless the caller asked otherwise (scripts/env.sh sets
-# the same default), so a test run never talks to, or hears from, another host.
+# the same default), so a test run never talks to, or hears from, another host, also in the
+# tests that start processes without a ros_domain fixture.
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-
-def _unique_domain() -> int:
-    """Return a ROS domain id unique within this pytest process, in [1, 200].
-
-    Ids are spread over the range by process id, so two pytest processes on one machine are
-    unlikely to collide.
-    """
-    return 1 + (os.getpid() * 37 + next(_counter)) % 200
-
-
-@pytest.fixture
-def ros_domain() -> int:
-    """Return a ROS domain id unique to this test within this pytest process.
-
-    Ids are spread over [1, 200] by process id, so two pytest processes on one machine are
-    unlikely to collide; discovery is limited to localhost by scripts/env.sh (and above).
-    """
-    return _unique_domain()
-
-
-@pytest.fixture
-def other_ros_domain(ros_domain) -> int:
-    """Return a second domain id for the same test, different from :func:`ros_domain`'s."""
-    return _unique_domain()
+REPO = Path(__file__).resolve().parents[1]
+#: Top-level entries of a working tree that are not package sources (virtualenv, run outputs,
+#: colcon's own directories), left out even if a global gitignore does not list them.
+NOT_SOURCES = {'.venv', 'out', 'build', 'install', 'log'}
+#: Wall-clock bounds: a build or a run that hangs fails the test instead of blocking CI.
+BUILD_TIMEOUT = 300.0
+RUN_TIMEOUT = 120.0
 
 
 def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
@@ -59,10 +45,40 @@ def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
     return others, world
 
 
-def wait_for(condition, timeout: float, what: str) -> None:
-    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)
+def source_files() -> list[str]:
+    """Return the package sources: tracked and untracked non-ignored files, relative paths."""
+    listed = subprocess.run(
+        ['git', 'ls-files', '-z', '--cached', '--others', '--exclude-standard'],
+        cwd=REPO, capture_output=True, check=True, timeout=60).stdout.decode()
+    return [f for f in listed.split('\0')
+            if f and f.split('/', 1)[0] not in NOT_SOURCES and (REPO / f).is_file()]
+
+
+def copy_sources(dest: Path) -> None:
+    """Copy the package sources (:func:`source_files`) into ``dest``, as a fresh clone has them."""
+    for rel in source_files():
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO / rel, dest / rel)
+
+
+def subprocess_env(**extra: str) -> dict[str, str]:
+    """Return the environment of the test's subprocesses: this venv's bin on PATH, as env.sh.
+
+    :param extra: further variables to set.
+    :return: the environment.
+    """
+    env = dict(os.environ, **extra)
+    venv_bin = str(Path(sys.executable).parent)
+    env['PATH'] = os.pathsep.join([venv_bin, env.get('PATH', '')])
+    # The ROS wheels' message packages are indexed under the venv (scripts/env.sh exports it).
+    prefixes = [p for p in env.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    if sys.prefix not in prefixes:
+        env['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *prefixes])
+    return env
+
+
+def run_installed(ws: Path, command: list[str], env: dict[str, str]):
+    """Run ``command`` in ``ws`` after sourcing the workspace's ``install/setup.bash``."""
+    return subprocess.run(['bash', '-c', 'source install/setup.bash && exec "$@"', 'bash',
+                           *command], cwd=ws, env=env, capture_output=True, text=True,
+                          timeout=RUN_TIMEOUT)

@@ -10,24 +10,18 @@ with nobody else on its domain, so every step ends by its timeout with zero comm
 import json
 import os
 from pathlib import Path
-import shutil
 import subprocess
 import sys
 import textwrap
 
 import pytest
 
+from conftest import BUILD_TIMEOUT, copy_sources, run_installed, subprocess_env
+
 pytestmark = pytest.mark.ros
 
 PACKAGE = 'flock_swarm'
-REPO = Path(__file__).resolve().parents[1]
-#: Top-level entries of a working tree that are not package sources (virtualenv, run outputs,
-#: colcon's own directories), left out even if a global gitignore does not list them.
-NOT_SOURCES = {'.venv', 'out', 'build', 'install', 'log'}
 EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm')
-#: Wall-clock bounds: a build or a run that hangs fails the test instead of blocking CI.
-BUILD_TIMEOUT = 300.0
-RUN_TIMEOUT = 120.0
 #: The world run: demo with 3 agents for 0.06 s at dt = 0.02 s, i.e. steps 0..3, each closed
 #: by the step timeout (no agent or leader runs), starting at once.
 N_AGENTS = 3
@@ -50,46 +44,11 @@ IMPORT_CHECK = textwrap.dedent("""\
 """)
 
 
-def source_files() -> list[str]:
-    """Return the package sources: tracked and untracked non-ignored files, relative paths."""
-    listed = subprocess.run(
-        ['git', 'ls-files', '-z', '--cached', '--others', '--exclude-standard'],
-        cwd=REPO, capture_output=True, check=True, timeout=60).stdout.decode()
-    return [f for f in listed.split('\0')
-            if f and f.split('/', 1)[0] not in NOT_SOURCES and (REPO / f).is_file()]
-
-
-def subprocess_env(**extra: str) -> dict[str, str]:
-    """Return the environment of the test's subprocesses: this venv's bin on PATH, as env.sh.
-
-    :param extra: further variables to set.
-    :return: the environment.
-    """
-    env = dict(os.environ, **extra)
-    venv_bin = str(Path(sys.executable).parent)
-    env['PATH'] = os.pathsep.join([venv_bin, env.get('PATH', '')])
-    # The ROS wheels' message packages are indexed under the venv (scripts/env.sh exports it).
-    prefixes = [p for p in env.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
-    if sys.prefix not in prefixes:
-        env['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *prefixes])
-    return env
-
-
-def run_installed(ws: Path, command: list[str], env: dict[str, str]):
-    """Run ``command`` in ``ws`` after sourcing the workspace's ``install/setup.bash``."""
-    return subprocess.run(['bash', '-c', 'source install/setup.bash && exec "$@"', 'bash',
-                           *command], cwd=ws, env=env, capture_output=True, text=True,
-                          timeout=RUN_TIMEOUT)
-
-
 @pytest.fixture(scope='module')
 def workspace(tmp_path_factory) -> Path:
     """Copy the sources into ``ws/src/flock_swarm``, run ``colcon build``, return ``ws``."""
     ws = tmp_path_factory.mktemp('colcon') / 'ws'
-    dest = ws / 'src' / PACKAGE
-    for rel in source_files():
-        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(REPO / rel, dest / rel)
+    copy_sources(ws / 'src' / PACKAGE)
     # An empty COLCON_HOME: no user defaults (~/.colcon) change the build.
     result = subprocess.run(
         [sys.executable, '-m', 'colcon', 'build', '--base-paths', 'src'], cwd=ws,

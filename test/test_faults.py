@@ -36,8 +36,9 @@ from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
+from flock_swarm.testing import wait_for
 from broken_law import nan_command_for
-from conftest import start_nodes, wait_for
+from conftest import start_nodes
 from ros_messages import make_accel, make_odometry
 
 pytestmark = pytest.mark.ros

@@ -6,13 +6,13 @@ import sys
 
 ROOT = Path(__file__).resolve().parent.parent
 # Source trees checked, whichever of them exist.
-TARGETS = ('flock_swarm', 'test', 'bench', 'launch')
+TARGETS = ('flock_swarm', 'test', 'bench', 'launch', 'examples')
 # ament_flake8's line limit (ROS 2 code style).
 MAX_LINE_LENGTH = 99
 
 
 def test_flake8():
-    """Find no flake8 findings in the package, its tests, benchmarks and launch files."""
+    """Find no flake8 findings in the package, its tests, benchmarks, launch files, examples."""
     paths = [name for name in TARGETS if (ROOT / name).is_dir()]
     result = subprocess.run(
         [sys.executable, '-m', 'flake8', f'--max-line-length={MAX_LINE_LENGTH}', *paths],

@@ -24,7 +24,8 @@ from flock_swarm.nodes.common import StepClock
 from flock_swarm.runner import (executable, resolve_scenario, run_in_process, run_processes,
                                 stop)
 from flock_swarm.core.run import simulate
-from conftest import start_nodes, wait_for
+from flock_swarm.testing import wait_for
+from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
 
