@@ -291,8 +291,12 @@ class DaskBackend:
     match). Dask reschedules the tasks of a worker that dies.
     """
 
-    def __init__(self, address: str, jobs: int) -> None:
+    def __init__(self, address: str, jobs: int, timeout: float = CONNECT_TIMEOUT) -> None:
         """Connect (or start a local cluster of ``jobs`` single-threaded workers).
+
+        :param address: the scheduler's address (``tcp://host:8786``) or ``local``.
+        :param jobs: workers of a local cluster.
+        :param timeout: seconds to wait for the scheduler.
 
         :raises SweepError: naming the address when the scheduler cannot be reached.
         """
@@ -308,7 +312,7 @@ class DaskBackend:
                                             host='127.0.0.1')
                 self.client = Client(self.cluster)
             else:
-                self.client = Client(address, timeout=CONNECT_TIMEOUT)
+                self.client = Client(address, timeout=timeout)
         except (OSError, TimeoutError, ValueError) as exc:
             raise SweepError(f'--scheduler: cannot reach {address}: '
                              f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
