@@ -217,9 +217,14 @@ class LocalPool:
             while queue or busy:
                 while queue and (idle or len(busy) < self.jobs):
                     proc, conn = idle.pop() if idle else self._start(func, args)
-                    k = queue.popleft()
-                    conn.send((k, tasks[k]))
-                    busy[conn] = (proc, k)
+                    try:
+                        conn.send((queue[0], tasks[queue[0]]))
+                    except OSError:
+                        # It died while idle: it held no task; another worker starts.
+                        proc.join()
+                        conn.close()
+                        continue
+                    busy[conn] = (proc, queue.popleft())
                 ready = wait(list(busy) + [proc.sentinel for proc, _ in busy.values()])
                 for conn in list(busy):
                     proc, k = busy[conn]
