@@ -40,10 +40,11 @@ from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.potentials import psi_alpha
 from flock_swarm.core.protocols import heading
 from flock_swarm.core.pseudo_leaders import minor_lambda_max, select_pseudo_leaders
+from flock_swarm.core.run import SimResult, simulate
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.stability import check_step
 from flock_swarm.scenarios import load, resolve
-from flock_swarm.sim import SimResult, simulate, write_outputs
+from flock_swarm.outputs import write_outputs
 from flock_swarm.study.execute import (DaskBackend, LocalPool, Progress, SerialBackend,
                                        SweepError, execute, terminal_line)
 from flock_swarm.study.spec import Run, SweepSpec, parse_spec, plain, plan_runs
@@ -66,8 +67,8 @@ FIG3_TOLERANCES = (0.05, 0.15, 0.5, 1.0)
 FIG3_ETA_EVERY = 10.0
 #: The loose tolerance [m/s] the report also shows Fig. 3 at.
 FIG3_LOOSE = 1.0
-#: Fig. 3 runs of one N and seed are stacked (:func:`flock_swarm.sim.simulate_stack`) up to
-#: about this many agents per stack: the per-step cost of Python is then paid once for
+#: Fig. 3 runs of one N and seed are stacked (:func:`~flock_swarm.core.run.simulate_stack`) up
+#: to about this many agents per stack: the per-step cost of Python is then paid once for
 #: several swarms (measured: 0.70 against 1.20 CPU-s per 30 s run at N = 300 stacked by 10,
 #: 9 % less at N = 1000 stacked by 2), and the pool still gets several jobs per realisation.
 FIG3_STACK_AGENTS = 3000

@@ -25,17 +25,18 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.node import Node
 
 from flock_swarm.analyze import main as analyze_main
-from flock_swarm.nodes import world as world_module
+from flock_swarm.nodes import stepper as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
-from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,
+from flock_swarm.nodes.common import (LOCKSTEP_QOS, StepClock, make_accel,
                                       make_odometry)
+from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
-from flock_swarm.sim import interaction_graph, simulate, static_graph
+from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from conftest import start_nodes, wait_for
 
 pytestmark = pytest.mark.ros
@@ -190,7 +191,7 @@ def test_stalled_step_is_offered_again_with_backoff(tmp_path, ros_domain):
     overrides = ['n_agents=3', 'informed.count=1', 'duration=10', 'record_every=1']
     path, _, out = scenario_of(tmp_path, overrides)
     with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=30.0) as swarm:
-        world = swarm.world
+        world = swarm.world.stepper
         swarm.spin_until(lambda: world.k >= 5, RUN_TIMEOUT)
         swarm.remove(swarm.agents)
         # The step in progress may still close (its commands were in); the next one stalls.

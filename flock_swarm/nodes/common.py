@@ -5,7 +5,6 @@ other parameter whose name is a dotted scenario key overrides that single value,
 ``ros2 run flock_swarm agent --ros-args -p agent_id:=3 -p scenario:=demo -p protocol.c1:=0.8``.
 """
 
-import bisect
 import math
 import re
 import sys
@@ -46,42 +45,6 @@ ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
 FRAME = 'world'
 #: Exit status for invalid configuration.
 EXIT_CONFIG = 2
-
-
-class LatencyHistogram:
-    """Latencies in constant memory: 100 log-spaced bins per decade from 1 us to 100 s.
-
-    Percentiles are read off the bins (their upper edges: at most 2.3 % high), so a soak of
-    any length costs the same few kilobytes.
-    """
-
-    EDGES = [10.0 ** (-6 + k / 100.0) for k in range(801)]
-
-    def __init__(self) -> None:
-        """Create an empty histogram."""
-        self.counts = [0] * (len(self.EDGES) + 1)
-        self.count = 0
-        self.max = 0.0
-
-    def add(self, seconds: float) -> None:
-        """Add one latency [s]."""
-        self.counts[bisect.bisect_left(self.EDGES, seconds)] += 1
-        self.count += 1
-        self.max = max(self.max, seconds)
-
-    def summary_ms(self) -> dict:
-        """Return ``count``, ``p50``, ``p90``, ``p99`` and ``max`` in milliseconds."""
-        out = {'count': self.count}
-        for name, q in (('p50', 0.5), ('p90', 0.9), ('p99', 0.99)):
-            target, seen, value = q * self.count, 0, None
-            for k, c in enumerate(self.counts):
-                seen += c
-                if c and seen >= target:
-                    value = self.EDGES[min(k, len(self.EDGES) - 1)]
-                    break
-            out[name] = None if value is None else round(1e3 * min(value, self.max), 3)
-        out['max'] = round(1e3 * self.max, 3) if self.count else None
-        return out
 
 
 def odom_topic(i: int) -> str:

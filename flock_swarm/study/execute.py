@@ -22,8 +22,8 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from flock_swarm import __version__
+from flock_swarm.core.run import SimResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
-from flock_swarm.sim import SimResult, simulate_stack
 from flock_swarm.study.cache import CacheWriter, read_cache
 from flock_swarm.study.spec import TIMED_METRICS, Run, plain, timed_column
 

@@ -19,9 +19,9 @@ import yaml
 
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.run import stack_mismatch
 from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml, realize
 from flock_swarm.core.stability import check_step
-from flock_swarm.sim import stack_mismatch
 from flock_swarm.study.expr import Expression, ExpressionError
 
 #: The keys of a spec file.
