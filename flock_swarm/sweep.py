@@ -25,20 +25,8 @@ def spec_path(name_or_path: str) -> Path:
 
     :raises ScenarioError: when nothing matches.
     """
-    from flock_swarm.scenarios import config_dirs
-    candidate = Path(name_or_path)
-    if candidate.suffix in ('.yaml', '.yml') or os.sep in name_or_path:
-        if not candidate.is_file():
-            raise ScenarioError('spec', f'no such file: {name_or_path}')
-        return candidate
-    names = set()
-    for d in config_dirs():
-        path = d / 'sweeps' / f'{name_or_path}.yaml'
-        if path.is_file():
-            return path
-        names.update(p.stem for p in (d / 'sweeps').glob('*.yaml'))
-    raise ScenarioError('spec', f'unknown sweep {name_or_path!r} '
-                        f'(shipped: {", ".join(sorted(names)) or "none found"})')
+    from flock_swarm.scenarios import resolve
+    return resolve(name_or_path, 'sweeps', 'spec')
 
 
 def build_parser() -> argparse.ArgumentParser:

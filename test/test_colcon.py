@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: Top-level entries of a working tree that are not package sources (virtualenv, run outputs,
 #: colcon's own directories), left out even if a global gitignore does not list them.
 NOT_SOURCES = {'.venv', 'out', 'build', 'install', 'log'}
-EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm')
+EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm', 'sweep')
 #: Wall-clock bounds: a build or a run that hangs fails the test instead of blocking CI.
 BUILD_TIMEOUT = 300.0
 RUN_TIMEOUT = 120.0
@@ -108,6 +108,7 @@ def test_colcon_build_installs_package(workspace):
     share = prefix / 'share'
     assert (share / PACKAGE / 'package.xml').is_file()
     assert (share / PACKAGE / 'config' / 'demo.yaml').is_file()
+    assert (share / PACKAGE / 'config' / 'sweeps' / 'su2009_fig3.yaml').is_file()
     assert (share / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
 
 

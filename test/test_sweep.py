@@ -301,18 +301,32 @@ def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
 # Interruptions and the cache
 
 
-def test_a_killed_worker_process_has_its_runs_redone(long_serial):
-    out = long_serial / 'killed'
-    proc = sweep_process(str(long_serial / 'long.yaml'), '--jobs', '2', '--out', str(out),
-                         '--no-plots')
+def hit_mid_sweep(spec: Path, out: Path, finished: int, hit) -> tuple[int, str]:
+    """Run ``sweep`` on two workers, call ``hit(process)`` once ``finished`` runs are cached.
+
+    :return: the exit status and the standard error.
+    """
+    proc = sweep_process(str(spec), '--jobs', '2', '--out', str(out), '--no-plots')
     try:
-        wait_for(lambda: cache_lines(out / 'runs.jsonl') >= 1, 120.0, 'a first finished run')
-        wait_for(lambda: len(children(proc.pid)) == 2, 30.0, 'two worker processes')
-        os.kill(children(proc.pid)[0], signal.SIGKILL)
+        wait_for(lambda: cache_lines(out / 'runs.jsonl') >= finished, 120.0,
+                 f'{finished} finished run(s)')
+        hit(proc)
         _, err = proc.communicate(timeout=180)
     finally:
         proc.kill()
-    assert proc.returncode == 0, err
+    return proc.returncode, err
+
+
+def kill_a_worker(proc: subprocess.Popen) -> None:
+    """SIGKILL one of the sweep's two worker processes."""
+    wait_for(lambda: len(children(proc.pid)) == 2, 30.0, 'two worker processes')
+    os.kill(children(proc.pid)[0], signal.SIGKILL)
+
+
+def test_a_killed_worker_process_has_its_runs_redone(long_serial):
+    out = long_serial / 'killed'
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1, kill_a_worker)
+    assert status == 0, err
     assert 'died (exit code -9); its job is redone' in err
     assert len(read_cache(out / 'runs.jsonl')) == 16
     assert cache_lines(out / 'runs.jsonl') == 16
@@ -321,15 +335,9 @@ def test_a_killed_worker_process_has_its_runs_redone(long_serial):
 
 def test_an_interrupted_sweep_resumes_to_the_same_table(long_serial):
     out = long_serial / 'interrupted'
-    proc = sweep_process(str(long_serial / 'long.yaml'), '--jobs', '2', '--out', str(out),
-                         '--no-plots')
-    try:
-        wait_for(lambda: cache_lines(out / 'runs.jsonl') >= 2, 120.0, 'two finished runs')
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 130, err
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 2,
+                                lambda proc: proc.send_signal(signal.SIGINT))
+    assert status == 130, err
     assert err.rstrip().splitlines()[-1].startswith('sweep: interrupted; every finished run')
     problems = []
     kept = read_cache(out / 'runs.jsonl', report=problems.append)
