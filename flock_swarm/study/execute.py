@@ -389,7 +389,8 @@ def execute(runs: list[Run], cache_path: Path, recorder: Recorder, backend,
     interrupted = False
     with CacheWriter(cache_path) as cache:
         for job, recs in backend.results(run_job, jobs, recorder):
-            done = [r for r in recs if r['status'] != 'interrupted']
+            # JSON types, non-finite values as None: the record as the cache gives it back.
+            done = [plain(r) for r in recs if r['status'] != 'interrupted']
             interrupted |= len(done) < len(recs)
             cache.add(done)
             for rec in done:
