@@ -30,7 +30,7 @@ from flock_swarm.core.run import simulate
 from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.study.execute import Job, Progress, make_jobs
 from flock_swarm.study.expr import Expression, ExpressionError
-from flock_swarm.study.spec import Run, parse_spec, plan_runs, read_spec
+from flock_swarm.study.spec import Run, parse_spec, plan_runs, points, read_spec
 from flock_swarm.sweep import main, spec_path
 
 BIN = Path(sys.executable).parent
@@ -152,6 +152,16 @@ def test_plan_is_seed_major_largest_first_with_common_seeds():
     sc = runs[2].scenario()
     assert sc.seed == 0 and sc.duration == 1.0 and sc.informed.fraction == 0.25
     np.testing.assert_array_equal(sc.position_box, [[0.0, math.sqrt(200.0)]] * 2)
+
+
+def test_zipped_axes_vary_together_within_the_grid():
+    spec = parse_spec({'scenario': 'su2009_fig7', 'grid': {'n_agents': [10, 20]},
+                       'zip': {'protocol.c1': [0.2, 0.5], 'protocol.c2': [0.4, 1.0]}})
+    assert points(spec) == [{'n_agents': n, 'protocol.c1': c1, 'protocol.c2': c2}
+                            for n in (10, 20) for c1, c2 in ((0.2, 0.4), (0.5, 1.0))]
+    assert (spec.plot_x, spec.plot_line) == ('n_agents', 'protocol.c1')
+    with pytest.raises(ScenarioError, match='zip: lists of different lengths'):
+        parse_spec({'scenario': 'su2009_fig7', 'zip': {'dt': [0.01], 'duration': [1, 2]}})
 
 
 def test_stacks_keep_the_order_and_split_evenly():
