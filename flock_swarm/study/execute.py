@@ -218,7 +218,7 @@ class LocalPool:
                 while queue and (idle or len(busy) < self.jobs):
                     proc, conn = idle.pop() if idle else self._start(func, args)
                     try:
-                        conn.send((queue[0], tasks[queue[0]]))
+                        conn.send(tasks[queue[0]])
                     except OSError:
                         # It died while idle: it held no task; another worker starts.
                         proc.join()
@@ -278,12 +278,12 @@ def _worker(conn, func: Callable[..., Any], args: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
-            k, task = conn.recv()
+            task = conn.recv()
         except (EOFError, OSError):
             return
         try:
             conn.send(('ok', func(task, *args)))
-        except Exception as exc:  # noqa: B902 - reported to the parent, which stops the sweep
+        except Exception as exc:  # any failure: reported to the parent, which stops the sweep
             last = traceback.extract_tb(exc.__traceback__)[-1]
             conn.send(('error', f'{type(exc).__name__}: {exc} ({Path(last.filename).name}:'
                                 f'{last.lineno})'))
@@ -339,7 +339,7 @@ class DaskBackend:
             for fut in as_completed(futures):
                 try:
                     value = fut.result()
-                except Exception as exc:  # noqa: B902 - one line, the sweep stops
+                except Exception as exc:  # any failure of a task: one line, the sweep stops
                     raise SweepError(f'a Dask task failed: {type(exc).__name__}: {exc}') \
                         from None
                 pending.discard(fut.key)
