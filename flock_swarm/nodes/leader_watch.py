@@ -2,10 +2,23 @@
 
 The world and the agents both follow the leader's messages and fall back when they stop
 (the world steps on without waiting for it, the agents apply the uninformed law); this is
-the one bookkeeping of both, each caller logging the change in its own words.
+the one bookkeeping of both, each caller logging the change in its own words (to a
+:class:`Log`, the logging of the ROS-free parts of the nodes).
 """
 
 import math
+from typing import Protocol
+
+
+class Log(Protocol):
+    """Where the world stepper and the agent controller say what happened (an rclpy logger,
+    a :mod:`logging` logger)."""
+
+    def info(self, message: str) -> object:
+        """Log an event."""
+
+    def warning(self, message: str) -> object:
+        """Log a problem."""
 
 
 class LeaderWatch:

@@ -13,8 +13,6 @@ import bisect
 import json
 import time
 from dataclasses import dataclass
-from typing import Protocol
-
 import numpy as np
 
 from flock_swarm.core.dynamics import LeaderState, step_agents
@@ -22,7 +20,7 @@ from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.run import RunLog, SimResult, build_summary
 from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.nodes.leader_watch import LeaderWatch
+from flock_swarm.nodes.leader_watch import LeaderWatch, Log
 
 #: Seconds after which a stalled lockstep step is first offered again (see ``resent``).
 RESEND_PERIOD = 0.5
@@ -90,16 +88,6 @@ class LatencyHistogram:
             out[name] = None if value is None else round(1e3 * min(value, self.max), 3)
         out['max'] = round(1e3 * self.max, 3) if self.count else None
         return out
-
-
-class Log(Protocol):
-    """Where the stepper says what happened (an rclpy logger, a :mod:`logging` logger)."""
-
-    def info(self, message: str) -> object:
-        """Log an event."""
-
-    def warning(self, message: str) -> object:
-        """Log a problem."""
 
 
 @dataclass(frozen=True)
