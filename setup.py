@@ -15,6 +15,7 @@ setup(
         ('share/' + package_name + '/config',
          glob('config/*.yaml') + glob('config/*.rviz') + glob('config/*.json')
          + glob('config/*.xml')),
+        ('share/' + package_name + '/config/sweeps', glob('config/sweeps/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*_launch.py')),
     ],
     install_requires=['setuptools'],
@@ -38,6 +39,7 @@ setup(
             'world = flock_swarm.nodes.world:main',
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
+            'sweep = flock_swarm.sweep:main',
         ],
         # The built-in laws and leader models, registered exactly as a user's package
         # registers its own (docs/extending.md): one registry, one code path.

@@ -1,12 +1,14 @@
 """Benchmark of the Su 2009 Fig. 3 Monte Carlo sweep: measure a subset, project the full sweep.
 
     python bench/bench_sweep.py [--realisations 2] [--jobs 2] [--out DIR] [--json FILE]
-                                [--full-realisations 50]
+                                [--full-realisations 50] [--scheduler ADDRESS|local]
+                                [--sizes N ...] [--fractions D ...] [--set KEY=VALUE ...]
 
 Runs the sweep of ``python -m flock_swarm.reproduce`` alone (no presets, no ROS runs, no
 report): every (N, delta) point of Fig. 3 (N = 100, 300, 500, 1000; ten informed fractions),
 100 s at dt = 0.02 (5000 steps) per run, with ``--realisations`` seeds per point, stacked and
-spread over ``--jobs`` worker processes exactly as the reproduction runs them. The subset
+spread over ``--jobs`` worker processes exactly as the reproduction runs them (the sweep
+machinery, :mod:`flock_swarm.study`), or over a Dask cluster with ``--scheduler``. The subset
 holds whole realisations, i.e. the full sweep's mix of sizes and fractions, so the full
 sweep's wall time is projected as ``measured wall x full realisations / realisations``;
 the pool's idle tail at the end makes this projection err on the long side.
@@ -15,6 +17,9 @@ Without ``--out`` the runs go to a fresh temporary directory (a measurement, not
 reused). With ``--out`` the cache there is used and extended like the reproduction's, so
 ``--realisations 50 --out out/reproduce`` *is* the full sweep (resumable, with a progress
 bar), and ``scripts/reproduce --realisations 50`` then reuses it for the report.
+
+``--sizes``, ``--fractions`` and ``--set`` (for example ``--set duration=20``) make a smaller
+grid, to compare backends in a few minutes; the projection then holds for that grid only.
 """
 
 import argparse
@@ -31,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.reproduce import (FIG3_FRACTIONS, FIG3_PAPER_REALISATIONS, FIG3_SIZES, Plan,
-                                   append_invocation, git_revision, machine, run_simulations,
-                                   terminal_line)
+                                   append_invocation, git_revision, machine, run_simulations)
+from flock_swarm.study.execute import DaskBackend, SweepError, terminal_line
 
 #: The issue's target for the full sweep on a 2-core machine [min].
 TARGET_MIN = 60.0
@@ -66,21 +71,38 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path,
                         help='run cache to use and extend (default: a fresh temporary one)')
     parser.add_argument('--json', type=Path, help='also write the results here')
+    parser.add_argument('--scheduler', metavar='ADDRESS',
+                        help='run on the Dask scheduler at ADDRESS, or "local" (a LocalCluster '
+                        'of --jobs single-threaded workers, started before the clock)')
+    parser.add_argument('--sizes', type=int, nargs='+', default=list(FIG3_SIZES),
+                        help='group sizes N (default: the paper\'s four)')
+    parser.add_argument('--fractions', type=float, nargs='+', default=list(FIG3_FRACTIONS),
+                        help='informed fractions (default: the reproduction\'s ten)')
+    parser.add_argument('--set', dest='overrides', action='append', default=[],
+                        metavar='KEY=VALUE', help='override a value of every run')
     args = parser.parse_args(argv)
     if args.realisations < 1 or args.full_realisations < 1 or args.jobs < 1:
         parser.error('--realisations, --full-realisations and --jobs must be >= 1')
     command = 'python bench/bench_sweep.py' + ''.join(
         f' {shlex.quote(a)}' for a in (sys.argv[1:] if argv is None else argv))
-    plan = Plan(False, args.realisations)
+    plan = Plan(False, args.realisations, tuple(args.sizes), tuple(args.fractions),
+                tuple(args.overrides))
     host = machine()
     started = time.strftime('%Y-%m-%d %H:%M', time.gmtime())
     revision = git_revision()
     print(f'# {command}')
     print(f'# {host["nproc"]} CPUs ({host["cpu_model"]}), Python {platform.python_version()}, '
           f'load average {" ".join(f"{x:.2f}" for x in host["load_average"])} at the start')
-    print(f'# sweep: N = {", ".join(map(str, FIG3_SIZES))}; '
-          f'delta = {", ".join(f"{d:g}" for d in FIG3_FRACTIONS)}; '
-          f'{args.realisations} realisation(s) each; {args.jobs} worker(s)', flush=True)
+    backend = None
+    if args.scheduler is not None:
+        try:
+            backend = DaskBackend(args.scheduler, args.jobs)
+        except SweepError as exc:
+            parser.error(str(exc))
+    print(f'# sweep: N = {", ".join(map(str, plan.sizes))}; '
+          f'delta = {", ".join(f"{d:g}" for d in plan.fractions)}; '
+          f'{args.realisations} realisation(s) each; '
+          f'{backend.name if backend is not None else f"{args.jobs} worker(s)"}', flush=True)
 
     def say(line: str) -> None:
         """Print a progress line to stderr."""
@@ -90,7 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix='bench_sweep_') as scratch:
         out = args.out if args.out is not None else Path(scratch)
         cpu0, wall0 = cpu_seconds(), time.monotonic()
-        sims = run_simulations(plan, out, args.jobs, False, say, presets=False, live=live)
+        try:
+            sims = run_simulations(plan, out, args.jobs, False, say, presets=False, live=live,
+                                   backend=backend)
+        finally:
+            if backend is not None:
+                backend.close()
         wall, cpu = time.monotonic() - wall0, cpu_seconds() - cpu0
     load_end = list(os.getloadavg())
     if args.out is not None and sims['executed']:
@@ -122,8 +149,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f'  N = {n:>4}: {row["runs"]:>4} runs, {row["mean_s"]:6.2f} s per run '
               f'(share of its stack), {row["total_s"] / 60:6.2f} min in all')
     print(f'load average at the end: {" ".join(f"{x:.2f}" for x in load_end)}')
+    paper_grid = (plan.sizes, plan.fractions, plan.fig3_overrides) \
+        == (FIG3_SIZES, FIG3_FRACTIONS, ())
     if projected is None:
         print('projection: none (runs were reused from --out; measure into a fresh directory)')
+    elif not paper_grid:
+        print(f'projection: this grid ({full_runs} runs, {args.full_realisations} '
+              f'realisations) takes {projected / 60:.1f} min wall (not the full sweep)')
     else:
         verdict = 'PASS' if projected / 60.0 < TARGET_MIN else 'FAIL'
         print(f'projection: the full sweep ({full_runs} runs, {args.full_realisations} '

@@ -661,3 +661,38 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
             if progress is not None:
                 progress(path)
     return written
+
+
+def plot_errorbars(lines: dict[str, tuple[list, list, list]], out: Path, *, xlabel: str,
+                   ylabel: str, title: str = '', filename: str = 'metric.png') -> Path:
+    """Plot one metric against a swept value, one line with error bars per label.
+
+    The layout of Su, Wang, Lin 2009 Fig. 3 (eta against the informed fraction, one line
+    per group size), for any metric of a sweep.
+
+    :param lines: ``{label: (x, mean, error)}``, each list ordered by x.
+    :param out: the output directory.
+    :param xlabel: the x axis (the swept key).
+    :param ylabel: the y axis (the metric).
+    :param title: the figure's title.
+    :param filename: the file name in ``out``.
+    :return: the written path.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    numeric = all(isinstance(v, (int, float)) for x, _, _ in lines.values() for v in x)
+    for k, (label, (x, mean, error)) in enumerate(lines.items()):
+        where = x if numeric else list(range(len(x)))
+        ax.errorbar(where, mean, yerr=error, marker='o', ms=3, capsize=2, lw=1,
+                    color=f'C{k % 10}', label=label or None)
+        if not numeric:
+            ax.set_xticks(where, [str(v) for v in x])
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    if title:
+        ax.set_title(title)
+    if any(lines):
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, Path(out) / filename)

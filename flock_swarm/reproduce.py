@@ -10,16 +10,15 @@ real ROS 2 nodes (lockstep, one process); it then writes one JSON result per exp
 
 Every run is cached in ``OUT`` and reused when its scenario and the package version match:
 presets in ``OUT/runs/<experiment>/`` (``summary.json``, ``timeseries.npz``), the Fig. 3
-sweep as JSON lines in ``OUT/fig3_runs.jsonl`` (one line per run, appended as runs finish),
+sweep as JSON lines in ``OUT/fig3_runs.jsonl`` (one line per run, appended as runs finish;
+the machinery of ``sweep``, :mod:`flock_swarm.study`),
 the ROS runs in ``OUT/ros/<experiment>/``. An interrupted reproduction therefore resumes
 where it stopped, and a larger ``--realisations`` only runs the missing realisations.
 ``--fresh`` ignores the caches.
 """
 
 import argparse
-import hashlib
 import json
-import multiprocessing
 import os
 import platform
 import shlex
@@ -41,11 +40,14 @@ from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.potentials import psi_alpha
 from flock_swarm.core.laws.jadbabaie2003 import heading
 from flock_swarm.core.pseudo_leaders import minor_lambda_max, select_pseudo_leaders
-from flock_swarm.core.run import simulate, simulate_stack
+from flock_swarm.core.run import SimResult, simulate
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.stability import check_step
 from flock_swarm.scenarios import load, resolve
 from flock_swarm.outputs import write_outputs
+from flock_swarm.study.execute import (DaskBackend, LocalPool, Progress, SerialBackend,
+                                       SweepError, execute, terminal_line)
+from flock_swarm.study.spec import Run, SweepSpec, parse_spec, plain, plan_runs
 
 #: Su, Wang, Lin 2009, Section V.A: Fig. 3 keeps the density N / L^2 at this value.
 FIG3_DENSITY = 0.05
@@ -70,8 +72,6 @@ FIG3_LOOSE = 1.0
 #: several swarms (measured: 0.70 against 1.20 CPU-s per 30 s run at N = 300 stacked by 10,
 #: 9 % less at N = 1000 stacked by 2), and the pool still gets several jobs per realisation.
 FIG3_STACK_AGENTS = 3000
-#: Without a terminal, progress lines come at most this often [s] (on one, a live line).
-PROGRESS_EVERY = 30.0
 #: --quick: a sweep small enough for a unit test.
 QUICK_FIG3_SIZES = (20, 40)
 QUICK_FIG3_FRACTIONS = (0.1, 0.5)
@@ -228,27 +228,6 @@ def fmt(value: Any) -> str:
     return str(value)
 
 
-def plain(value: Any) -> Any:
-    """Return ``value`` with NumPy scalars and arrays turned into JSON types (inf: None)."""
-    if isinstance(value, dict):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [plain(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    return value
-
-
-def scenario_digest(sc: Scenario) -> str:
-    """Return a short hash of a scenario as run (its mapping after overrides and seed)."""
-    text = json.dumps(plain(sc.raw), sort_keys=True)
-    return hashlib.sha1(f'{text}|{__version__}'.encode()).hexdigest()[:16]
-
-
 def preset_notes(preset: str) -> str:
     """Return the header comment of a preset file (what we chose where the paper is silent)."""
     lines = []
@@ -262,12 +241,6 @@ def preset_notes(preset: str) -> str:
 def set_args(overrides: Iterable[str]) -> str:
     """Return ``--set`` options for a command line."""
     return ''.join(f' --set {shlex.quote(o)}' for o in overrides)
-
-
-def fig3_box(n_agents: int) -> list[list[float]]:
-    """Return the box ``[0, L]^2`` with ``N / L^2 = 0.05`` (Su 2009 Section V.A)."""
-    side = float(np.sqrt(n_agents / FIG3_DENSITY))
-    return [[0.0, side], [0.0, side]]
 
 
 # --------------------------------------------------------------------------------------------
@@ -1218,38 +1191,33 @@ def cached_preset(out: Path, sc: Scenario) -> dict | None:
 
 
 def run_task(task: dict) -> dict:
-    """Run one job of the pool: a preset, or a stack of runs of the Fig. 3 sweep.
+    """Run one preset job of the pool (``key``, ``preset``, ``overrides``, ``out``).
 
-    :param task: ``kind`` ``preset`` (with ``key``, ``preset``, ``overrides``, ``out``) or
-        ``fig3`` (with ``runs``: the sweep's runs, see :func:`fig3_tasks`, of one N).
-    :return: for a preset, its summary; for Fig. 3, the cache records of its runs.
+    :return: its summary.
     """
-    if task['kind'] == 'preset':
-        sc = load(task['preset'], task['overrides'])
-        result = simulate(sc)
-        write_outputs(result, Path(task['out']), sc)
-        return {'kind': 'preset', 'key': task['key'], 'summary': result.summary}
-    runs = task['runs']
-    scenarios = [load(r['preset'], r['overrides'], r['seed'], r['extra']) for r in runs]
-    results = simulate_stack(scenarios)
-    return {'kind': 'fig3', 'records': [fig3_record(r, sc, res)
-                                        for r, sc, res in zip(runs, scenarios, results)]}
+    sc = load(task['preset'], task['overrides'])
+    result = simulate(sc)
+    write_outputs(result, Path(task['out']), sc)
+    return {'kind': 'preset', 'key': task['key'], 'summary': result.summary}
 
 
-def fig3_record(task: dict, sc: Scenario, result) -> dict:
+def fig3_record(run: Run, sc: Scenario, result: SimResult) -> dict:
     """Return the cache record of one run of the Fig. 3 sweep from its result.
 
-    :param task: the run (see :func:`fig3_tasks`).
+    The recorder of the sweep machinery (:func:`flock_swarm.study.execute.run_job`, which
+    adds the run's ``digest``).
+
+    :param run: the run (see :func:`fig3_tasks`).
     :param sc: its scenario.
-    :param result: its :class:`~flock_swarm.core.run.SimResult`.
+    :param result: its result.
     :return: the record (one JSON line of ``fig3_runs.jsonl``).
     """
     s, series = result.summary, result.series
     mismatch = np.linalg.norm(series['p'][-1] - series['leader_p'][-1], axis=1)
     t = series['t']
     every = np.searchsorted(t, np.arange(0.0, t[-1] + 1e-9, FIG3_ETA_EVERY))
-    return {'kind': 'fig3', 'digest': task['digest'], 'n_agents': task['n_agents'],
-            'delta': task['delta'], 'seed': task['seed'], 'duration': sc.duration,
+    return {'kind': 'fig3', 'n_agents': run.point['n_agents'],
+            'delta': run.point['informed.fraction'], 'seed': run.seed, 'duration': sc.duration,
             'informed': len(s['informed']), 'eta': s['eta'],
             'eta_tolerance': s['eta_tolerance'],
             'eta_by_tolerance': {f'{tol:g}': float(np.mean(mismatch <= tol))
@@ -1290,71 +1258,24 @@ class Plan:
         return cls(False, realisations or 10)
 
 
-def fig3_tasks(plan: Plan) -> list[dict]:
-    """Return the runs of the Fig. 3 sweep, realisation by realisation, largest N first.
+def fig3_spec(plan: Plan) -> SweepSpec:
+    """Return the Fig. 3 sweep of a plan as a sweep spec (``config/sweeps/su2009_fig3.yaml``).
 
     Seeds are the realisation indices ``0 .. R-1``, shared by every (N, delta): the points
     of one realisation use common random numbers, and a larger ``R`` only adds seeds.
     """
-    tasks = []
-    for seed in range(plan.realisations):
-        for n in sorted(plan.sizes, reverse=True):
-            for delta in plan.fractions:
-                extra = {'n_agents': n, 'initial.position_box': fig3_box(n),
-                         'informed.fraction': float(delta)}
-                sc = load('su2009_fig3', plan.fig3_overrides, seed, extra)
-                tasks.append({'kind': 'fig3', 'preset': 'su2009_fig3',
-                              'overrides': list(plan.fig3_overrides), 'seed': seed,
-                              'extra': extra, 'n_agents': n, 'delta': float(delta),
-                              'steps': sc.steps, 'digest': scenario_digest(sc)})
-    return tasks
+    side = f'sqrt(n_agents / {FIG3_DENSITY!r})'
+    return parse_spec({'name': 'su2009_fig3', 'scenario': 'su2009_fig3',
+                       'grid': {'n_agents': list(plan.sizes),
+                                'informed.fraction': [float(d) for d in plan.fractions]},
+                       'derived': {'initial.position_box': f'[[0.0, {side}], [0.0, {side}]]'},
+                       'seeds': plan.realisations, 'stack_agents': FIG3_STACK_AGENTS},
+                      plan.fig3_overrides)
 
 
-def fig3_stacks(runs: list[dict], stack_agents: int | None = None) -> list[dict]:
-    """Group runs of the sweep into pool jobs: consecutive runs of one N and seed, stacked.
-
-    Each group of runs sharing N and seed is split into stacks of about
-    ``stack_agents // N`` runs (at least one), of sizes as equal as possible; the order of
-    :func:`fig3_tasks` is kept, so an interrupted sweep has finished whole realisations first.
-
-    :param runs: the runs still to do, in the order of :func:`fig3_tasks`.
-    :param stack_agents: about how many agents a stack holds (default
-        :data:`FIG3_STACK_AGENTS`).
-    :return: jobs ``{'kind': 'fig3', 'runs': [...], 'weight': agent-steps}``.
-    """
-    groups: list[list[dict]] = []
-    for run in runs:
-        if groups and (groups[-1][0]['n_agents'], groups[-1][0]['seed']) \
-                == (run['n_agents'], run['seed']):
-            groups[-1].append(run)
-        else:
-            groups.append([run])
-    jobs = []
-    for group in groups:
-        per_stack = max(1, (stack_agents or FIG3_STACK_AGENTS) // group[0]['n_agents'])
-        count = -(-len(group) // per_stack)
-        for part in np.array_split(np.arange(len(group)), count):
-            stack = [group[k] for k in part.tolist()]
-            jobs.append({'kind': 'fig3', 'runs': stack,
-                         'weight': sum(r['n_agents'] * r['steps'] for r in stack)})
-    return jobs
-
-
-def read_cache(path: Path) -> dict[str, dict]:
-    """Read the JSON-lines cache of the Fig. 3 sweep, keyed by scenario digest.
-
-    A truncated last line (an interrupted write) is skipped.
-    """
-    records = {}
-    if path.is_file():
-        for line in path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(rec, dict) and 'digest' in rec and 'eta' in rec:
-                records[rec['digest']] = rec
-    return records
+def fig3_tasks(plan: Plan) -> list[Run]:
+    """Return the runs of the Fig. 3 sweep, realisation by realisation, largest N first."""
+    return plan_runs(fig3_spec(plan))
 
 
 def aggregate_fig3(records: Iterable[dict],
@@ -1401,60 +1322,10 @@ def delta_for_eta(rows: list[dict], n_agents: int, level: float) -> float | None
     return None
 
 
-class Progress:
-    """The progress of the pool: runs done / total, elapsed time and the time left.
-
-    The time left extrapolates the rate of agent-steps done so far (runs of 1000 agents
-    cost about ten times those of 100). On a terminal (``live``) one line is rewritten in
-    place after every job; otherwise ``say`` gets a line at most every ``every`` seconds
-    and after the last job.
-    """
-
-    def __init__(self, total: int, weight: float, say: Callable[[str], None],
-                 live: Callable[[str], None] | None = None,
-                 every: float = PROGRESS_EVERY) -> None:
-        """Start the clock.
-
-        :param total: runs to do.
-        :param weight: their total cost in agent-steps.
-        :param say: where progress lines go.
-        :param live: rewrites the terminal's current line, or ``None`` (no terminal).
-        :param every: seconds between lines without a terminal.
-        """
-        self.total, self.weight, self.say, self.live, self.every = total, weight, say, live, every
-        self.started = self.last = time.monotonic()
-        self.done, self.done_weight = 0, 0.0
-
-    def step(self, runs: int, weight: float, text: str) -> None:
-        """Report a finished job of ``runs`` runs costing ``weight`` agent-steps."""
-        self.done += runs
-        self.done_weight += weight
-        now = time.monotonic()
-        elapsed = now - self.started
-        left = elapsed / max(self.done_weight, 1e-9) * (self.weight - self.done_weight)
-        width = 24
-        filled = int(width * self.done_weight / max(self.weight, 1e-9))
-        line = (f'[reproduce] [{"#" * filled}{"." * (width - filled)}] '
-                f'{self.done}/{self.total} runs  elapsed {elapsed / 60:.1f} min  '
-                f'ETA {left / 60:.1f} min  ({text})')
-        finished = self.done >= self.total
-        if self.live is not None:
-            self.live(line + ('\n' if finished else ''))
-        elif finished or now - self.last >= self.every:
-            self.last = now
-            self.say(line)
-
-
-def terminal_line(line: str) -> None:
-    """Rewrite the current line of the terminal on stderr (a live progress bar)."""
-    sys.stderr.write('\r\x1b[K' + line)
-    sys.stderr.flush()
-
-
 def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
                     say: Callable[[str], None], presets: bool = True,
-                    live: Callable[[str], None] | None = None) -> dict:
-    """Run the presets and the Fig. 3 sweep (cached runs are reused).
+                    live: Callable[[str], None] | None = None, backend=None) -> dict:
+    """Run the presets, then the Fig. 3 sweep through the sweep machinery (caches reused).
 
     :param plan: what to run.
     :param out: the output directory.
@@ -1463,10 +1334,15 @@ def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
     :param say: progress output.
     :param presets: also run the presets (``False``: the Fig. 3 sweep only).
     :param live: rewrites the terminal's progress line (see :class:`Progress`), or ``None``.
+    :param backend: where the runs go (default: ``jobs`` local worker processes, or this
+        process for one job; a :class:`~flock_swarm.study.execute.DaskBackend` for a
+        cluster).
     :return: ``{'summaries': {key: summary}, 'fig3': [records], 'executed': n, 'cached': n,
         'core_seconds': s, 'wall_s': s}``.
     """
     started = time.monotonic()
+    if backend is None:
+        backend = SerialBackend() if jobs <= 1 else LocalPool(jobs, say)
     summaries, tasks, cached = {}, [], 0
     for exp in EXPERIMENTS if presets else ():
         if exp.key == 'su2009_fig3':
@@ -1484,67 +1360,32 @@ def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
                           'weight': sc.steps * sc.n_agents, 'cost': sc.steps * sc.n_agents ** 2})
     # The long runs first, so that they do not end up alone at the end.
     tasks.sort(key=lambda t: -t['cost'])
-    cache_path = out / 'fig3_runs.jsonl'
-    if fresh and cache_path.exists():
-        cache_path.unlink()
-    records = read_cache(cache_path)
-    planned = fig3_tasks(plan)
-    todo = [t for t in planned if t['digest'] not in records]
-    cached += len(planned) - len(todo)
-    presets_todo = len(tasks)
-    tasks += fig3_stacks(todo)
-    say(f'[reproduce] simulations: {presets_todo + len(todo)} to run ({presets_todo} presets, '
-        f'{len(todo)} Fig. 3 runs in {len(tasks) - presets_todo} stacks), {cached} reused '
-        f'from {out}; {jobs} worker(s)')
-    progress = Progress(presets_todo + len(todo), sum(t['weight'] for t in tasks), say, live)
     core = 0.0
-    out.mkdir(parents=True, exist_ok=True)
-    weights = {id(t): t['weight'] for t in tasks}
-    with open(cache_path, 'a') as cache:
-        for task, res in _pool_map(run_task, tasks, jobs):
-            if res['kind'] == 'preset':
-                summaries[res['key']] = res['summary']
-                core += res['summary']['wall_time_s']
-                progress.step(1, weights[id(task)], f'{res["key"]}: {res["summary"]["status"]}')
-                continue
-            for rec in res['records']:
-                records[rec['digest']] = rec
-                cache.write(json.dumps(rec) + '\n')
-                core += rec['wall_time_s']
-            cache.flush()
-            first = res['records'][0]
-            progress.step(len(res['records']), weights[id(task)],
-                          f'Fig. 3 N = {first["n_agents"]} seed {first["seed"]}, '
-                          f'{len(res["records"])} stacked: '
-                          f'{sum(r["wall_time_s"] for r in res["records"]):.1f} s')
-    fig3 = [records[t['digest']] for t in planned if t['digest'] in records]
+    if tasks:
+        say(f'[reproduce] presets: {len(tasks)} to run, {cached} reused from {out}; on '
+            f'{backend.name}')
+        progress = Progress(len(tasks), sum(t['weight'] for t in tasks), say, live,
+                            prefix='reproduce')
+        for task, res in backend.results(run_task, tasks):
+            summaries[res['key']] = res['summary']
+            core += res['summary']['wall_time_s']
+            progress.step(1, task['weight'], f'{res["key"]}: {res["summary"]["status"]}')
+    sweep = execute(fig3_tasks(plan), out / 'fig3_runs.jsonl', fig3_record, backend,
+                    FIG3_STACK_AGENTS, say, live, fresh, prefix='reproduce',
+                    describe=_describe_fig3)
+    fig3 = sweep['records']
     used = sum(x['wall_time_s'] for x in summaries.values()) \
         + sum(r['wall_time_s'] for r in fig3)
-    return {'summaries': summaries, 'fig3': fig3, 'executed': presets_todo + len(todo),
-            'cached': cached, 'core_seconds': core, 'core_seconds_all': used,
-            'wall_s': time.monotonic() - started}
+    return {'summaries': summaries, 'fig3': fig3, 'executed': len(tasks) + sweep['executed'],
+            'cached': cached + sweep['cached'], 'core_seconds': core + sweep['core_seconds'],
+            'core_seconds_all': used, 'wall_s': time.monotonic() - started}
 
 
-def _pool_map(func: Callable[[dict], dict], tasks: list[dict], jobs: int):
-    """Yield ``(task, func(task))`` for every task, in completion order, on ``jobs`` processes.
-
-    ``spawn`` workers: the parent may hold ROS (DDS) threads, which ``fork`` would copy.
-    """
-    if jobs <= 1 or len(tasks) <= 1:
-        for task in tasks:
-            yield task, func(task)
-        return
-    ctx = multiprocessing.get_context('spawn')
-    with ctx.Pool(min(jobs, len(tasks))) as pool:
-        for k, res in pool.imap_unordered(_indexed, [(func, k, t) for k, t in enumerate(tasks)],
-                                          chunksize=1):
-            yield tasks[k], res
-
-
-def _indexed(job: tuple[Callable[[dict], dict], int, dict]) -> tuple[int, dict]:
-    """Run ``func(task)`` in a worker and return it with the task's index."""
-    func, k, task = job
-    return k, func(task)
+def _describe_fig3(job, records: list[dict]) -> str:
+    """Return the progress text of a finished stack of Fig. 3 runs."""
+    first = records[0]
+    return (f'Fig. 3 N = {first["n_agents"]} seed {first["seed"]}, {len(records)} stacked: '
+            f'{sum(r["wall_time_s"] for r in records):.1f} s')
 
 
 # --------------------------------------------------------------------------------------------
@@ -2179,6 +2020,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='tiny sizes and durations, for tests (numbers are no reproduction)')
     parser.add_argument('--skip-ros', action='store_true', help='skip the ROS node runs')
     parser.add_argument('--jobs', type=int, default=2, help='worker processes (default: 2)')
+    parser.add_argument('--scheduler', metavar='ADDRESS',
+                        help='run the simulations on the Dask scheduler at ADDRESS, or "local" '
+                        '(see docs/sweeps.md)')
     parser.add_argument('--fresh', action='store_true', help='ignore cached runs')
     return parser
 
@@ -2219,8 +2063,20 @@ def main(argv: list[str] | None = None) -> int:
                             f'{ROS_DOMAIN_BASE + len(ros) - 1}: ' + ', '.join(done) + '.')
     meta['ros_wall_s'] = time.monotonic() - ros_started
 
-    sims = run_simulations(plan, args.out, args.jobs, args.fresh, say,
-                           live=terminal_line if sys.stderr.isatty() else None)
+    backend = None
+    if args.scheduler is not None:
+        try:
+            backend = DaskBackend(args.scheduler, args.jobs)
+        except SweepError as exc:
+            print(f'reproduce: error: {exc}', file=sys.stderr)
+            return 2
+    try:
+        sims = run_simulations(plan, args.out, args.jobs, args.fresh, say,
+                               live=terminal_line if sys.stderr.isatty() else None,
+                               backend=backend)
+    finally:
+        if backend is not None:
+            backend.close()
     meta['simulations'] = {k: sims[k] for k in ('executed', 'cached', 'core_seconds',
                                                 'core_seconds_all', 'wall_s')}
     results: dict[str, dict] = {}

@@ -38,32 +38,36 @@ def config_dirs() -> list[Path]:
     return out
 
 
-def preset_names() -> list[str]:
-    """Return the names of the available presets."""
+def preset_names(folder: str = '') -> list[str]:
+    """Return the names of the available presets (of sweep specs with ``folder='sweeps'``)."""
     names = set()
     for d in config_dirs():
-        names.update(p.stem for p in d.glob('*.yaml') if not p.stem.endswith('_params'))
+        names.update(p.stem for p in (d / folder).glob('*.yaml')
+                     if not p.stem.endswith('_params'))
     return sorted(names)
 
 
-def resolve(name_or_path: str) -> Path:
+def resolve(name_or_path: str, folder: str = '', key: str = 'scenario') -> Path:
     """Return the file of a preset name or a path.
 
     :param name_or_path: ``su2009_fig2`` or ``path/to/file.yaml``.
+    :param folder: the presets' folder under ``config/`` (``sweeps`` for sweep specs).
+    :param key: the name errors give the argument.
     :return: an existing path.
     :raises ScenarioError: when nothing matches.
     """
     candidate = Path(name_or_path)
     if candidate.suffix in ('.yaml', '.yml') or os.sep in name_or_path:
         if not candidate.is_file():
-            raise ScenarioError('scenario', f'no such file: {name_or_path}')
+            raise ScenarioError(key, f'no such file: {name_or_path}')
         return candidate
     for d in config_dirs():
-        path = d / f'{name_or_path}.yaml'
+        path = d / folder / f'{name_or_path}.yaml'
         if path.is_file():
             return path
-    raise ScenarioError('scenario', f'unknown preset {name_or_path!r} '
-                        f'(presets: {", ".join(preset_names()) or "none found"})')
+    kind = f'{folder} preset' if folder else 'preset'
+    raise ScenarioError(key, f'unknown {kind} {name_or_path!r} '
+                        f'(presets: {", ".join(preset_names(folder)) or "none found"})')
 
 
 def load_mapping(name_or_path: str) -> dict:

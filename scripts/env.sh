@@ -10,6 +10,7 @@
 # pip runs only when .venv/.flock_swarm_stamp is out of date, in two steps:
 #   deps     requirements/*.txt and the interpreter version -> pip install -r requirements/test.txt
 #   package  this file, setup.py, setup.cfg, package.xml, resource/, config/*.{yaml,rviz,json,xml},
+#            config/sweeps/*.yaml,
 #            launch/*_launch.py and the set of top-level packages -> editable install of
 #            flock_swarm plus its data_files. The Python sources are imported from the working
 #            tree, but the data_files are copies under .venv/share, so adding or editing a
@@ -115,7 +116,8 @@ _flock_env_deps_hash() {
 
 _flock_env_pkg_hash() {
     local f data=()
-    for f in "$_flock_env_root"/config/*.yaml "$_flock_env_root"/config/*.rviz \
+    for f in "$_flock_env_root"/config/*.yaml "$_flock_env_root"/config/sweeps/*.yaml \
+        "$_flock_env_root"/config/*.rviz \
         "$_flock_env_root"/config/*.json "$_flock_env_root"/config/*.xml \
         "$_flock_env_root"/launch/*_launch.py \
         "$_flock_env_root"/*/__init__.py; do

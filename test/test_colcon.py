@@ -21,7 +21,7 @@ from conftest import BUILD_TIMEOUT, copy_sources, run_installed, subprocess_env
 pytestmark = pytest.mark.ros
 
 PACKAGE = 'flock_swarm'
-EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm')
+EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm', 'sweep')
 #: The world run: demo with 3 agents for 0.06 s at dt = 0.02 s, i.e. steps 0..3, each closed
 #: by the step timeout (no agent or leader runs), starting at once.
 N_AGENTS = 3
@@ -67,6 +67,7 @@ def test_colcon_build_installs_package(workspace):
     share = prefix / 'share'
     assert (share / PACKAGE / 'package.xml').is_file()
     assert (share / PACKAGE / 'config' / 'demo.yaml').is_file()
+    assert (share / PACKAGE / 'config' / 'sweeps' / 'su2009_fig3.yaml').is_file()
     assert (share / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
 
 

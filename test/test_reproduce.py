@@ -15,9 +15,11 @@ from numpy.testing import assert_allclose
 import pytest
 
 from flock_swarm import reproduce
-from flock_swarm.reproduce import (EXPERIMENTS, FIG_MAX_BYTES, Plan, Progress, aggregate_fig3,
-                                   delta_for_eta, fig3_stacks, fig3_tasks, fmt, read_cache,
-                                   run_simulations)
+from flock_swarm.reproduce import (EXPERIMENTS, FIG_MAX_BYTES, Plan, aggregate_fig3,
+                                   delta_for_eta, fig3_tasks, fmt, run_simulations)
+from flock_swarm.study import execute
+from flock_swarm.study.cache import cache_line, read_cache
+from flock_swarm.study.execute import make_jobs, run_job
 
 # A table row of the report: "| what (`key`) | paper | ours |".
 ROW = re.compile(r'\(`(?P<key>[\w.]+)`\) \| (?P<paper>.*?) \| (?P<ours>[^|]*) \|$')
@@ -114,20 +116,24 @@ def test_aggregate_fig3_averages_over_realisations():
 def test_read_cache_skips_a_truncated_line(tmp_path):
     path = tmp_path / 'fig3_runs.jsonl'
     good = {'digest': 'abc', 'n_agents': 10, 'delta': 0.5, 'seed': 0, 'eta': 0.25}
-    path.write_text(json.dumps(good) + '\n' + json.dumps(good | {'digest': 'def'})[:20])
+    path.write_text(cache_line(good) + cache_line(good | {'digest': 'def'})[:20])
     assert read_cache(path) == {'abc': good}
 
 
 def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
     ran = []
-    real_run_task = reproduce.run_task
+    real_run_task, real_record = reproduce.run_task, reproduce.fig3_record
 
     def counting(task):
-        for run in task.get('runs', [task]):
-            ran.append((task['kind'], run.get('n_agents'), run.get('delta'), run.get('seed')))
+        ran.append((task['kind'], None, None, None))
         return real_run_task(task)
 
+    def counting_record(run, sc, result):
+        ran.append(('fig3', run.n_agents, run.point['informed.fraction'], run.seed))
+        return real_record(run, sc, result)
+
     monkeypatch.setattr(reproduce, 'run_task', counting)
+    monkeypatch.setattr(reproduce, 'fig3_record', counting_record)
     plan = Plan(True, 2, (12,), (0.25, 0.5), ('duration=0.5',))
     quiet = (lambda line: None)
     first = run_simulations(plan, tmp_path, 1, False, quiet)
@@ -150,13 +156,13 @@ def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
 
 def test_fig3_sweep_alone_stacks_runs_and_resumes(tmp_path, monkeypatch):
     jobs = []
-    real_run_task = reproduce.run_task
+    real_run_job = execute.run_job
 
-    def counting(task):
-        jobs.append([(r['n_agents'], r['delta'], r['seed']) for r in task['runs']])
-        return real_run_task(task)
+    def counting(job, recorder):
+        jobs.append([(r.n_agents, r.point['informed.fraction'], r.seed) for r in job.runs])
+        return real_run_job(job, recorder)
 
-    monkeypatch.setattr(reproduce, 'run_task', counting)
+    monkeypatch.setattr(execute, 'run_job', counting)
     monkeypatch.setattr(reproduce, 'FIG3_STACK_AGENTS', 24)
     plan = Plan(True, 2, (12, 30), (0.25, 0.5, 1.0), ('duration=0.5',))
     quiet = (lambda line: None)
@@ -176,39 +182,9 @@ def test_fig3_sweep_alone_stacks_runs_and_resumes(tmp_path, monkeypatch):
 def test_a_stacked_fig3_run_equals_its_own_run():
     plan = Plan(True, 1, (15,), (0.2, 0.6, 1.0), ('duration=1',))
     runs = fig3_tasks(plan)
-    [stack] = fig3_stacks(runs, stack_agents=45)
-    stacked = reproduce.run_task(stack)['records']
-    alone = [reproduce.run_task({'kind': 'fig3', 'runs': [r]})['records'][0] for r in runs]
+    [stack] = make_jobs(runs, stack_agents=45)
+    stacked = run_job(stack, reproduce.fig3_record)
+    alone = [run_job(job, reproduce.fig3_record)[0] for job in make_jobs(runs, stack_agents=1)]
     for a, b in zip(stacked, alone):
         assert {k: v for k, v in a.items() if k != 'wall_time_s'} \
             == {k: v for k, v in b.items() if k != 'wall_time_s'}
-
-
-def test_fig3_stacks_keep_the_order_and_split_evenly():
-    runs = [{'n_agents': n, 'seed': seed, 'steps': 10, 'delta': d}
-            for seed in range(2) for n in (300, 100) for d in range(10)]
-    jobs = fig3_stacks(runs, stack_agents=1000)
-    assert [r for job in jobs for r in job['runs']] == runs
-    # Per seed: 10 runs of N = 300 in stacks of at most 3, then one stack of 10 of N = 100.
-    assert [len(job['runs']) for job in jobs] == [3, 3, 2, 2, 10] * 2
-    assert jobs[0]['weight'] == 3 * 300 * 10
-
-
-def test_progress_lines_without_a_terminal_are_periodic():
-    lines = []
-    progress = Progress(4, 400.0, lines.append, every=3600.0)
-    progress.step(1, 100.0, 'one')
-    progress.step(2, 200.0, 'two')
-    assert lines == []
-    progress.step(1, 100.0, 'last')
-    assert len(lines) == 1 and '4/4 runs' in lines[0] and 'ETA 0.0 min' in lines[0]
-
-
-def test_progress_on_a_terminal_rewrites_one_line():
-    live, said = [], []
-    progress = Progress(2, 20.0, said.append, live=live.append)
-    progress.step(1, 10.0, 'half')
-    progress.step(1, 10.0, 'all')
-    assert said == [] and len(live) == 2
-    assert '1/2 runs' in live[0] and 'ETA' in live[0] and not live[0].endswith('\n')
-    assert live[1].endswith('\n')

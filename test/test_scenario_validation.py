@@ -295,6 +295,9 @@ def test_exponents_in_files_are_numbers(tmp_path):
     ('swarm', ['demo', '--step-timeout', 'nan'], 'swarm: error: --step-timeout: must be'),
     ('analyze', ['bag', '--record-every', '0'], 'analyze: error: --record-every'),
     ('replay', ['bag', '--bogus'], 'replay: error: --bogus: unrecognized argument(s)'),
+    ('sweep', ['su2009_fig3', '--jobs', '0'], 'sweep: error: --jobs: must be >= 1'),
+    ('sweep', ['su2009_fig3', '--seeds', 'x'], "sweep: error: --seeds: invalid int value: 'x'"),
+    ('sweep', ['nope'], "sweep: error: spec: unknown sweeps preset 'nope'"),
 ])
 def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
     module = {'swarm': 'runner'}.get(tool, tool)

@@ -1,0 +1,425 @@
+"""A sweep's spec (the YAML file of ``sweep``) and the plan of runs it expands to.
+
+The spec names a scenario (preset or file), axes over any ``--set`` path (a grid, and
+optionally lists varied together), derived values computed from the axes, the seeds of every
+point, the summary metrics to collect (optionally also at several times) and the figure's
+layout. See ``docs/sweeps.md`` for the format; :func:`parse_spec` checks all of it, and
+:func:`plan_runs` resolves and validates every run's scenario, before any run starts.
+"""
+
+import copy
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from flock_swarm import __version__
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.run import stack_mismatch
+from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml, realize
+from flock_swarm.core.stability import check_step
+from flock_swarm.study.expr import Expression, ExpressionError
+
+#: The keys of a spec file.
+SPEC_KEYS = ('name', 'description', 'scenario', 'set', 'grid', 'zip', 'derived', 'seeds',
+             'metrics', 'times', 'plot', 'stack_agents')
+#: Scalar summary keys (``summary.json``) a sweep can collect.
+SUMMARY_METRICS = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
+                   'min_pair_distance', 'collisions', 'components_final', 'n_agents',
+                   't_final', 'steps', 'pseudo_leader_reselections')
+#: Summary metrics that are also recorded over time (``timeseries.npz``), by series name.
+TIMED_METRICS = {'eta': 'metric_eta', 'velocity_mismatch_max': 'metric_velocity_mismatch_max',
+                 'com_position_error': 'metric_com_position_error',
+                 'com_velocity_error': 'metric_com_velocity_error',
+                 'min_pair_distance': 'metric_min_pair_distance',
+                 'components_final': 'metric_components'}
+#: Default metrics when a spec names none.
+DEFAULT_METRICS = ('eta', 'velocity_mismatch_max', 'collisions', 'components_final')
+#: Runs of one stack hold about this many agents in all (see :mod:`flock_swarm.study.execute`).
+STACK_AGENTS = 3000
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One swept ``--set`` path and its values."""
+
+    key: str
+    values: tuple
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep spec.
+
+    :ivar name: the study's name (default output directory ``out/sweeps/NAME``).
+    :ivar scenario: preset name or scenario file.
+    :ivar overrides: ``key=value`` overrides of every run (``sweep --set``), applied first.
+    :ivar fixed: ``{path: value}`` of every run (the spec's ``set``), applied next.
+    :ivar grid: axes of the Cartesian product, in order.
+    :ivar zipped: axes varied together (one more factor of the product).
+    :ivar derived: ``(path, expression)`` computed from the axes, in order.
+    :ivar seeds: the seeds of every point (common random numbers across points).
+    :ivar metrics: summary keys collected per run.
+    :ivar times: times [s] at which the timed metrics are also collected.
+    :ivar plot_x: the figures' x axis; ``plot_line``: one line per value of this axis.
+    :ivar stack_agents: about how many agents one stack of runs holds.
+    """
+
+    name: str
+    scenario: str
+    overrides: tuple[str, ...] = ()
+    fixed: tuple[tuple[str, Any], ...] = ()
+    grid: tuple[Axis, ...] = ()
+    zipped: tuple[Axis, ...] = ()
+    derived: tuple[tuple[str, Expression], ...] = ()
+    seeds: tuple[int, ...] = (0,)
+    metrics: tuple[str, ...] = DEFAULT_METRICS
+    times: tuple[float, ...] = ()
+    plot_x: str | None = None
+    plot_line: str | None = None
+    stack_agents: int = STACK_AGENTS
+    description: str = ''
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        """Return every axis (grid, then zipped)."""
+        return self.grid + self.zipped
+
+    def columns(self) -> list[str]:
+        """Return the metric columns of a run: the metrics, then each timed one per time."""
+        return list(self.metrics) + [timed_column(m, t) for t in self.times
+                                     for m in self.metrics if m in TIMED_METRICS]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One planned run: its point, seed and fully resolved scenario mapping.
+
+    :ivar point: the axis values (the table's columns), by path.
+    :ivar seed: the seed.
+    :ivar data: the scenario mapping as run (overrides, point, derived values and seed in).
+    :ivar digest: the cache key (:func:`scenario_digest`).
+    :ivar n_agents: N; ``steps``: steps (their product is the run's cost).
+    :ivar stack_key: runs with equal keys can share a stack (:func:`simulate_stack`);
+        ``None``: this run cannot be stacked.
+    """
+
+    point: dict
+    seed: int
+    data: dict = field(repr=False)
+    digest: str
+    n_agents: int
+    steps: int
+    stack_key: str | None = None
+
+    @property
+    def weight(self) -> int:
+        """Return the run's cost in agent-steps."""
+        return self.n_agents * self.steps
+
+    def scenario(self) -> Scenario:
+        """Return the run's validated scenario."""
+        return parse_scenario(copy.deepcopy(self.data))
+
+
+def timed_column(metric: str, t: float) -> str:
+    """Return the column of a metric at time ``t``: ``eta@50``."""
+    return f'{metric}@{t:g}'
+
+
+def plain(value: Any) -> Any:
+    """Return ``value`` with NumPy scalars and arrays turned into JSON types (inf: None)."""
+    import numpy as np
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [plain(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def scenario_digest(sc: Scenario) -> str:
+    """Return the cache key of a run: a hash of its scenario as run and the package version."""
+    text = json.dumps(plain(sc.raw), sort_keys=True)
+    return hashlib.sha1(f'{text}|{__version__}'.encode()).hexdigest()[:16]
+
+
+def read_spec(path: Path, overrides: tuple[str, ...] = (), seeds: int | None = None
+              ) -> SweepSpec:
+    """Read and check a spec file.
+
+    :param path: the YAML file.
+    :param overrides: ``sweep --set`` overrides of every run.
+    :param seeds: replaces the spec's seeds by ``0 .. seeds - 1`` when given.
+    :return: the spec.
+    :raises ScenarioError: naming the offending key.
+    """
+    try:
+        data = parse_yaml(path.read_text())
+    except OSError as exc:
+        raise ScenarioError('spec', f'{path}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}' if mark is not None else ''
+        raise ScenarioError('spec', f'{path}: invalid YAML{where}') from None
+    if not isinstance(data, dict):
+        raise ScenarioError('spec', f'{path}: expected a mapping at the top level')
+    data.setdefault('name', path.stem)
+    if seeds is not None:
+        data['seeds'] = seeds
+    return parse_spec(data, overrides)
+
+
+def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
+    """Check a spec mapping and return the :class:`SweepSpec`.
+
+    :param data: the mapping (see ``docs/sweeps.md``).
+    :param overrides: ``key=value`` overrides of every run.
+    :return: the spec.
+    :raises ScenarioError: naming the offending key.
+    """
+    unknown = sorted(set(map(str, data)) - set(SPEC_KEYS))
+    if unknown:
+        raise ScenarioError(unknown[0], f'unknown spec key (known: {", ".join(SPEC_KEYS)})')
+    name = data.get('name', 'sweep')
+    if not isinstance(name, str) or not name or any(c in name for c in '/\\\0') \
+            or name in ('.', '..'):
+        raise ScenarioError('name', f'must be usable as a directory name, got {name!r}')
+    scenario = data.get('scenario')
+    if not isinstance(scenario, str) or not scenario:
+        raise ScenarioError('scenario', 'missing: a preset name or a scenario file')
+    fixed = tuple(_paths(data.get('set') or {}, 'set').items())
+    grid = _axes(data.get('grid') or {}, 'grid')
+    zipped = _axes(data.get('zip') or {}, 'zip')
+    lengths = {len(a.values) for a in zipped}
+    if len(lengths) > 1:
+        raise ScenarioError('zip', f'lists of different lengths ({sorted(lengths)}): '
+                            'zipped axes vary together')
+    axes = grid + zipped
+    keys = [a.key for a in axes]
+    for key in keys:
+        if keys.count(key) > 1:
+            raise ScenarioError(key, 'swept twice (in grid and zip)')
+        if key == 'seed':
+            raise ScenarioError(key, 'the seeds are set by the spec key seeds')
+    derived = []
+    known = set(keys)
+    for key, text in _paths(data.get('derived') or {}, 'derived').items():
+        if key in known:
+            raise ScenarioError(f'derived.{key}', 'is also an axis')
+        if not isinstance(text, (str, int, float)) or isinstance(text, bool):
+            raise ScenarioError(f'derived.{key}', f'expected an expression, got {text!r}')
+        try:
+            expr = Expression(str(text))
+        except ExpressionError as exc:
+            raise ScenarioError(f'derived.{key}', str(exc)) from None
+        missing = sorted(expr.names() - known - {'pi'})
+        if missing:
+            raise ScenarioError(f'derived.{key}', f'unknown name {missing[0]!r} '
+                                f'(axes and earlier derived values: '
+                                f'{", ".join(sorted(known)) or "none"})')
+        derived.append((key, expr))
+        known.add(key)
+    metrics = _metrics(data.get('metrics', list(DEFAULT_METRICS)))
+    times = _times(data.get('times', []))
+    plot = data.get('plot') or {}
+    if not isinstance(plot, dict):
+        raise ScenarioError('plot', f'expected a mapping {{x: AXIS, line: AXIS}}, got {plot!r}')
+    for key in sorted(set(map(str, plot)) - {'x', 'line'}):
+        raise ScenarioError(f'plot.{key}', 'unknown key (known: x, line)')
+    plot_x = plot.get('x', keys[0] if keys else None)
+    plot_line = plot.get('line', next((k for k in keys if k != plot_x), None))
+    for key, value in (('plot.x', plot_x), ('plot.line', plot_line)):
+        if value is not None and value not in keys:
+            raise ScenarioError(key, f'{value!r} is not an axis (axes: {", ".join(keys)})')
+    stack = data.get('stack_agents', STACK_AGENTS)
+    if isinstance(stack, bool) or not isinstance(stack, int) or stack < 1:
+        raise ScenarioError('stack_agents', f'expected a positive integer, got {stack!r}')
+    description = data.get('description', '')
+    if not isinstance(description, str):
+        raise ScenarioError('description', f'expected text, got {description!r}')
+    return SweepSpec(name, scenario, tuple(overrides), fixed, grid, zipped, tuple(derived),
+                     _seeds(data.get('seeds', 1)), metrics, times, plot_x, plot_line, stack,
+                     description)
+
+
+def _paths(section: Any, key: str) -> dict[str, Any]:
+    """Return a mapping of dotted ``--set`` paths, checked."""
+    if not isinstance(section, dict):
+        raise ScenarioError(key, f'expected a mapping of scenario keys, got {section!r}')
+    out = {}
+    for path, value in section.items():
+        parts = str(path).split('.')
+        if not isinstance(path, str) or not all(p.isidentifier() for p in parts):
+            raise ScenarioError(f'{key}.{path}', 'expected a dotted scenario key such as '
+                                'protocol.c1')
+        out[path] = value
+    return out
+
+
+def _axes(section: Any, key: str) -> tuple[Axis, ...]:
+    """Return the axes of ``grid`` or ``zip``."""
+    axes = []
+    for path, values in _paths(section, key).items():
+        if not isinstance(values, list) or not values:
+            raise ScenarioError(f'{key}.{path}', f'expected a non-empty list of values, '
+                                f'got {values!r}')
+        if len({json.dumps(plain(v), sort_keys=True) for v in values}) < len(values):
+            raise ScenarioError(f'{key}.{path}', 'a value is listed twice')
+        axes.append(Axis(path, tuple(values)))
+    return tuple(axes)
+
+
+def _seeds(value: Any) -> tuple[int, ...]:
+    """Return the seeds: a count (``0 .. n - 1``), a list, or ``{first, count}``."""
+    if isinstance(value, dict):
+        extra = sorted(set(map(str, value)) - {'first', 'count'})
+        if extra:
+            raise ScenarioError(f'seeds.{extra[0]}', 'unknown key (known: first, count)')
+        first, count = value.get('first', 0), value.get('count')
+        if not _natural(first) or not _natural(count) or count < 1:
+            raise ScenarioError('seeds', f'expected first >= 0 and count >= 1, got {value!r}')
+        return tuple(range(first, first + count))
+    if isinstance(value, list):
+        if not value or not all(_natural(s) for s in value):
+            raise ScenarioError('seeds', f'expected a list of integers >= 0, got {value!r}')
+        if len(set(value)) < len(value):
+            raise ScenarioError('seeds', 'a seed is listed twice')
+        return tuple(value)
+    if not _natural(value) or value < 1:
+        raise ScenarioError('seeds', f'expected a count >= 1, a list or {{first, count}}, '
+                            f'got {value!r}')
+    return tuple(range(value))
+
+
+def _natural(value: Any) -> bool:
+    """Return whether ``value`` is an integer >= 0 (not a bool)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _metrics(value: Any) -> tuple[str, ...]:
+    """Return the metrics, each a scalar summary key."""
+    if not isinstance(value, list) or not value:
+        raise ScenarioError('metrics', f'expected a non-empty list, got {value!r}')
+    for k, name in enumerate(value):
+        if name not in SUMMARY_METRICS:
+            raise ScenarioError(f'metrics[{k}]', f'unknown metric {name!r} (known: '
+                                f'{", ".join(SUMMARY_METRICS)})')
+    if len(set(value)) < len(value):
+        raise ScenarioError('metrics', 'a metric is listed twice')
+    return tuple(value)
+
+
+def _times(value: Any) -> tuple[float, ...]:
+    """Return the times [s] the timed metrics are also collected at."""
+    if not isinstance(value, list):
+        raise ScenarioError('times', f'expected a list of times [s], got {value!r}')
+    out = []
+    for k, t in enumerate(value):
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not t >= 0:
+            raise ScenarioError(f'times[{k}]', f'expected a time >= 0 [s], got {t!r}')
+        out.append(float(t))
+    if len(set(out)) < len(out):
+        raise ScenarioError('times', 'a time is listed twice')
+    return tuple(out)
+
+
+def points(spec: SweepSpec) -> list[dict]:
+    """Return the spec's points (axis values by path): the grid's product, then ``zip``."""
+    factors = [[(a.key, v) for v in a.values] for a in spec.grid]
+    if spec.zipped:
+        factors.append([tuple(pair for a in spec.zipped for pair in [(a.key, a.values[k])])
+                        for k in range(len(spec.zipped[0].values))])
+    out = []
+    for combo in itertools.product(*factors):
+        point = {}
+        for item in combo:
+            if isinstance(item[0], tuple):
+                point.update(dict(item))
+            else:
+                point[item[0]] = item[1]
+        out.append(point)
+    return out
+
+
+def resolve_point(spec: SweepSpec, point: dict) -> dict:
+    """Return every value a point sets: the spec's ``set``, the axes, the derived values.
+
+    :raises ScenarioError: when a derived value fails (naming it and the point).
+    """
+    values = dict(point)
+    for key, expr in spec.derived:
+        try:
+            values[key] = expr.evaluate(values)
+        except ExpressionError as exc:
+            raise ScenarioError(f'derived.{key}', str(exc)) from None
+    return {**dict(spec.fixed), **values}
+
+
+def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
+    """Return every run of the spec, each scenario resolved and validated.
+
+    Order: seed by seed (the runs of one seed are the points of one realisation, with
+    common random numbers), and within a seed the points of largest cost (N x steps) first
+    so that long runs do not end up alone at the end. A larger seed count only adds runs.
+
+    :param spec: the spec.
+    :param allow_unstable: accept points whose dt violates a stability bound (as
+        ``sim --allow-unstable``).
+    :raises ScenarioError: naming the point and the key a scenario rejects.
+    """
+    from flock_swarm.scenarios import load
+    resolved = []
+    for point in points(spec):
+        values = resolve_point(spec, point)
+        try:
+            sc = load(spec.scenario, spec.overrides, spec.seeds[0], values)
+        except ScenarioError as exc:
+            where = ', '.join(f'{k}={v!r}' for k, v in point.items())
+            if exc.key in ('scenario', '--set'):
+                raise
+            raise ScenarioError(where or 'set', str(exc)) from None
+        violations = [] if allow_unstable else check_step(sc, realize(sc))
+        if violations:
+            reason = violations[0].message(sc.dt).split(': ', 1)[1]
+            raise ScenarioError(', '.join(f'{k}={v!r}' for k, v in point.items()) or 'dt',
+                                f'dt: {reason} (sweep --allow-unstable runs it anyway)')
+        for t in spec.times:
+            if t > sc.duration + 0.5 * sc.dt:
+                raise ScenarioError('times', f'{t:g} s is after the end of the run '
+                                    f'({sc.duration:g} s)')
+        resolved.append((point, sc))
+    order = sorted(range(len(resolved)),
+                   key=lambda k: -resolved[k][1].n_agents * resolved[k][1].steps)
+    runs = []
+    for seed in spec.seeds:
+        for k in order:
+            point, first = resolved[k]
+            data = dict(first.raw, seed=seed)
+            sc = parse_scenario(copy.deepcopy(data))
+            runs.append(Run(point, seed, data, scenario_digest(sc), sc.n_agents, sc.steps,
+                            stack_key(sc)))
+    return runs
+
+
+def stack_key(sc: Scenario) -> str | None:
+    """Return the key under which runs may share a stack, or ``None`` if this one cannot.
+
+    Realisations of one stack differ only in seed, informed set and initial state
+    (:func:`stack_mismatch`); the key is the rest of the scenario mapping, plus the seed so
+    that a stack holds one realisation's points (an interrupted sweep then has finished
+    whole realisations first, as Fig. 3 has always run).
+    """
+    if stack_mismatch([sc, sc]) is not None:
+        return None
+    rest = {k: v for k, v in sc.raw.items() if k not in ('informed', 'initial', 'name')}
+    return json.dumps(plain(rest), sort_keys=True)

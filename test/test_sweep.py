@@ -1,0 +1,391 @@
+"""Parameter studies (``sweep``): spec, safe expressions, cache, backends, interruptions.
+
+One small study (two axes, a derived box side, three seeds, a metric at a time) is run in
+this process (``--jobs 1``), on two local worker processes and on a Dask cluster of a real
+``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1: the tables must be the
+same (all but the wall-time column). A second study, of longer runs, is run once
+uninterrupted, then with a worker process SIGKILLed mid-sweep, and with the sweep SIGINTed
+and resumed: every table must equal the uninterrupted one. The CSVs are read back with
+:mod:`csv`, and a row is checked against a run of ``sim``'s own code path.
+"""
+
+import csv
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import wait_for
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.reproduce import Plan, fig3_tasks
+from flock_swarm.scenarios import load
+from flock_swarm.core.run import simulate
+from flock_swarm.study.cache import cache_line, read_cache
+from flock_swarm.study.execute import Job, Progress, make_jobs
+from flock_swarm.study.expr import Expression, ExpressionError
+from flock_swarm.study.spec import Run, parse_spec, plan_runs, points, read_spec
+from flock_swarm.sweep import main, spec_path
+
+BIN = Path(sys.executable).parent
+#: The small study: 2 x 2 points, 3 seeds, 1 s runs of 10 and 16 agents.
+SMALL = {
+    'name': 'small', 'scenario': 'su2009_fig3', 'set': {'duration': 1.0},
+    'grid': {'n_agents': [10, 16], 'informed.fraction': [0.25, 1.0]},
+    'derived': {'initial.position_box':
+                '[[0.0, sqrt(n_agents / 0.05)], [0.0, sqrt(n_agents / 0.05)]]'},
+    'seeds': 3, 'metrics': ['eta', 'velocity_mismatch_max', 'collisions'], 'times': [0.0],
+    'stack_agents': 20,
+}
+#: The study that is interrupted: 16 runs of about 0.2 s each, one run per job.
+LONG = dict(SMALL, name='long', set={'duration': 6.0}, seeds=4, stack_agents=1)
+
+
+def write_spec(path: Path, spec: dict) -> Path:
+    """Write a spec file."""
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def read_csv(path: Path, drop=('wall_time_s',)) -> list[dict]:
+    """Read a CSV back with :mod:`csv`, without the columns in ``drop``."""
+    with open(path, newline='') as stream:
+        return [{k: v for k, v in row.items() if k not in drop}
+                for row in csv.DictReader(stream)]
+
+
+def sweep_process(*args: str) -> subprocess.Popen:
+    """Start the ``sweep`` executable."""
+    return subprocess.Popen([str(BIN / 'sweep'), *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def cache_lines(path: Path) -> int:
+    """Return how many complete lines the cache holds."""
+    return path.read_bytes().count(b'\n') if path.exists() else 0
+
+
+def children(pid: int) -> list[int]:
+    """Return the worker processes (multiprocessing spawn children) of ``pid``."""
+    found = []
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        for child in (task / 'children').read_text().split():
+            try:
+                cmdline = Path(f'/proc/{child}/cmdline').read_bytes()
+            except OSError:
+                continue
+            if b'spawn_main' in cmdline:
+                found.append(int(child))
+    return found
+
+
+@pytest.fixture(scope='module')
+def small_serial(tmp_path_factory):
+    """Run the small study with ``--jobs 1``; return its directory."""
+    root = tmp_path_factory.mktemp('small')
+    spec = write_spec(root / 'small.yaml', SMALL)
+    assert main([str(spec), '--jobs', '1', '--out', str(root / 'serial'), '--quiet']) == 0
+    return root
+
+
+@pytest.fixture(scope='module')
+def long_serial(tmp_path_factory):
+    """Run the long study uninterrupted with ``--jobs 1``; return its directory."""
+    root = tmp_path_factory.mktemp('long')
+    spec = write_spec(root / 'long.yaml', LONG)
+    assert main([str(spec), '--jobs', '1', '--out', str(root / 'serial'), '--quiet',
+                 '--no-plots']) == 0
+    return root
+
+
+# --------------------------------------------------------------------------------------------
+# Expressions
+
+
+def test_expressions_compute_numbers_and_lists():
+    side = Expression('[[0.0, sqrt(n_agents / 0.05)], [0.0, sqrt(n_agents / 0.05)]]')
+    # Su 2009 V.A: N = 100 at density 0.05 is the preset's box side sqrt(2000).
+    assert side.evaluate({'n_agents': 100}) == [[0.0, 44.721359549995796]] * 2
+    assert side.names() == {'n_agents'}
+    dotted = Expression('round(informed.fraction * 2 ** 3 - -1, 2)')
+    assert dotted.evaluate({'informed.fraction': 0.5}) == 5
+    assert Expression('max(1, int(log(exp(2.0))))').evaluate({}) == 2
+
+
+@pytest.mark.parametrize('text', [
+    "__import__('os').system('true')", '(1).real', "'text'", 'lambda: 1', 'x[0]',
+    '[x for x in y]', 'open(1)', 'round(x, ndigits=1)', 'a if b else c', 'True', '1 <'])
+def test_expressions_outside_the_language_are_rejected(text):
+    with pytest.raises(ExpressionError):
+        Expression(text)
+
+
+@pytest.mark.parametrize('text, values', [('sqrt(x - 10)', {'x': 1}), ('1 / x', {'x': 0}),
+                                          ('2 ** x', {'x': 5000}), ('y + 1', {'x': 1})])
+def test_failing_expressions_say_so(text, values):
+    with pytest.raises(ExpressionError, match='fails|larger|unknown name'):
+        Expression(text).evaluate(values)
+
+
+# --------------------------------------------------------------------------------------------
+# Specs and plans
+
+
+def test_the_shipped_fig3_spec_is_the_reproductions_sweep():
+    spec = read_spec(spec_path('su2009_fig3'), seeds=1)
+    runs = plan_runs(spec)
+    assert len(runs) == 40 and spec.seeds == (0,)
+    assert [r.digest for r in runs] == [r.digest for r in fig3_tasks(Plan(False, 1))]
+
+
+def test_plan_is_seed_major_largest_first_with_common_seeds():
+    runs = plan_runs(parse_spec(SMALL))
+    assert [(r.point['n_agents'], r.point['informed.fraction'], r.seed) for r in runs[:5]] \
+        == [(16, 0.25, 0), (16, 1.0, 0), (10, 0.25, 0), (10, 1.0, 0), (16, 0.25, 1)]
+    assert len(runs) == 12 and len({r.digest for r in runs}) == 12
+    sc = runs[2].scenario()
+    assert sc.seed == 0 and sc.duration == 1.0 and sc.informed.fraction == 0.25
+    np.testing.assert_array_equal(sc.position_box, [[0.0, math.sqrt(200.0)]] * 2)
+
+
+def test_zipped_axes_vary_together_within_the_grid():
+    spec = parse_spec({'scenario': 'su2009_fig7', 'grid': {'n_agents': [10, 20]},
+                       'zip': {'protocol.c1': [0.2, 0.5], 'protocol.c2': [0.4, 1.0]}})
+    assert points(spec) == [{'n_agents': n, 'protocol.c1': c1, 'protocol.c2': c2}
+                            for n in (10, 20) for c1, c2 in ((0.2, 0.4), (0.5, 1.0))]
+    assert (spec.plot_x, spec.plot_line) == ('n_agents', 'protocol.c1')
+    with pytest.raises(ScenarioError, match='zip: lists of different lengths'):
+        parse_spec({'scenario': 'su2009_fig7', 'zip': {'dt': [0.01], 'duration': [1, 2]}})
+
+
+def test_stacks_keep_the_order_and_split_evenly():
+    runs = [Run({'delta': d}, seed, {}, f'{seed}/{n}/{d}', n, 10, f'{n} {seed}')
+            for seed in range(2) for n in (300, 100) for d in range(10)]
+    jobs = make_jobs(runs, stack_agents=1000)
+    assert [r for job in jobs for r in job.runs] == runs
+    # Per seed: 10 runs of N = 300 in stacks of at most 3, then one stack of 10 of N = 100.
+    assert [len(job.runs) for job in jobs] == [3, 3, 2, 2, 10] * 2
+    assert jobs[0].weight == 3 * 300 * 10
+    unstackable = [Run({}, 0, {}, str(k), 5, 1, None) for k in range(3)]
+    assert make_jobs(unstackable, 1000) == [Job((r,)) for r in unstackable]
+
+
+def test_progress_lines_without_a_terminal_are_periodic():
+    lines = []
+    progress = Progress(4, 400.0, lines.append, every=3600.0)
+    progress.step(1, 100.0, 'one')
+    progress.step(2, 200.0, 'two')
+    assert lines == []
+    progress.step(1, 100.0, 'last')
+    assert len(lines) == 1 and '4/4 runs' in lines[0] and 'ETA 0.0 min' in lines[0]
+
+
+def test_progress_on_a_terminal_rewrites_one_line():
+    live, said = [], []
+    progress = Progress(2, 20.0, said.append, live=live.append)
+    progress.step(1, 10.0, 'half')
+    progress.step(1, 10.0, 'all')
+    assert said == [] and len(live) == 2
+    assert '1/2 runs' in live[0] and 'ETA' in live[0] and not live[0].endswith('\n')
+    assert live[1].endswith('\n')
+
+
+@pytest.mark.parametrize('change, named', [
+    ({'grdi': {}}, 'grdi: unknown spec key'),
+    ({'grid': {'n_agents': [10, -5]}}, "n_agents=-5"),
+    ({'grid': {'protocol.c1': [0.5, 'fast']}}, 'protocol.c1'),
+    ({'derived': {'initial.position_box': '[[0.0, sqrt(n_agents - 12)], [0.0, 1.0]]'}},
+     'derived.initial.position_box'),
+    ({'derived': {'initial.position_box': 'sqrt(N)'}}, "derived.initial.position_box: "
+                                                       "unknown name 'N'"),
+    ({'derived': {'initial.position_box': "__import__('os')"}},
+     'derived.initial.position_box'),
+    ({'metrics': ['eta', 'happiness']}, 'metrics[1]'),
+    ({'times': [5.0]}, 'times: 5 s is after the end'),
+    ({'seeds': 0}, 'seeds'),
+    ({'plot': {'x': 'dt'}}, 'plot.x'),
+])
+def test_bad_specs_are_one_line_naming_the_key(tmp_path, capsys, change, named):
+    spec = write_spec(tmp_path / 'bad.yaml', {**SMALL, **change})
+    assert main([str(spec), '--jobs', '1', '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('sweep: error: ') and named in err, err
+    assert not (tmp_path / 'out' / 'runs.jsonl').exists()
+
+
+def test_an_unreachable_scheduler_is_one_line_naming_it(tmp_path, capsys):
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        address = f'tcp://127.0.0.1:{sock.getsockname()[1]}'
+    spec = write_spec(tmp_path / 'small.yaml', SMALL)
+    assert main([str(spec), '--scheduler', address, '--connect-timeout', '1',
+                 '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and f'--scheduler: cannot reach {address}' in err, err
+    assert not (tmp_path / 'out' / 'runs.jsonl').exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Results
+
+
+def test_tables_hold_every_run_once_with_sims_numbers(small_serial):
+    rows = read_csv(small_serial / 'serial' / 'runs.csv', drop=())
+    assert len(rows) == 12
+    assert len({(r['n_agents'], r['informed.fraction'], r['seed']) for r in rows}) == 12
+    assert {r['status'] for r in rows} == {'completed'}
+    assert all(len(r['scenario_hash']) == 16 and r['flock_swarm_version'] for r in rows)
+    # One row against sim's own code path on the same scenario.
+    row = next(r for r in rows if (r['n_agents'], r['informed.fraction'], r['seed'])
+               == ('16', '0.25', '2'))
+    side = math.sqrt(16 / 0.05)
+    sc = load('su2009_fig3', ['duration=1.0'], 2,
+              {'n_agents': 16, 'informed.fraction': 0.25,
+               'initial.position_box': [[0.0, side], [0.0, side]]})
+    summary = simulate(sc).summary
+    assert float(row['eta']) == summary['eta']
+    assert float(row['velocity_mismatch_max']) == summary['velocity_mismatch_max']
+    assert int(row['collisions']) == summary['collisions']
+    # The aggregate, recomputed from the tidy rows.
+    stats = read_csv(small_serial / 'serial' / 'summary.csv', drop=())
+    assert len(stats) == 4 * 5
+    for stat in stats:
+        values = [float(r[stat['metric']]) for r in rows
+                  if (r['n_agents'], r['informed.fraction'])
+                  == (stat['n_agents'], stat['informed.fraction'])]
+        assert int(stat['count']) == 3
+        assert float(stat['mean']) == pytest.approx(np.mean(values), rel=1e-12, abs=1e-15)
+        assert float(stat['std']) == pytest.approx(np.std(values, ddof=1), rel=1e-9,
+                                                   abs=1e-15)
+        assert float(stat['sem']) == pytest.approx(float(stat['std']) / math.sqrt(3))
+        assert (float(stat['min']), float(stat['max'])) == (min(values), max(values))
+    figures = sorted(p.name for p in (small_serial / 'serial').glob('*.png'))
+    assert figures == ['collisions.png', 'eta.png', 'eta_at_0.png', 'velocity_mismatch_max.png',
+                       'velocity_mismatch_max_at_0.png']
+
+
+def test_local_pool_gives_the_same_tables(small_serial):
+    out = small_serial / 'pool'
+    assert main([str(small_serial / 'small.yaml'), '--jobs', '2', '--out', str(out),
+                 '--quiet', '--no-plots']) == 0
+    assert read_csv(out / 'runs.csv') == read_csv(small_serial / 'serial' / 'runs.csv')
+    assert (out / 'summary.csv').read_bytes() \
+        == (small_serial / 'serial' / 'summary.csv').read_bytes()
+
+
+def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
+    info = tmp_path / 'scheduler.json'
+    env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON='False')
+    procs = [subprocess.Popen([str(BIN / 'dask'), 'scheduler', '--host', '127.0.0.1',
+                               '--port', '0', '--no-dashboard', '--scheduler-file', str(info)],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        wait_for(info.exists, 60.0, 'the Dask scheduler file')
+        address = json.loads(info.read_text())['address']
+        assert address.startswith('tcp://127.0.0.1:')
+        for _ in range(2):
+            procs.append(subprocess.Popen(
+                [str(BIN / 'dask'), 'worker', address, '--nthreads', '1', '--no-nanny',
+                 '--host', '127.0.0.1', '--no-dashboard'],
+                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        out = tmp_path / 'dask'
+        assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
+                     '--out', str(out), '--quiet', '--no-plots']) == 0
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+        for proc in procs:
+            proc.wait(timeout=30)
+    assert read_csv(out / 'runs.csv') == read_csv(small_serial / 'serial' / 'runs.csv')
+    assert (out / 'summary.csv').read_bytes() \
+        == (small_serial / 'serial' / 'summary.csv').read_bytes()
+
+
+# --------------------------------------------------------------------------------------------
+# Interruptions and the cache
+
+
+def hit_mid_sweep(spec: Path, out: Path, finished: int, hit) -> tuple[int, str]:
+    """Run ``sweep`` on two workers, call ``hit(process)`` once ``finished`` runs are cached.
+
+    :return: the exit status and the standard error.
+    """
+    proc = sweep_process(str(spec), '--jobs', '2', '--out', str(out), '--no-plots')
+    try:
+        wait_for(lambda: cache_lines(out / 'runs.jsonl') >= finished, 120.0,
+                 f'{finished} finished run(s)')
+        hit(proc)
+        _, err = proc.communicate(timeout=180)
+    finally:
+        proc.kill()
+    return proc.returncode, err
+
+
+def kill_a_worker(proc: subprocess.Popen) -> None:
+    """SIGKILL one of the sweep's two worker processes."""
+    wait_for(lambda: len(children(proc.pid)) == 2, 30.0, 'two worker processes')
+    os.kill(children(proc.pid)[0], signal.SIGKILL)
+
+
+def test_a_killed_worker_process_has_its_runs_redone(long_serial):
+    out = long_serial / 'killed'
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1, kill_a_worker)
+    assert status == 0, err
+    assert 'died (exit code -9); its job is redone' in err
+    assert len(read_cache(out / 'runs.jsonl')) == 16
+    assert cache_lines(out / 'runs.jsonl') == 16
+    assert read_csv(out / 'runs.csv') == read_csv(long_serial / 'serial' / 'runs.csv')
+
+
+def test_an_interrupted_sweep_resumes_to_the_same_table(long_serial):
+    out = long_serial / 'interrupted'
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 2,
+                                lambda proc: proc.send_signal(signal.SIGINT))
+    assert status == 130, err
+    assert err.rstrip().splitlines()[-1].startswith('sweep: interrupted; every finished run')
+    problems = []
+    kept = read_cache(out / 'runs.jsonl', report=problems.append)
+    assert problems == [] and 2 <= len(kept) < 16
+    resumed = subprocess.run([str(BIN / 'sweep'), str(long_serial / 'long.yaml'), '--jobs', '2',
+                              '--out', str(out), '--no-plots'], capture_output=True, text=True,
+                             timeout=180)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f'{16 - len(kept)} to run' in resumed.stderr and f'{len(kept)} reused' in resumed.stderr
+    assert read_csv(out / 'runs.csv') == read_csv(long_serial / 'serial' / 'runs.csv')
+
+
+def test_corrupt_cache_lines_are_reported_and_rerun(small_serial, tmp_path, capsys):
+    cache = tmp_path / 'out' / 'runs.jsonl'
+    cache.parent.mkdir()
+    lines = (small_serial / 'serial' / 'runs.jsonl').read_text().splitlines(keepends=True)
+    edited = lines[3].replace('"seed": ', '"seed": 1', 1)
+    cache.write_text(''.join(lines[:3]) + edited + ''.join(lines[4:-1]) + lines[-1][:30])
+    assert main([str(small_serial / 'small.yaml'), '--jobs', '1', '--out', str(cache.parent),
+                 '--no-plots']) == 0
+    err = capsys.readouterr().err
+    assert f'{cache}:4: unusable cache line (its check does not match' in err
+    assert f'{cache}:12: unusable cache line (not a complete JSON line' in err
+    assert '2 to run in' in err and '10 reused' in err
+    assert read_csv(cache.parent / 'runs.csv') \
+        == read_csv(small_serial / 'serial' / 'runs.csv')
+
+
+def test_cache_lines_round_trip_and_need_their_check(tmp_path):
+    path = tmp_path / 'runs.jsonl'
+    good = {'digest': 'abc', 'status': 'completed', 'eta': 0.25}
+    path.write_text(cache_line(good) + json.dumps(good | {'digest': 'def'}) + '\n')
+    problems = []
+    assert read_cache(path, report=problems.append) == {'abc': good}
+    assert len(problems) == 1 and ':2: unusable cache line' in problems[0]
+
+
+def test_scenario_errors_name_the_point():
+    spec = parse_spec({**SMALL, 'grid': {'n_agents': [10, 0]}})
+    with pytest.raises(ScenarioError, match='n_agents=0'):
+        plan_runs(spec)
