@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import wait_for
+from flock_swarm.testing import wait_for
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.reproduce import Plan, fig3_tasks
 from flock_swarm.scenarios import load
