@@ -38,6 +38,7 @@ setup(
             'world = flock_swarm.nodes.world:main',
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
+            'foxglove_server = flock_swarm.live:main',
         ],
     },
 )
