@@ -161,8 +161,8 @@ class LiveServer:
             channel.log(data, log_time=t_ns)
 
     def set_time(self, t_ns: int) -> None:
-        """Broadcast ``t_ns`` as the server's time when it is later than the last one."""
-        if t_ns > self.time_ns:
+        """Broadcast ``t_ns`` as the server's time, unless it is the time last broadcast."""
+        if t_ns != self.time_ns:
             self.time_ns = t_ns
             self.server.broadcast_time(t_ns)
 
