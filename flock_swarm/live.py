@@ -23,6 +23,7 @@ when it is full, and the bridge subscribes best-effort, so it never holds a writ
 
 import struct
 import sys
+import threading
 from typing import Callable, Iterable
 
 from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
@@ -35,6 +36,8 @@ DEFAULT_HOST = '127.0.0.1'
 MESSAGE_ENCODING = 'cdr'
 #: Name the server announces to its clients.
 SERVER_NAME = 'flock_swarm'
+#: Longest wait [s] for the server to stop when the run ends (:meth:`LiveServer.close`).
+CLOSE_TIMEOUT = 2.0
 
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
@@ -166,12 +169,21 @@ class LiveServer:
             self.time_ns = t_ns
             self.server.broadcast_time(t_ns)
 
-    def close(self) -> None:
-        """Stop the server and close its channels (idempotent)."""
+    def close(self, timeout: float = CLOSE_TIMEOUT) -> None:
+        """Close the channels and stop the server, waiting at most ``timeout`` s (idempotent).
+
+        The SDK's ``stop`` waits until every client has closed its connection: a client that
+        does not read never sees the close frame and holds it up for as long as the client's
+        own keepalive takes (47 s with ``websockets``' defaults, measured). So ``stop`` runs
+        in a daemon thread, left behind after ``timeout``: a ``swarm`` or ``replay`` ends on
+        time whatever its clients do (the process's exit ends the thread).
+        """
         for channel in self.channels.values():
             channel.close()
         self.channels = {}
-        self.server.stop()
+        stopper = threading.Thread(target=self.server.stop, name='foxglove-stop', daemon=True)
+        stopper.start()
+        stopper.join(timeout)
 
     def __enter__(self) -> 'LiveServer':
         """Return the server."""
