@@ -12,9 +12,10 @@ Three ways in, one :class:`LiveServer` under each:
 - ``swarm ... --foxglove [PORT]`` in one process: :class:`LiveTee` hands the server what the
   world records, without another DDS subscriber (the cheapest, docs/performance.md);
 - ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
-- ``foxglove_server`` (:func:`main`) for runs started node by node, and for
-  ``swarm --processes --foxglove``: :class:`LiveBridge`, a node subscribing to the contract
-  topics with ``raw=True`` and forwarding the bytes.
+- ``foxglove_server`` (:func:`main`) for runs started node by node, ``swarm --processes
+  --foxglove`` (:class:`BackgroundBridge`, in the runner's process) and a one-process run
+  that does not record: :class:`LiveBridge`, a node subscribing to the contract topics with
+  ``raw=True`` and forwarding the bytes.
 
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
 bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
@@ -328,8 +329,9 @@ def _bridge_class() -> type:
             def on_data(data: bytes) -> None:
                 stamp = message_stamp_ns(type_name, data)
                 t_ns = self.time_ns if stamp is None else stamp
-                if clock:
-                    self.time_ns = max(self.time_ns, t_ns)
+                if clock and t_ns > self.time_ns:
+                    # A step offered again (the world's resend) does not turn time back.
+                    self.time_ns = t_ns
                     self.live.set_time(t_ns)
                 self.live.write(topic, data, t_ns)
                 self.received += 1
@@ -341,6 +343,61 @@ def _bridge_class() -> type:
                 self.live.close()
 
     return LiveBridge
+
+
+class BackgroundBridge:
+    """A :class:`LiveBridge` on its own context and domain, spun by a thread of this process.
+
+    ``swarm --processes --foxglove`` serves this way: the runner's process keeps the server
+    it bound (no second process racing for the port), while the nodes run elsewhere. Use it
+    as a context manager.
+
+    :param live: the server.
+    :param domain_id: the run's ROS domain id.
+    :param parameters: the bridge's parameters (``scenario`` and the like).
+    """
+
+    def __init__(self, live: LiveServer, domain_id: int, parameters: dict) -> None:
+        """Create the context and the node, and start spinning."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.parameter import Parameter
+
+        from flock_swarm.nodes.common import make_executor
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        try:
+            self.node = make_bridge(live, context=self.context, parameter_overrides=[
+                Parameter(name, value=value) for name, value in parameters.items()])
+        except BaseException:
+            rclpy.try_shutdown(context=self.context)
+            raise
+        self.executor = make_executor(self.context)
+        self.executor.add_node(self.node)
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, name='foxglove-bridge', daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.1)
+
+    def close(self) -> None:
+        """Stop spinning; destroy the node and the context (the server stays open)."""
+        import rclpy
+        self._stop.set()
+        self.thread.join()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> 'BackgroundBridge':
+        """Return the bridge."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Close the bridge."""
+        self.close()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -225,7 +225,8 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
 
 
 #: Modules of the executables that are not ``flock_swarm.nodes.<name>``, for ``python -m``.
-MODULES = {'foxglove_server': 'flock_swarm.live'}
+MODULES = {'foxglove_server': 'flock_swarm.live', 'replay': 'flock_swarm.replay',
+           'swarm': 'flock_swarm.runner'}
 
 
 def executable(name: str) -> list[str]:
@@ -260,8 +261,7 @@ def stop(procs: list, timeout: float = 10.0) -> None:
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   log=None, realtime_factor: float = 1.0, container: bool = False,
-                  world_params: dict | None = None, foxglove: tuple[str, int] | None = None
-                  ) -> dict:
+                  world_params: dict | None = None, live=None) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
@@ -277,8 +277,9 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :param container: host every agent in one ``agents`` process.
     :param world_params: further parameters of the world node.
-    :param foxglove: ``(host, port)``: serve the run there with a ``foxglove_server``
-        process (a bridge node subscribing to the topics).
+    :param live: a :class:`~flock_swarm.live.LiveServer` to serve the run on, through a
+        bridge node spun by a thread of this process
+        (:class:`~flock_swarm.live.BackgroundBridge`), or None.
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
@@ -297,11 +298,12 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
                                stderr=sink)]
     hosts = [executable('agents') + ros_args(base)] if container else [
         executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
-    if foxglove is not None:
-        hosts.append(executable('foxglove_server') + ros_args(
-            dict(base, host=foxglove[0], port=foxglove[1])))
     for command in hosts:
         others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
+    bridge = None
+    if live is not None:
+        from flock_swarm.live import BackgroundBridge
+        bridge = BackgroundBridge(live, domain_id, base)
     world = subprocess.Popen(executable('world') + ros_args(
         dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
         env=env)
@@ -313,6 +315,8 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
     finally:
         stop(others)
+        if bridge is not None:
+            bridge.close()
     summary = out / 'summary.json'
     return json.loads(summary.read_text()) if summary.is_file() else {}
 
@@ -418,15 +422,10 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
     if args.processes:
-        foxglove = None
-        if live is not None:
-            # A foxglove_server process serves instead; the port was free a moment ago.
-            foxglove = (live.host, live.port)
-            live.close()
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
                                 container=args.container, world_params=world_params,
-                                foxglove=foxglove)
+                                live=live)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                  args.executor, progress=say,

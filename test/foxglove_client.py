@@ -38,6 +38,8 @@ class FoxgloveClient:
         self.server_info: dict | None = None
         #: channel id -> advertised channel (``topic``, ``encoding``, ``schemaName`` ...).
         self.channels: dict[int, dict] = {}
+        #: every channel ever advertised, unadvertised ones (at the server's end) included.
+        self.advertised: dict[int, dict] = {}
         #: subscription id -> channel id.
         self.subscriptions: dict[int, int] = {}
         #: ``(topic, log_time_ns, payload)`` in order of arrival.
@@ -53,8 +55,8 @@ class FoxgloveClient:
         return self.ws.subprotocol
 
     def topics(self) -> dict[str, dict]:
-        """Return the advertised channels by topic."""
-        return {channel['topic']: channel for channel in self.channels.values()}
+        """Return every channel advertised so far by topic (also those since unadvertised)."""
+        return {channel['topic']: channel for channel in self.advertised.values()}
 
     def handle(self, frame: str | bytes) -> None:
         """Take one frame from the server into the client's state."""
@@ -64,13 +66,14 @@ class FoxgloveClient:
                 self.server_info = message
             elif message['op'] == 'advertise':
                 self.channels.update({channel['id']: channel for channel in message['channels']})
+                self.advertised.update(self.channels)
             elif message['op'] == 'unadvertise':
                 for channel_id in message['channelIds']:
                     self.channels.pop(channel_id, None)
             return
         if frame[0] == OP_MESSAGE_DATA:
             _, subscription, log_time = _MESSAGE_HEADER.unpack_from(frame)
-            topic = self.channels[self.subscriptions[subscription]]['topic']
+            topic = self.advertised[self.subscriptions[subscription]]['topic']
             self.messages.append((topic, log_time, bytes(frame[_MESSAGE_HEADER.size:])))
         elif frame[0] == OP_TIME:
             self.times.append(_TIME.unpack_from(frame)[1])

@@ -245,6 +245,39 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
             proc.wait()
 
 
+@pytest.mark.parametrize('layout', [[], ['--processes', '--container']])
+def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
+    """``swarm --foxglove 0``: one process (the world's recorded bytes), or three processes
+    (a bridge node in the runner's process); a client that connects on the announcement."""
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=20',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--domain-id', str(ros_domain), *layout]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = None
+        for line in proc.stderr:
+            found = re.search(r'live view on (ws://\S+)', line)
+            if found:
+                url = found.group(1)
+                break
+        assert url is not None
+        client = subscribed_client(url)
+        # The client reads until the run is over and the server has gone.
+        client.pump(TIMEOUT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+        log = proc.stderr.read()
+        assert 'Traceback' not in log, log
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert client.messages, log
+    decoders = check_advertised(client, bag_messages(out / 'bag')[1])
+    check_received(client, out / 'bag', decoders, wire=bool(layout))
+
+
 def test_a_run_without_recording_is_served_by_a_bridge_node(tmp_path, ros_domain):
     with start_live(port=0) as live:
         def connect(swarm):
