@@ -19,6 +19,8 @@ after the other and interleaved over ``--repeat`` rounds; the best run of each c
 The client is the tests' (test/foxglove_client.py) in a process of its own, as the Foxglove
 app would be; it reports the messages it received. Steps/s come from the world's own clock
 (``steps / wall_time_s``, start-up excluded); the ratio is against ``off`` at the same N.
+CPU ms per step is the swarm process's CPU time (all its threads, the server's included)
+over the run, divided by its steps: on a shared machine it is the steadier of the two.
 """
 
 import argparse
@@ -103,7 +105,9 @@ def run_role(variant: str, n: int, steps: int) -> dict:
                     swarm.serve(live)
                 if variant in ('client', 'stalled', 'bridge'):
                     client = start_client(live, variant == 'stalled')
+                cpu = time.process_time()
                 swarm.spin_until(lambda: False, RUN_TIMEOUT)
+                cpu = time.process_time() - cpu
                 summary = swarm.summary()
         finally:
             if client is not None:
@@ -115,6 +119,7 @@ def run_role(variant: str, n: int, steps: int) -> dict:
     return {'variant': variant, 'n': n, 'steps': summary['steps'],
             'wall_time_s': summary['wall_time_s'],
             'steps_per_s': summary['steps'] / summary['wall_time_s'],
+            'cpu_ms_per_step': 1e3 * cpu / summary['steps'],
             'missed_commands': summary['missed_commands'], 'status': summary['status'],
             'client_messages': received}
 
@@ -154,21 +159,26 @@ def main(argv: list[str] | None = None) -> int:
                 run = json.loads(res.stdout.strip().splitlines()[-1])
                 run['process_s'] = time.monotonic() - started
                 runs.append(run)
-    print(f'{"N":>4} {"variant":>8} {"steps/s":>8} {"ratio":>6} {"missed":>6} '
-          f'{"client msgs":>11}')
+    print(f'{"N":>4} {"variant":>8} {"steps/s":>8} {"ratio":>6} {"CPU ms/step":>11} '
+          f'{"ratio":>6} {"missed":>6} {"client msgs":>11}')
     for n in args.sizes:
         best = {}
         for run in runs:
             if run['n'] == n and run['steps_per_s'] > best.get(run['variant'], {}).get(
                     'steps_per_s', 0):
                 best[run['variant']] = run
-        base = best.get('off', {}).get('steps_per_s')
+        base = best.get('off', {})
         for variant in args.variants:
             run = best[variant]
-            ratio = f'{run["steps_per_s"] / base:.2f}' if base else '-'
+            ratio = (f'{run["steps_per_s"] / base["steps_per_s"]:.2f}' if base else '-')
+            cpu = min(r['cpu_ms_per_step'] for r in runs
+                      if r['n'] == n and r['variant'] == variant)
+            cpu_base = min((r['cpu_ms_per_step'] for r in runs
+                            if r['n'] == n and r['variant'] == 'off'), default=None)
+            cpu_ratio = f'{cpu / cpu_base:.2f}' if cpu_base else '-'
             msgs = '-' if run['client_messages'] is None else str(run['client_messages'])
-            print(f'{n:>4} {variant:>8} {run["steps_per_s"]:>8.1f} {ratio:>6} '
-                  f'{run["missed_commands"]:>6} {msgs:>11}')
+            print(f'{n:>4} {variant:>8} {run["steps_per_s"]:>8.1f} {ratio:>6} {cpu:>11.3f} '
+                  f'{cpu_ratio:>6} {run["missed_commands"]:>6} {msgs:>11}')
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(runs, indent=1) + '\n')

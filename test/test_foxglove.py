@@ -142,6 +142,17 @@ def fly(tmp_path: Path, domain: int, live: LiveServer | None, overrides=(), conn
     return summary, client, out / 'bag'
 
 
+def announced(proc: subprocess.Popen, pattern: str) -> re.Match:
+    """Read ``proc``'s stderr up to the line matching ``pattern`` (the server's address)."""
+    lines = []
+    for line in proc.stderr:
+        found = re.search(pattern, line)
+        if found:
+            return found
+        lines.append(line)
+    pytest.fail(f'no line matching {pattern!r} on stderr: {"".join(lines)!r}')
+
+
 def subscribed_client(url: str, topics=tuple(CONTRACT), **kwargs) -> FoxgloveClient:
     """Connect, wait for ``topics`` to be advertised, subscribe to all of them.
 
@@ -188,13 +199,8 @@ def test_replay_serves_the_bag(recorded, ros_domain):
     proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
-        url = None
-        for line in proc.stderr:
-            found = re.search(r'live view on (ws://\S+)', line)
-            if found:
-                url = found.group(1)
-                break
-        assert url is not None and url.startswith('ws://127.0.0.1:')
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        assert url.startswith('ws://127.0.0.1:')
         client = subscribed_client(url)
         decoders = check_advertised(client, bag_messages(bag)[1])
         client.pump_until(lambda: {t for t, _, _ in client.messages} >= set(CONTRACT),
@@ -218,9 +224,7 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
         '--ros-args', '-p', f'scenario:={scenario}', '-p', 'port:=0'],
         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        line = proc.stderr.readline()
-        found = re.search(r'serving (\d+) topics on (ws://\S+)', line)
-        assert found is not None, line
+        found = announced(proc, r'serving (\d+) topics on (ws://\S+)')
         assert int(found.group(1)) == len(CONTRACT)
         client = subscribed_client(found.group(2))
 
@@ -256,14 +260,7 @@ def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
-        url = None
-        for line in proc.stderr:
-            found = re.search(r'live view on (ws://\S+)', line)
-            if found:
-                url = found.group(1)
-                break
-        assert url is not None
-        client = subscribed_client(url)
+        client = subscribed_client(announced(proc, r'live view on (ws://\S+)').group(1))
         # The client reads until the run is over and the server has gone.
         client.pump(TIMEOUT)
         assert proc.wait(timeout=TIMEOUT) == 0
