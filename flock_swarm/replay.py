@@ -5,7 +5,7 @@ Usage::
     replay BAG [--rate R] [--loop] [--topics T [T ...]] [--regex PATTERN]
                [--exclude PATTERN] [--start-offset S] [--clock] [--clock-rate HZ]
                [--wait-for-subscribers N] [--wait-timeout S] [--delay S] [--quiet]
-               [--ros-args ...]
+               [--foxglove [PORT]] [--foxglove-host HOST] [--ros-args ...]
 
 ``BAG`` is a bag directory or one ``.mcap`` file, written by this package or by
 ``ros2 bag record -s mcap``. Each message is published at wall time
@@ -16,6 +16,10 @@ progress line on stderr, updated twice a second, gives the bag time (ns since th
 simulation time for a simulated run) and the time elapsed since the start of the bag::
 
     [RUNNING]  Bag Time 1700000012.340000000  Duration 2.340000000/10.000000000
+
+With ``--foxglove`` the same bytes, on the same schedule, are also served over the Foxglove
+WebSocket protocol (:mod:`flock_swarm.live`), logged at their recorded times, the server's
+time following bag time.
 
 Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
 expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
@@ -43,6 +47,7 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
+from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 
 #: Exit status when the bag turns out unreadable during playback.
 EXIT_FAILURE = 1
@@ -296,6 +301,8 @@ class Player(Node):
     :param delay: wall seconds to wait before the first message (after the subscribers).
     :param progress: stream for the progress line (None: no progress).
     :param say: receives warning and information lines (default: stderr).
+    :param live: a :class:`~flock_swarm.live.LiveServer` that serves every replayed message
+        too (its recorded bytes, logged at its recorded time), or None.
     :param node_name: name of the node.
     :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``namespace``...).
     :raises BagError: if the bag cannot be read.
@@ -308,7 +315,7 @@ class Player(Node):
                  clock_rate: float = 100.0, wait_subscribers: int = 0,
                  wait_timeout: float = 10.0, delay: float = 0.0,
                  progress: TextIO | None = None, say: Callable[[str], None] | None = None,
-                 node_name: str = 'replay', **kwargs) -> None:
+                 live=None, node_name: str = 'replay', **kwargs) -> None:
         """Open the bag, check the options, create the node and its publishers."""
         self._say = say if say is not None else (
             lambda line: print(line, file=sys.stderr, flush=True))
@@ -364,6 +371,10 @@ class Player(Node):
             name: self.create_publisher(cls, name, qos[name]) for name, cls in classes.items()}
         self._clock_pub = (self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS) if clock
                            else None)
+        self._live = live
+        if live is not None:
+            live.add_topics((pub.topic_name, recorded[name])
+                            for name, pub in self._topic_pubs.items())
         self._stop = threading.Event()
         self._executor: SingleThreadedExecutor | None = None
         # Wall time (monotonic) and bag time (ns) at which the current pass started.
@@ -473,9 +484,12 @@ class Player(Node):
             due = self._wall_zero + (message.log_time_ns - start_ns) / _NS / self._rate
             if not self._wait_until(due, result):
                 break
-            data = message.data
-            self._topic_pubs[message.topic].publish(
-                data if type(data) is bytes else bytes(data))
+            data = message.data if type(message.data) is bytes else bytes(message.data)
+            publisher = self._topic_pubs[message.topic]
+            publisher.publish(data)
+            if self._live is not None:
+                self._live.set_time(message.log_time_ns)
+                self._live.write(publisher.topic_name, data, message.log_time_ns)
             result.max_lateness = max(result.max_lateness, time.monotonic() - due)
             result.published[message.topic] += 1
             published += 1
@@ -581,6 +595,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help='wait S seconds before the first message (time for discovery)')
     parser.add_argument('-q', '--quiet', action='store_true',
                         help='no progress line and no summary')
+    parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
+                        help='also serve the replayed messages to Foxglove / Lichtblick over '
+                        f'the Foxglove WebSocket protocol (default port {DEFAULT_PORT}; 0: '
+                        'any free port)')
+    parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
+                        help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
+                        'this machine only)')
     return parser
 
 
@@ -600,15 +621,24 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     args = build_parser().parse_args(own_args)
     player = None
+    live = None
     try:
+        if args.foxglove is not None:
+            live = start_live(args.foxglove_host, args.foxglove, '--foxglove')
         rclpy.init(args=['replay', *argv])
         player = Player(
             args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,
             exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
             clock_rate=args.clock_rate, wait_subscribers=args.wait_for_subscribers,
             wait_timeout=args.wait_timeout, delay=args.delay,
-            progress=None if args.quiet else sys.stderr)
+            progress=None if args.quiet else sys.stderr, live=live)
+        if live is not None and not args.quiet:
+            print(f'[replay] live view on {live.url} ({len(live.channels)} topics)',
+                  file=sys.stderr, flush=True)
         result = player.play()
+    except ServeError as exc:
+        print(f'replay: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
     except (BagError, ReplayError) as exc:
         status = EXIT_USAGE if player is None else EXIT_FAILURE
         print(f'replay: error: {exc}', file=sys.stderr)
@@ -624,6 +654,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if player is not None:
             player.destroy_node()
+        if live is not None:
+            live.close()
         rclpy.try_shutdown()
     if not args.quiet:
         how = 'stopped' if result.interrupted else 'done'

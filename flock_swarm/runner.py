@@ -1,9 +1,11 @@
 """Launch-free runner: world, leader and N agents in one process or as separate processes.
 
-``swarm SCENARIO [--set key=value ...] [--seed N] [--out DIR] [--processes]`` resolves the
-scenario (with overrides and seed) into ``DIR/scenario.yaml``, starts every node on that
-file, prints progress, and ends when the world has recorded its last step. Outputs:
-``DIR/bag/`` (rosbag2 MCAP), ``DIR/summary.json``, ``DIR/timeseries.npz`` and figures.
+``swarm SCENARIO [--set key=value ...] [--seed N] [--out DIR] [--processes]
+[--foxglove [PORT]]`` resolves the scenario (with overrides and seed) into
+``DIR/scenario.yaml``, starts every node on that file, prints progress, and ends when the
+world has recorded its last step. Outputs: ``DIR/bag/`` (rosbag2 MCAP),
+``DIR/summary.json``, ``DIR/timeseries.npz`` and figures. With ``--foxglove`` the run is
+served live over the Foxglove WebSocket protocol (:mod:`flock_swarm.live`).
 """
 
 import argparse
@@ -23,6 +25,7 @@ from flock_swarm.cli import EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import check_law_output
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml, realize
+from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.scenarios import load_mapping
 
 
@@ -79,12 +82,14 @@ class InProcessSwarm:
     :param world_params: further parameters of the world node.
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :param agent_params: further parameters of the agents' node.
+    :param live: a :class:`~flock_swarm.live.LiveServer` to serve the run on (see
+        :meth:`serve`), or None.
     """
 
     def __init__(self, scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                  step_timeout: float = 2.0, executor: str = 'events', progress=None,
                  agents=None, world_params: dict | None = None, realtime_factor: float = 1.0,
-                 agent_params: dict | None = None) -> None:
+                 agent_params: dict | None = None, live=None) -> None:
         """Create the context, the nodes and the executor."""
         import rclpy
         from rclpy.context import Context
@@ -108,9 +113,27 @@ class InProcessSwarm:
             hosted = range(self.scenario.n_agents) if agents is None else agents
             self.agents = self.add_agents([int(i) for i in hosted], 'agents',
                                           **(agent_params or {}))
+            if live is not None:
+                self.serve(live)
         except BaseException:
             self.close()
             raise
+
+    def serve(self, live) -> None:
+        """Serve the run on ``live`` (a :class:`~flock_swarm.live.LiveServer`).
+
+        A recording world already holds every message of the contract once a step, as the
+        bytes on the wire: its bag writer is wrapped (:class:`~flock_swarm.live.LiveTee`) so
+        the server gets them too, at no cost in DDS deliveries (docs/performance.md). A
+        world that does not record gets a bridge node instead, subscribing to the topics.
+        """
+        from flock_swarm.live import LiveTee, contract_topics, make_bridge
+        if self.world.bag is None:
+            self.add(make_bridge(live, context=self.context,
+                                 parameter_overrides=self.parameters()))
+            return
+        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace()))
+        self.world.bag = LiveTee(self.world.bag, live)
 
     def parameters(self, **values) -> list:
         """Return the common node parameters plus ``values`` as rclpy parameters."""
@@ -182,7 +205,8 @@ class InProcessSwarm:
 def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                    step_timeout: float = 2.0, executor: str = 'events',
                    progress=None, timeout: float | None = None, agents=None,
-                   world_params: dict | None = None, realtime_factor: float = 1.0) -> dict:
+                   world_params: dict | None = None, realtime_factor: float = 1.0,
+                   live=None) -> dict:
     """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
 
     :param timeout: wall-clock limit [s] of the whole run (``None``: none).
@@ -191,13 +215,18 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     The other parameters are :class:`InProcessSwarm`'s.
     """
     with InProcessSwarm(scenario, out, mode, domain_id, step_timeout, executor, progress,
-                        agents, world_params, realtime_factor) as swarm:
+                        agents, world_params, realtime_factor, live=live) as swarm:
         try:
             swarm.spin_until(lambda: False, timeout)
         except KeyboardInterrupt:
             pass
         swarm.world.close()
         return swarm.summary()
+
+
+#: Modules of the executables that are not ``flock_swarm.nodes.<name>``, for ``python -m``.
+MODULES = {'foxglove_server': 'flock_swarm.live', 'replay': 'flock_swarm.replay',
+           'swarm': 'flock_swarm.runner'}
 
 
 def executable(name: str) -> list[str]:
@@ -208,7 +237,7 @@ def executable(name: str) -> list[str]:
     found = shutil.which(name)
     if found:
         return [found]
-    return [sys.executable, '-m', f'flock_swarm.nodes.{name}']
+    return [sys.executable, '-m', MODULES.get(name, f'flock_swarm.nodes.{name}')]
 
 
 def stop(procs: list, timeout: float = 10.0) -> None:
@@ -232,7 +261,7 @@ def stop(procs: list, timeout: float = 10.0) -> None:
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   log=None, realtime_factor: float = 1.0, container: bool = False,
-                  world_params: dict | None = None) -> dict:
+                  world_params: dict | None = None, live=None) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
@@ -248,6 +277,9 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :param container: host every agent in one ``agents`` process.
     :param world_params: further parameters of the world node.
+    :param live: a :class:`~flock_swarm.live.LiveServer` to serve the run on, through a
+        bridge node spun by a thread of this process
+        (:class:`~flock_swarm.live.BackgroundBridge`), or None.
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
@@ -268,6 +300,10 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
     for command in hosts:
         others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
+    bridge = None
+    if live is not None:
+        from flock_swarm.live import BackgroundBridge
+        bridge = BackgroundBridge(live, domain_id, base)
     world = subprocess.Popen(executable('world') + ros_args(
         dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
         env=env)
@@ -279,6 +315,8 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
     finally:
         stop(others)
+        if bridge is not None:
+            bridge.close()
     summary = out / 'summary.json'
     return json.loads(summary.read_text()) if summary.is_file() else {}
 
@@ -315,6 +353,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
     parser.add_argument('--no-record', action='store_true',
                         help='do not write the bag (summary and time series are still written)')
+    parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
+                        help='serve the run live to Foxglove / Lichtblick over the Foxglove '
+                        f'WebSocket protocol (default port {DEFAULT_PORT}; 0: any free port)')
+    parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
+                        help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
+                        'this machine only)')
     return parser
 
 
@@ -344,12 +388,24 @@ def main(argv: list[str] | None = None) -> int:
             raise ScenarioError('--out', f'{out / "bag"} already holds a bag; choose another '
                                 '--out')
         scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out)
-    except ScenarioError as exc:
+        # Bound before the nodes start, so a port in use is a usage error, not a failed run.
+        live = (None if args.foxglove is None
+                else start_live(args.foxglove_host, args.foxglove, '--foxglove'))
+    except (ScenarioError, ServeError) as exc:
         print(f'swarm: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:
         print(f'swarm: error: --out: {exc}', file=sys.stderr)
         return EXIT_USAGE
+    try:
+        return _run(args, scenario, out, live, say)
+    finally:
+        if live is not None:
+            live.close()
+
+
+def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
+    """Run the resolved scenario as ``args`` say (serving it on ``live``); return the status."""
     sc = parse_scenario(parse_yaml(scenario.read_text()))
     if not args.processes:
         layout = 'one process (agents in one container node)'
@@ -362,15 +418,19 @@ def main(argv: list[str] | None = None) -> int:
     world_params = {'start_timeout': args.start_timeout}
     if args.no_record:
         world_params['record'] = False
+    if live is not None:
+        say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
+            'Foxglove WebSocket)')
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
-                                container=args.container, world_params=world_params)
+                                container=args.container, world_params=world_params,
+                                live=live)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                  args.executor, progress=say,
                                  realtime_factor=args.realtime_factor,
-                                 world_params=world_params)
+                                 world_params=world_params, live=live)
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
         return 1

@@ -75,16 +75,29 @@ def load_mapping(name_or_path: str) -> dict:
 
     :param name_or_path: preset name or path.
     :return: the mapping.
+    :raises ScenarioError: for a file that cannot be read, is not UTF-8 text (a binary file,
+        say), is not YAML, is empty, or holds no mapping.
     """
     path = resolve(name_or_path)
     try:
-        data = parse_yaml(path.read_text())
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ScenarioError('scenario', f'{path}: {exc.strerror}') from None
+    try:
+        # utf-8-sig: a byte order mark, as some editors write it, is not part of the text.
+        text = raw.decode('utf-8-sig')
+    except UnicodeDecodeError as exc:
+        raise ScenarioError('scenario', f'{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} '
+                            f'at offset {exc.start}); a scenario is a YAML file') from None
+    try:
+        data = parse_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark is not None else ''
         raise ScenarioError('scenario', f'{path}: invalid YAML{where}') from None
-    except OSError as exc:
-        raise ScenarioError('scenario', f'{path}: {exc.strerror}') from None
+    if data is None:
+        raise ScenarioError('scenario', f'{path}: empty (no YAML document); a scenario is a '
+                            'mapping of keys such as n_agents and protocol')
     if not isinstance(data, dict):
         raise ScenarioError('scenario', f'{path}: expected a mapping at the top level')
     data.setdefault('name', path.stem)

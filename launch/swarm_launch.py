@@ -1,13 +1,22 @@
-"""Launch the world, the leader and N agents of a scenario.
+"""Launch the world, the leader and the agents of a scenario (needs a system ROS 2 install).
 
 ros2 launch flock_swarm swarm_launch.py scenario:=su2009_fig6
 ros2 launch flock_swarm swarm_launch.py scenario:=demo n_agents:=12 mode:=realtime
-ros2 launch flock_swarm swarm_launch.py scenario:=demo n_agents:=100 container:=true
+ros2 launch flock_swarm swarm_launch.py scenario:=demo container:=false   # a process per agent
+ros2 launch flock_swarm swarm_launch.py scenario:=demo foxglove:=true     # and the live view
 
-Arguments: ``scenario`` (preset name or YAML path), ``n_agents`` (0: the scenario's),
-``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and summary.json),
-``container`` (true: every agent in one ``agents`` process instead of one process each).
-The launch ends when the world has recorded its last step.
+Arguments (``--show-args``): ``scenario`` (preset name or YAML path), ``n_agents`` (0: the
+scenario's), ``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and
+summary.json), ``container`` (default true: every agent in one ``agents`` process; false:
+one ``agent`` process per agent, which takes minutes for the demo on two cores),
+``foxglove`` and ``foxglove_port`` (the live view, ``foxglove_server``). The launch ends
+when the world has recorded its last step.
+
+``ros2 launch`` needs a system ROS 2 install: ``launch_ros`` imports
+``composition_interfaces``, which has no PyPI wheel. In the virtualenv use ``swarm``
+(``swarm demo --processes --container`` starts the same three processes). Which processes
+start with which parameters is decided by :func:`flock_swarm.launch_plan.swarm_processes`,
+tested without ``launch``.
 """
 
 from launch import LaunchDescription
@@ -15,47 +24,22 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction, Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from flock_swarm.scenarios import load
+from flock_swarm.launch_plan import LAUNCH_ARGUMENTS, swarm_processes
 
 
 def swarm_nodes(context):
-    """Return the world, leader and agent nodes for the chosen scenario."""
-    scenario = LaunchConfiguration('scenario').perform(context)
-    n_agents = int(LaunchConfiguration('n_agents').perform(context))
-    mode = LaunchConfiguration('mode').perform(context)
-    out_dir = LaunchConfiguration('out_dir').perform(context)
-    container = LaunchConfiguration('container').perform(context).lower() in ('true', '1')
-    common = {'scenario': scenario, 'mode': mode}
-    if n_agents > 0:
-        common['n_agents'] = n_agents
-    n = load(scenario, extra={'n_agents': n_agents} if n_agents > 0 else None).n_agents
-    nodes = [
-        Node(package='flock_swarm', executable='world', name='world', output='screen',
-             parameters=[dict(common, out_dir=out_dir)], on_exit=Shutdown()),
-        Node(package='flock_swarm', executable='leader', name='leader',
-             parameters=[common]),
-    ]
-    if container:
-        nodes.append(Node(package='flock_swarm', executable='agents', name='agents',
-                          parameters=[common]))
-    else:
-        nodes += [Node(package='flock_swarm', executable='agent', name=f'agent_{i}',
-                       parameters=[dict(common, agent_id=i)]) for i in range(n)]
-    return nodes
+    """Return the nodes :func:`swarm_processes` chooses for the launch arguments."""
+    values = {name: LaunchConfiguration(name).perform(context)
+              for name, _, _ in LAUNCH_ARGUMENTS}
+    return [Node(package='flock_swarm', executable=spec.executable, name=spec.name,
+                 output=spec.output, parameters=[spec.parameters],
+                 on_exit=Shutdown() if spec.ends_launch else None)
+            for spec in swarm_processes(**values)]
 
 
 def generate_launch_description():
     """Declare the arguments and the nodes."""
-    return LaunchDescription([
-        DeclareLaunchArgument('scenario', default_value='demo',
-                              description='scenario preset name or path to a YAML file'),
-        DeclareLaunchArgument('n_agents', default_value='0',
-                              description='number of agents (0: the scenario value)'),
-        DeclareLaunchArgument('mode', default_value='lockstep',
-                              description='lockstep or realtime'),
-        DeclareLaunchArgument('out_dir', default_value='',
-                              description='output directory of the world (bag/, summary)'),
-        DeclareLaunchArgument('container', default_value='false',
-                              description='host every agent in one process (agents)'),
-        OpaqueFunction(function=swarm_nodes),
-    ])
+    return LaunchDescription(
+        [DeclareLaunchArgument(name, default_value=default, description=description)
+         for name, default, description in LAUNCH_ARGUMENTS]
+        + [OpaqueFunction(function=swarm_nodes)])

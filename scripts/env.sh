@@ -18,7 +18,9 @@
 #
 # Exports: VIRTUAL_ENV, PATH (.venv/bin first), AMENT_PREFIX_PATH (with .venv, which holds
 # share/ament_index for both the ROS wheels and flock_swarm) and ROS_AUTOMATIC_DISCOVERY_RANGE
-# (LOCALHOST unless already set).
+# (LOCALHOST unless already set). ROS_DOMAIN_ID is left as it is: the nodes and replay run on
+# $ROS_DOMAIN_ID (0 when unset), swarm on --domain-id (default $ROS_DOMAIN_ID, else 0),
+# scripts/demo on 222 unless it is set (docs/ros.md, "What runs where").
 
 if [[ "${BASH_SOURCE[0]}" == "$0" ]]; then
     printf '[env] error: source this file (source scripts/env.sh), do not execute it\n' >&2

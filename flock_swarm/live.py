@@ -1,0 +1,424 @@
+"""Live view: serve the swarm's topics over the Foxglove WebSocket protocol (``foxglove-sdk``).
+
+The Foxglove app and Lichtblick connect to ``ws://localhost:8765`` and show every topic of
+the contract (``/clock``, ``/leader/odom``, ``/leader/accel``, ``/agent_<i>/odom``,
+``/agent_<i>/cmd_accel``, ``/swarm/markers``, ``/swarm/metrics``) as a ROS 2 connection
+would: each channel carries its ``ros2msg`` schema (the same text the bag records,
+:mod:`flock_swarm.bag.msgdefs`) and ``cdr`` messages, the serialised bytes passed through
+as they are, and the server's time is simulation time.
+
+Three ways in, one :class:`LiveServer` under each:
+
+- ``swarm ... --foxglove [PORT]`` in one process: :class:`LiveTee` hands the server what the
+  world records, without another DDS subscriber (the cheapest, docs/performance.md);
+- ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
+- ``foxglove_server`` (:func:`main`) for runs started node by node, ``swarm --processes
+  --foxglove`` (:class:`BackgroundBridge`, in the runner's process) and a one-process run
+  that does not record: :class:`LiveBridge`, a node subscribing to the contract topics with
+  ``raw=True`` and forwarding the bytes.
+
+A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
+bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
+when it is full, and the bridge subscribes best-effort, so it never holds a writer back.
+"""
+
+import struct
+import sys
+import threading
+from typing import Callable, Iterable
+
+from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
+
+#: Default port of the Foxglove WebSocket protocol (what the apps try first).
+DEFAULT_PORT = 8765
+#: Default address: this machine only. Anything else is an explicit choice (``--foxglove-host``).
+DEFAULT_HOST = '127.0.0.1'
+#: Message encoding of every channel: the CDR bytes of the ROS 2 wire, unchanged.
+MESSAGE_ENCODING = 'cdr'
+#: Name the server announces to its clients.
+SERVER_NAME = 'flock_swarm'
+#: Longest wait [s] for the server to stop when the run ends (:meth:`LiveServer.close`).
+CLOSE_TIMEOUT = 2.0
+
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
+ACCEL_TYPE = 'geometry_msgs/msg/AccelStamped'
+MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+METRICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+
+_NS = 10**9
+_TIME = {0: struct.Struct('>iI'), 1: struct.Struct('<iI')}
+
+
+def contract_topics(n_agents: int, namespace: str = '/') -> list[tuple[str, str]]:
+    """Return the topics of the contract for ``n_agents`` agents, with their message types.
+
+    :param n_agents: number of agents.
+    :param namespace: the namespace the nodes run in (``/``: none); ``/clock`` stays global.
+    :return: ``(topic, pkg/msg/Type)`` pairs, ``/clock`` first.
+    """
+    prefix = namespace.rstrip('/')
+    topics = [('/clock', CLOCK_TYPE),
+              (f'{prefix}/leader/odom', ODOMETRY_TYPE),
+              (f'{prefix}/leader/accel', ACCEL_TYPE)]
+    for i in range(n_agents):
+        topics += [(f'{prefix}/agent_{i}/odom', ODOMETRY_TYPE),
+                   (f'{prefix}/agent_{i}/cmd_accel', ACCEL_TYPE)]
+    topics += [(f'{prefix}/swarm/markers', MARKERS_TYPE),
+               (f'{prefix}/swarm/metrics', METRICS_TYPE)]
+    return topics
+
+
+def message_stamp_ns(type_name: str, data: bytes) -> int | None:
+    """Return the simulation-time stamp [ns] of a serialised contract message.
+
+    ``Clock``, ``Odometry``, ``AccelStamped`` and ``DiagnosticArray`` begin with their time
+    (the clock, or the header's stamp); a ``MarkerArray`` with its length and then the first
+    marker's header. The world records each message at that stamp.
+
+    :param type_name: ``pkg/msg/Type`` of the message.
+    :param data: the CDR bytes.
+    :return: the stamp, or None when the bytes carry none (an empty marker array, or bytes
+        too short or not plain CDR).
+    """
+    offset = 8 if type_name == MARKERS_TYPE else 4
+    if len(data) < offset + 8 or data[0] != 0 or data[1] not in _TIME:
+        return None
+    if type_name == MARKERS_TYPE and _TIME[data[1]].unpack_from(data, 4)[0] == 0:
+        return None
+    sec, nanosec = _TIME[data[1]].unpack_from(data, offset)
+    return sec * _NS + nanosec
+
+
+class LiveServer:
+    """A Foxglove WebSocket server whose channels take CDR bytes of ROS 2 messages.
+
+    It has its own ``foxglove.Context``, so two servers in one process (tests) never share a
+    channel. Use it as a context manager, or call :meth:`close`.
+
+    :param host: address to bind (default :data:`DEFAULT_HOST`, this machine only).
+    :param port: TCP port (0: any free port, see :attr:`port`).
+    :param backlog: messages queued per client before its oldest are dropped (None: the
+        SDK's default, 1024).
+    :raises OSError: when the address cannot be bound (one line, naming it).
+    """
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+                 backlog: int | None = None) -> None:
+        """Start the server; it has no channels yet (:meth:`add_topic`)."""
+        import foxglove
+        self.context = foxglove.Context()
+        self.channels: dict[str, object] = {}
+        self.time_ns = -1
+        try:
+            self.server = foxglove.start_server(
+                name=SERVER_NAME, host=host, port=port, context=self.context,
+                capabilities=[foxglove.Capability.Time], message_backlog_size=backlog)
+        except RuntimeError as exc:
+            raise OSError(f'cannot serve on {host}:{port}: {" ".join(str(exc).split())}'
+                          ) from None
+        self.host = host
+
+    @property
+    def port(self) -> int:
+        """The TCP port the server listens on."""
+        return self.server.port
+
+    @property
+    def url(self) -> str:
+        """The address a client connects to, ``ws://HOST:PORT``."""
+        host = f'[{self.host}]' if ':' in self.host else self.host
+        return f'ws://{host}:{self.port}'
+
+    def add_topic(self, topic: str, msg_type: object) -> None:
+        """Advertise ``topic`` with the ``ros2msg`` schema of its type (once per topic).
+
+        :param topic: the fully qualified topic name.
+        :param msg_type: the message class or ``pkg/msg/Type``.
+        :raises DefinitionNotFoundError: when the type's ``.msg`` files are not installed.
+        """
+        if topic in self.channels:
+            return
+        from foxglove import Channel, Schema
+        definition = encoded_definition(type_name_of(msg_type))
+        schema = Schema(name=definition.type_name, encoding=definition.encoding,
+                        data=definition.text.encode('utf-8'))
+        self.channels[topic] = Channel(topic, schema=schema, message_encoding=MESSAGE_ENCODING,
+                                       context=self.context)
+
+    def add_topics(self, topics: Iterable[tuple[str, object]]) -> None:
+        """Advertise every ``(topic, type)`` pair (:meth:`add_topic`)."""
+        for topic, msg_type in topics:
+            self.add_topic(topic, msg_type)
+
+    def write(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Send a message's CDR bytes, logged at ``t_ns``, to the clients subscribed to it.
+
+        A topic that was not advertised is ignored (the viewer shows the contract only).
+
+        :param topic: the topic.
+        :param data: the serialised message, passed through unchanged.
+        :param t_ns: its simulation time [ns].
+        """
+        channel = self.channels.get(topic)
+        if channel is not None:
+            channel.log(data, log_time=t_ns)
+
+    def set_time(self, t_ns: int) -> None:
+        """Broadcast ``t_ns`` as the server's time, unless it is the time last broadcast."""
+        if t_ns != self.time_ns:
+            self.time_ns = t_ns
+            self.server.broadcast_time(t_ns)
+
+    def close(self, timeout: float = CLOSE_TIMEOUT) -> None:
+        """Close the channels and stop the server, waiting at most ``timeout`` s (idempotent).
+
+        The SDK's ``stop`` waits until every client has closed its connection: a client that
+        does not read never sees the close frame and holds it up for as long as the client's
+        own keepalive takes (47 s with ``websockets``' defaults, measured). So ``stop`` runs
+        in a daemon thread, left behind after ``timeout``: a ``swarm`` or ``replay`` ends on
+        time whatever its clients do (the process's exit ends the thread).
+        """
+        for channel in self.channels.values():
+            channel.close()
+        self.channels = {}
+        stopper = threading.Thread(target=self.server.stop, name='foxglove-stop', daemon=True)
+        stopper.start()
+        stopper.join(timeout)
+
+    def __enter__(self) -> 'LiveServer':
+        """Return the server."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Close the server."""
+        self.close()
+
+
+class LiveTee:
+    """The world's bag writer, with every message written also sent to a :class:`LiveServer`.
+
+    The world records every topic of the contract (what it publishes and what it receives)
+    once a step, as the bytes on the wire: the tee forwards those, so a one-process run is
+    served without another DDS subscriber. Attributes other than the two write methods
+    are the writer's.
+
+    :param bag: the world's :class:`~flock_swarm.bag.BagWriter`.
+    :param live: the server.
+    """
+
+    def __init__(self, bag, live: LiveServer) -> None:
+        """Wrap ``bag``."""
+        self._bag = bag
+        self._live = live
+
+    def __getattr__(self, name: str):
+        """Return the writer's attribute ``name``."""
+        return getattr(self._bag, name)
+
+    def write_serialized_many(self, messages: list[tuple[str, bytes]], t_ns: int) -> None:
+        """Record the messages of one time ``t_ns``, then serve them."""
+        self._bag.write_serialized_many(messages, t_ns)
+        self._live.set_time(t_ns)
+        for topic, data in messages:
+            self._live.write(topic, data, t_ns)
+
+    def write_serialized(self, topic: str, data: bytes, t_ns: int, *args, **kwargs) -> None:
+        """Record one message, then serve it."""
+        self._bag.write_serialized(topic, data, t_ns, *args, **kwargs)
+        self._live.set_time(t_ns)
+        self._live.write(topic, data, t_ns)
+
+
+class ServeError(ValueError):
+    """A port or address the server cannot use; the message is one line naming the option."""
+
+    def __init__(self, option: str, reason: str) -> None:
+        """Create the error.
+
+        :param option: the option or parameter, such as ``--foxglove``.
+        :param reason: what is wrong, one line.
+        """
+        super().__init__(f'{option}: {reason}')
+        self.option = option
+        self.reason = reason
+
+
+def start_live(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, option: str = '--foxglove',
+               backlog: int | None = None) -> 'LiveServer':
+    """Start a :class:`LiveServer`, or raise a one-line error naming ``option``.
+
+    :param host: address to bind.
+    :param port: TCP port, 0 to 65535 (0: any free port).
+    :param option: the option or parameter the port came from, for the error message.
+    :param backlog: messages queued per client (:class:`LiveServer`).
+    :return: the running server.
+    :raises ServeError: for a port out of range or an address that cannot be bound.
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ServeError(option, f'the port must be an integer in [0, 65535], got {port!r}')
+    try:
+        return LiveServer(host, port, backlog)
+    except OSError as exc:
+        raise ServeError(option, str(exc)) from None
+
+
+def make_bridge(live: 'LiveServer | None' = None, **kwargs):
+    """Return a :class:`LiveBridge` node (imported here: this module loads without rclpy).
+
+    :param live: the server to forward to; None: the node starts its own from its ``host``
+        and ``port`` parameters, and closes it in its ``close()``.
+    :param kwargs: forwarded to the node.
+    """
+    return _bridge_class()(live, **kwargs)
+
+
+def _bridge_class() -> type:
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from flock_swarm.bag.msgdefs import message_class
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.nodes.common import COMMON_PARAMS, declare, declare_common, load_scenario
+
+    #: Best effort: a viewer never makes a writer wait for its acknowledgements (it matches
+    #: the reliable writers of the contract); the depth covers a step's burst.
+    bridge_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                            reliability=ReliabilityPolicy.BEST_EFFORT,
+                            durability=DurabilityPolicy.VOLATILE)
+    own_params = COMMON_PARAMS | {'host', 'port'}
+
+    class LiveBridge(Node):
+        """Subscribes to the contract topics (raw bytes) and forwards them to a server.
+
+        Parameters: ``scenario`` (and its overrides, as every node: the number of agents),
+        ``host`` and ``port`` (of the server it starts when given none).
+
+        :param live: the server, or None to start one.
+        :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
+        :raises ScenarioError: for an invalid parameter, or an address that cannot be bound.
+        """
+
+        def __init__(self, live: 'LiveServer | None', **kwargs) -> None:
+            """Create the node, its server if needed, and its subscriptions."""
+            kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
+            super().__init__(kwargs.pop('node_name', 'foxglove_server'), **kwargs)
+            declare_common(self)
+            host = declare(self, 'host', DEFAULT_HOST, 'address the server binds '
+                           '(127.0.0.1: this machine only)')
+            port = declare(self, 'port', DEFAULT_PORT, 'TCP port of the server (0: any)')
+            sc = load_scenario(self, own_params)
+            self.owned = live is None
+            if live is None:
+                try:
+                    live = start_live(host, port, 'port')
+                except ServeError as exc:
+                    raise ScenarioError(exc.option, exc.reason) from None
+            self.live = live
+            self.received = 0
+            self.time_ns = 0
+            for topic, type_name in contract_topics(sc.n_agents, self.get_namespace()):
+                name = self.create_subscription(
+                    message_class(type_name), topic, self._forward(topic, type_name),
+                    bridge_qos, raw=True).topic_name
+                live.add_topic(name, type_name)
+
+        def _forward(self, topic: str, type_name: str) -> Callable[[bytes], None]:
+            clock = type_name == CLOCK_TYPE
+
+            def on_data(data: bytes) -> None:
+                stamp = message_stamp_ns(type_name, data)
+                t_ns = self.time_ns if stamp is None else stamp
+                if clock and t_ns > self.time_ns:
+                    # A step offered again (the world's resend) does not turn time back.
+                    self.time_ns = t_ns
+                    self.live.set_time(t_ns)
+                self.live.write(topic, data, t_ns)
+                self.received += 1
+            return on_data
+
+        def close(self) -> None:
+            """Stop the server if this node started it."""
+            if self.owned:
+                self.live.close()
+
+    return LiveBridge
+
+
+class BackgroundBridge:
+    """A :class:`LiveBridge` on its own context and domain, spun by a thread of this process.
+
+    ``swarm --processes --foxglove`` serves this way: the runner's process keeps the server
+    it bound (no second process racing for the port), while the nodes run elsewhere. Use it
+    as a context manager.
+
+    :param live: the server.
+    :param domain_id: the run's ROS domain id.
+    :param parameters: the bridge's parameters (``scenario`` and the like).
+    """
+
+    def __init__(self, live: LiveServer, domain_id: int, parameters: dict) -> None:
+        """Create the context and the node, and start spinning."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.parameter import Parameter
+
+        from flock_swarm.nodes.common import make_executor
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        try:
+            self.node = make_bridge(live, context=self.context, parameter_overrides=[
+                Parameter(name, value=value) for name, value in parameters.items()])
+        except BaseException:
+            rclpy.try_shutdown(context=self.context)
+            raise
+        self.executor = make_executor(self.context)
+        self.executor.add_node(self.node)
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, name='foxglove-bridge', daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.1)
+
+    def close(self) -> None:
+        """Stop spinning; destroy the node and the context (the server stays open)."""
+        import rclpy
+        self._stop.set()
+        self.thread.join()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> 'BackgroundBridge':
+        """Return the bridge."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Close the bridge."""
+        self.close()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run ``foxglove_server``: serve the contract topics of a running swarm (a bridge node).
+
+    ``foxglove_server --ros-args -p scenario:=demo [-p port:=8765] [-p host:=127.0.0.1]``;
+    the scenario gives the number of agents. Invalid input: one line, exit status 2.
+
+    :param args: command-line arguments (``None``: ``sys.argv``).
+    :return: the exit status.
+    """
+    from flock_swarm.nodes.common import run_node
+
+    def factory():
+        bridge = make_bridge()
+        print(f'[foxglove_server] serving {len(bridge.live.channels)} topics on '
+              f'{bridge.live.url}', file=sys.stderr, flush=True)
+        return bridge
+
+    return run_node('foxglove_server', factory, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,357 @@
+"""The live view: a real client of the Foxglove WebSocket protocol against every way in.
+
+The client (test/foxglove_client.py) is written over ``websockets`` from the protocol's
+specification, not from ``foxglove-sdk``; the bag it is compared with is read by the ``mcap``
+library and the advertised schemas are parsed by ``mcap_ros2``: three independent readers.
+"""
+
+import os
+from pathlib import Path
+import re
+import signal
+import socket
+import subprocess
+import threading
+import time
+
+from mcap.reader import make_reader
+from mcap.records import Schema
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+
+from conftest import wait_for
+from foxglove_client import FoxgloveClient, SUBPROTOCOL
+from flock_swarm.bag.msgdefs import message_definition
+from flock_swarm.live import CLOSE_TIMEOUT, LiveServer, start_live
+from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
+
+pytestmark = pytest.mark.ros
+
+#: Agents of the recorded runs.
+N = 3
+#: The contract (docs/ros.md): every topic of a run of N agents and its message type.
+CONTRACT = {'/clock': 'rosgraph_msgs/msg/Clock',
+            '/leader/odom': 'nav_msgs/msg/Odometry',
+            '/leader/accel': 'geometry_msgs/msg/AccelStamped',
+            '/swarm/markers': 'visualization_msgs/msg/MarkerArray',
+            '/swarm/metrics': 'diagnostic_msgs/msg/DiagnosticArray',
+            **{f'/agent_{i}/odom': 'nav_msgs/msg/Odometry' for i in range(N)},
+            **{f'/agent_{i}/cmd_accel': 'geometry_msgs/msg/AccelStamped' for i in range(N)}}
+#: The demo shortened to ``N`` agents and 1 s (50 steps).
+RUN = [f'n_agents={N}', 'informed.count=1', 'duration=1']
+#: Wall-clock bound of a run, a connection or a playback [s].
+TIMEOUT = 60.0
+
+
+def bag_messages(bag: Path) -> tuple[dict, dict]:
+    """Read a bag with the ``mcap`` library.
+
+    :return: ``{(topic, log_time): {bytes, ...}}`` and ``{schema name: schema text}``.
+    """
+    messages: dict[tuple[str, int], set[bytes]] = {}
+    with next(bag.glob('*.mcap')).open('rb') as stream:
+        reader = make_reader(stream)
+        schemas = {s.name: s.data.decode() for s in reader.get_summary().schemas.values()}
+        for _, channel, message in reader.iter_messages():
+            messages.setdefault((channel.topic, message.log_time), set()).add(message.data)
+    return messages, schemas
+
+
+def check_advertised(client: FoxgloveClient, schemas: dict) -> dict:
+    """Every contract topic is advertised as ROS 2 CDR with the bag's schema; return decoders.
+
+    :return: topic -> a CDR decoder built by ``mcap_ros2`` from the advertised schema.
+    """
+    assert client.subprotocol == SUBPROTOCOL
+    assert 'time' in client.server_info['capabilities']
+    channels = client.topics()
+    assert set(CONTRACT) <= set(channels)
+    decoders = {}
+    for topic, type_name in CONTRACT.items():
+        channel = channels[topic]
+        assert (channel['encoding'], channel['schemaEncoding'], channel['schemaName']) == (
+            'cdr', 'ros2msg', type_name), topic
+        assert channel['schema'] == schemas[type_name], topic
+        decoders[topic] = DecoderFactory().decoder_for('cdr', Schema(
+            id=1, name=type_name, encoding='ros2msg', data=channel['schema'].encode()))
+        assert decoders[topic] is not None, topic
+    return decoders
+
+
+def unpadded(data: bytes) -> set[bytes]:
+    """Return ``data`` and, if it ends in up to 3 zero bytes that pad it to a multiple of 4,
+    ``data`` without them.
+
+    Fast DDS pads a serialised payload to a multiple of 4 bytes on the wire, so a subscriber
+    receives the world's 1213-byte ``MarkerArray`` as 1216 bytes (rosbag2 records those);
+    the world records the bytes it serialised.
+    """
+    forms = {data}
+    if len(data) % 4 == 0:
+        forms |= {data[:len(data) - pad] for pad in (1, 2, 3) if not any(data[-pad:])}
+    return forms
+
+
+def check_received(client: FoxgloveClient, bag: Path, decoders: dict,
+                   wire: bool = False) -> None:
+    """The client got every contract topic, each message the bag's bytes at the bag's time.
+
+    :param wire: the server forwarded what a DDS subscriber received (the bridge): the bag's
+        bytes plus the wire's padding to a multiple of 4, at most.
+    """
+    recorded, _ = bag_messages(bag)
+    assert {topic for topic, _, _ in client.messages} >= set(CONTRACT)
+    for topic, t_ns, data in client.messages:
+        forms = unpadded(data) if wire else {data}
+        assert forms & recorded.get((topic, t_ns), set()), (topic, t_ns)
+        decoded = decoders[topic](data)
+        if topic == '/clock':
+            assert decoded.clock.sec * 10**9 + decoded.clock.nanosec == t_ns
+        elif topic.endswith('/odom'):
+            assert decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec == t_ns
+    clock_times = {t for topic, t in recorded if topic == '/clock'}
+    assert client.times and set(client.times) <= clock_times
+
+
+def fly(tmp_path: Path, domain: int, live: LiveServer | None, overrides=(), connect=None,
+        world_params: dict | None = None):
+    """Fly the demo with ``N`` agents in this process, served on ``live``.
+
+    :param connect: called with the swarm once its nodes exist and before the first step;
+        returns the client to read with while the swarm flies.
+    :param world_params: further parameters of the world.
+    :return: ``(summary, client, bag directory)``.
+    """
+    out = tmp_path / 'run'
+    scenario = resolve_scenario('demo', [*RUN, *overrides], None, out)
+    with InProcessSwarm(scenario, out, domain_id=domain, world_params=world_params) as swarm:
+        if live is not None:
+            swarm.serve(live)
+        client = connect(swarm) if connect is not None else None
+        reader = None
+        if client is not None:
+            reader = threading.Thread(target=client.pump, args=(2.0,))
+            reader.start()
+        try:
+            swarm.spin_until(lambda: False, TIMEOUT)
+        finally:
+            if reader is not None:
+                reader.join()
+        summary = swarm.summary()
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    return summary, client, out / 'bag'
+
+
+def announced(proc: subprocess.Popen, pattern: str) -> re.Match:
+    """Read ``proc``'s stderr up to the line matching ``pattern`` (the server's address)."""
+    lines = []
+    for line in proc.stderr:
+        found = re.search(pattern, line)
+        if found:
+            return found
+        lines.append(line)
+    pytest.fail(f'no line matching {pattern!r} on stderr: {"".join(lines)!r}')
+
+
+def subscribed_client(url: str, topics=tuple(CONTRACT), **kwargs) -> FoxgloveClient:
+    """Connect, wait for ``topics`` to be advertised, subscribe to all of them.
+
+    :param kwargs: passed to :class:`FoxgloveClient`.
+    """
+    client = FoxgloveClient(url, **kwargs)
+    client.pump_until(lambda: set(topics) <= set(client.topics()), TIMEOUT, 'advertise')
+    client.subscribe(topics)
+    return client
+
+
+@pytest.fixture(scope='module')
+def recorded(tmp_path_factory):
+    """A run served on a live server while it records, and the client that watched it."""
+    tmp_path = tmp_path_factory.mktemp('live')
+    domain = 1 + (os.getpid() * 37 + 101) % 200
+    with start_live(port=0) as live:
+        def connect(swarm):
+            client = subscribed_client(live.url)
+            # Subscribed before the first step: the server has a sink on every channel.
+            wait_for(lambda: all(c.has_sinks() for c in live.channels.values()), TIMEOUT,
+                     'the subscriptions to reach the server')
+            return client
+        summary, client, bag = fly(tmp_path, domain, live, connect=connect)
+    client.close()
+    return summary, client, bag
+
+
+def test_one_process_run_is_served_with_the_recorded_bytes(recorded):
+    summary, client, bag = recorded
+    decoders = check_advertised(client, bag_messages(bag)[1])
+    check_received(client, bag, decoders)
+    # Subscribed before the start, the client saw every message of the run (TCP, no drops).
+    recorded_count = sum(len(v) for v in bag_messages(bag)[0].values())
+    assert len(client.messages) == recorded_count
+    clock_times = {t for topic, t in bag_messages(bag)[0] if topic == '/clock'}
+    assert set(client.times) == clock_times and len(clock_times) == summary['steps'] + 1
+
+
+def test_replay_serves_the_bag(recorded, ros_domain):
+    _, _, bag = recorded
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    command = executable('replay') + [str(bag), '--foxglove', '0', '--loop', '--rate', '5']
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        assert url.startswith('ws://127.0.0.1:')
+        client = subscribed_client(url)
+        decoders = check_advertised(client, bag_messages(bag)[1])
+        client.pump_until(lambda: {t for t, _, _ in client.messages} >= set(CONTRACT),
+                          TIMEOUT, 'a message on every topic')
+        client.close()
+        check_received(client, bag, decoders)
+        proc.send_signal(signal.SIGINT)
+        proc.stderr.read()
+        assert proc.wait(timeout=TIMEOUT) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    # The node takes the scenario file every node of the run takes (for the agents' topics).
+    scenario = resolve_scenario('demo', RUN, None, tmp_path / 'run')
+    proc = subprocess.Popen(executable('foxglove_server') + [
+        '--ros-args', '-p', f'scenario:={scenario}', '-p', 'port:=0'],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        found = announced(proc, r'serving (\d+) topics on (ws://\S+)')
+        assert int(found.group(1)) == len(CONTRACT)
+        client = subscribed_client(found.group(2))
+
+        def connect(swarm):
+            # The bridge's subscriptions are matched before the first step: each topic the
+            # world publishes has the agents' (or leader's) subscriber and the bridge's.
+            world = swarm.world
+            wait_for(lambda: all(pub.get_subscription_count() >= 2
+                                 for pub in [world.clock_pub, *world.odom_pubs]),
+                     TIMEOUT, "the bridge's subscriptions")
+            return client
+        _, client, bag = fly(tmp_path, ros_domain, None, connect=connect)
+        client.close()
+        decoders = check_advertised(client, bag_messages(bag)[1])
+        check_received(client, bag, decoders, wire=True)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+        assert 'Traceback' not in proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.parametrize('layout', [[], ['--processes', '--container']])
+def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
+    """``swarm --foxglove 0``: one process (the world's recorded bytes), or three processes
+    (a bridge node in the runner's process); a client that connects on the announcement."""
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=20',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--domain-id', str(ros_domain), *layout]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        client = subscribed_client(announced(proc, r'live view on (ws://\S+)').group(1))
+        # The client reads until the run is over and the server has gone.
+        client.pump(TIMEOUT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+        log = proc.stderr.read()
+        assert 'Traceback' not in log, log
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert client.messages, log
+    decoders = check_advertised(client, bag_messages(out / 'bag')[1])
+    check_received(client, out / 'bag', decoders, wire=bool(layout))
+
+
+def test_a_run_without_recording_is_served_by_a_bridge_node(tmp_path, ros_domain):
+    with start_live(port=0) as live:
+        def connect(swarm):
+            client = subscribed_client(live.url)
+            wait_for(lambda: all(c.has_sinks() for c in live.channels.values()), TIMEOUT,
+                     'the subscriptions to reach the server')
+            world = swarm.world
+            wait_for(lambda: all(pub.get_subscription_count() >= 2
+                                 for pub in [world.clock_pub, *world.odom_pubs]),
+                     TIMEOUT, "the bridge's subscriptions")
+            return client
+        summary, client, bag = fly(tmp_path, ros_domain, live, connect=connect,
+                                   world_params={'record': False})
+    client.close()
+    assert not bag.exists()
+    check_advertised(client, {name: message_definition(name) for name in CONTRACT.values()})
+    assert {topic for topic, _, _ in client.messages} >= set(CONTRACT)
+    clock = [t for topic, t, _ in client.messages if topic == '/clock']
+    assert clock == sorted(clock) and clock[-1] == summary['steps'] * 20_000_000
+
+
+def test_a_stalled_client_does_not_stall_the_world(tmp_path, ros_domain):
+    """A client that subscribes to everything and never reads: the server drops, the world
+    flies on (every command in time) and the run ends as it would without the client."""
+    live = start_live(port=0)
+    try:
+        stalled = None
+
+        def connect(swarm):
+            nonlocal stalled
+            sock = socket.socket()
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            sock.connect(('127.0.0.1', live.port))
+            stalled = subscribed_client(live.url, list(live.channels), max_queue=1, sock=sock)
+            wait_for(lambda: all(c.has_sinks() for c in live.channels.values()), TIMEOUT,
+                     'the subscriptions to reach the server')
+            return None
+        summary, _, bag = fly(tmp_path, ros_domain, live,
+                              overrides=['n_agents=10', 'informed.count=3', 'duration=30'],
+                              connect=connect)
+    finally:
+        started = time.monotonic()
+        live.close()
+        # The client never saw the close frame; the server is left to stop on its own.
+        closing = time.monotonic() - started
+    sent = sum(len(v) for v in bag_messages(bag)[0].values())
+    stalled.pump(2.0)
+    stalled.close()
+    assert summary['steps'] == 1500
+    assert closing < CLOSE_TIMEOUT + 1.0
+    # The server had more for the client than it could hold: it dropped, nobody waited.
+    assert len(stalled.messages) < sent
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--foxglove', '70000'], '--foxglove: the port must be an integer in [0, 65535], got '
+     '70000'),
+    (['--foxglove', '0', '--foxglove-host', '256.0.0.1'], '--foxglove: cannot serve on '
+     '256.0.0.1:0'),
+])
+def test_swarm_refuses_a_bad_address_in_one_line(tmp_path, argv, message):
+    res = subprocess.run(executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), *argv],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert res.returncode == 2
+    assert res.stderr.startswith(f'swarm: error: {message}') and res.stderr.count('\n') == 1
+
+
+def test_a_port_in_use_is_one_line_and_status_2(tmp_path):
+    with LiveServer(port=0) as busy:
+        for argv, prefix in (
+                (executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), '--foxglove',
+                                        str(busy.port)], 'swarm: error: --foxglove: '),
+                (executable('replay') + [str(tmp_path), '--foxglove', str(busy.port)],
+                 'replay: error: --foxglove: '),
+                (executable('foxglove_server') + ['--ros-args', '-p', f'port:={busy.port}'],
+                 'foxglove_server: error: port: ')):
+            res = subprocess.run(argv, capture_output=True, text=True, timeout=TIMEOUT)
+            assert res.returncode == 2, argv
+            assert res.stderr.startswith(prefix) and res.stderr.count('\n') == 1, res.stderr
+            assert 'in use' in res.stderr
