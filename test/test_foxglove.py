@@ -19,7 +19,7 @@ from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 import pytest
 
-from conftest import wait_for
+from flock_swarm.testing import wait_for
 from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
 from flock_swarm.live import CLOSE_TIMEOUT, LiveServer, start_live
