@@ -8,8 +8,8 @@ lockstep, recording on, the same runs as ``bench/bench_ros.py``'s one-process pi
 after the other and interleaved over ``--repeat`` rounds; the best run of each counts:
 
 ``off``      no server (``swarm`` without ``--foxglove``);
-``tee``      ``--foxglove`` as ``swarm`` serves: the world's recorded bytes handed to the
-             server (:class:`flock_swarm.live.LiveTee`), no client connected;
+``tee``      ``--foxglove`` as ``swarm`` serves: the world's bytes handed to the server by
+             one of its sinks (:class:`flock_swarm.live.LiveSink`), no client connected;
 ``client``   the same with one client subscribed to every topic and reading;
 ``stalled``  the same with one client subscribed to every topic that never reads (its TCP
              receive buffer 4 KiB): the server must drop, the world must not wait;

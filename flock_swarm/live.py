@@ -9,12 +9,13 @@ as they are, and the server's time is simulation time.
 
 Three ways in, one :class:`LiveServer` under each:
 
-- ``swarm ... --foxglove [PORT]`` in one process: :class:`LiveTee` hands the server what the
-  world records, without another DDS subscriber (the cheapest, docs/performance.md);
+- ``swarm ... --foxglove [PORT]`` in one process: :class:`LiveSink`, one of the world's
+  sinks, hands the server every message the world publishes or receives, without another
+  DDS subscriber (the cheapest, docs/performance.md);
 - ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
 - ``foxglove_server`` (:func:`main`) for runs started node by node, ``swarm --processes
-  --foxglove`` (:class:`BackgroundBridge`, in the runner's process) and a one-process run
-  that does not record: :class:`LiveBridge`, a node subscribing to the contract topics with
+  --foxglove`` (:class:`BackgroundBridge`, in the runner's process):
+  :class:`LiveBridge`, a node subscribing to the contract topics with
   ``raw=True`` and forwarding the bytes.
 
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
@@ -195,39 +196,36 @@ class LiveServer:
         self.close()
 
 
-class LiveTee:
-    """The world's bag writer, with every message written also sent to a :class:`LiveServer`.
+class LiveSink:
+    """A sink of the world (:class:`~flock_swarm.nodes.recording.Sink`) serving its messages.
 
-    The world records every topic of the contract (what it publishes and what it receives)
-    once a step, as the bytes on the wire: the tee forwards those, so a one-process run is
-    served without another DDS subscriber. Attributes other than the two write methods
-    are the writer's.
+    The world hands every message of the contract it publishes or receives to its sinks
+    once a step, as the bytes on the wire: this sink forwards those to a
+    :class:`LiveServer`, so a one-process run is served without another DDS subscriber
+    (docs/performance.md). The server's topics are advertised beforehand
+    (:func:`contract_topics`); the server is the caller's to close.
 
-    :param bag: the world's :class:`~flock_swarm.bag.BagWriter`.
     :param live: the server.
     """
 
-    def __init__(self, bag, live: LiveServer) -> None:
-        """Wrap ``bag``."""
-        self._bag = bag
-        self._live = live
+    def __init__(self, live: LiveServer) -> None:
+        """Serve on ``live``."""
+        self.live = live
 
-    def __getattr__(self, name: str):
-        """Return the writer's attribute ``name``."""
-        return getattr(self._bag, name)
+    def add_topic(self, name: str, msg_type, qos) -> None:
+        """Advertise a topic the world creates (a no-op for one already advertised)."""
+        self.live.add_topic(name, msg_type)
 
-    def write_serialized_many(self, messages: list[tuple[str, bytes]], t_ns: int) -> None:
-        """Record the messages of one time ``t_ns``, then serve them."""
-        self._bag.write_serialized_many(messages, t_ns)
-        self._live.set_time(t_ns)
-        for topic, data in messages:
-            self._live.write(topic, data, t_ns)
+    def write(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Serve one message at simulation time ``t_ns``, the server's time from then on."""
+        self.live.set_time(t_ns)
+        self.live.write(topic, data, t_ns)
 
-    def write_serialized(self, topic: str, data: bytes, t_ns: int, *args, **kwargs) -> None:
-        """Record one message, then serve it."""
-        self._bag.write_serialized(topic, data, t_ns, *args, **kwargs)
-        self._live.set_time(t_ns)
-        self._live.write(topic, data, t_ns)
+    def flush(self) -> None:
+        """Nothing to do: every message is sent as it is written."""
+
+    def close(self) -> None:
+        """Nothing to do: the server outlives the world."""
 
 
 class ServeError(ValueError):

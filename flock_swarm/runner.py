@@ -122,18 +122,13 @@ class InProcessSwarm:
     def serve(self, live) -> None:
         """Serve the run on ``live`` (a :class:`~flock_swarm.live.LiveServer`).
 
-        A recording world already holds every message of the contract once a step, as the
-        bytes on the wire: its bag writer is wrapped (:class:`~flock_swarm.live.LiveTee`) so
-        the server gets them too, at no cost in DDS deliveries (docs/performance.md). A
-        world that does not record gets a bridge node instead, subscribing to the topics.
+        The world already holds every message of the contract once a step, as the bytes on
+        the wire: a :class:`~flock_swarm.live.LiveSink` among its sinks gives them to the
+        server too, at no cost in DDS deliveries (docs/performance.md).
         """
-        from flock_swarm.live import LiveTee, contract_topics, make_bridge
-        if self.world.bag is None:
-            self.add(make_bridge(live, context=self.context,
-                                 parameter_overrides=self.parameters()))
-            return
+        from flock_swarm.live import LiveSink, contract_topics
         live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace()))
-        self.world.bag = LiveTee(self.world.bag, live)
+        self.world.sinks.append(LiveSink(live))
 
     def parameters(self, **values) -> list:
         """Return the common node parameters plus ``values`` as rclpy parameters."""
