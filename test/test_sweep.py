@@ -301,7 +301,12 @@ def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
         for proc in reversed(procs):
             proc.terminate()
         for proc in procs:
-            proc.wait(timeout=30)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                # A worker's graceful close can outwait a busy machine; the test is done.
+                proc.kill()
+                proc.wait()
     assert read_csv(out / 'runs.csv') == read_csv(small_serial / 'serial' / 'runs.csv')
     assert (out / 'summary.csv').read_bytes() \
         == (small_serial / 'serial' / 'summary.csv').read_bytes()

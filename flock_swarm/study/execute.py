@@ -14,6 +14,7 @@ import sys
 import time
 import traceback
 from collections import deque
+from contextlib import closing
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from pathlib import Path
@@ -387,8 +388,10 @@ def execute(runs: list[Run], cache_path: Path, recorder: Recorder, backend,
     progress = Progress(len(todo), sum(j.weight for j in jobs), say, live, prefix=prefix)
     core = 0.0
     interrupted = False
-    with CacheWriter(cache_path) as cache:
-        for job, recs in backend.results(run_job, jobs, recorder):
+    # closing(): an interrupt while a result is handled here still stops the workers.
+    with CacheWriter(cache_path) as cache, \
+            closing(backend.results(run_job, jobs, recorder)) as results:
+        for job, recs in results:
             # JSON types, non-finite values as None: the record as the cache gives it back.
             done = [plain(r) for r in recs if r['status'] != 'interrupted']
             interrupted |= len(done) < len(recs)
