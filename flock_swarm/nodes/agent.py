@@ -34,6 +34,16 @@ from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel,
 
 AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout',
                                                'leader_start_timeout'}
+#: The agents' timeouts [s] (each must be > 0): default and description.
+TIMEOUTS = {
+    'leader_timeout': (1.0, 'seconds without the leader state (lockstep: for a step whose '
+                       'odometry is complete) before the agents apply the uninformed law, '
+                       'until it returns; below the world step_timeout'),
+    'leader_start_timeout': (30.0, 'lockstep: seconds to wait for the leader\'s first state (it '
+                             'answers its first tick only once every node has matched its '
+                             'topics, up to its own start_timeout) before the agents apply the '
+                             'uninformed law'),
+}
 
 
 class AgentNode(Node):
@@ -56,23 +66,13 @@ class AgentNode(Node):
                        "agents this node hosts: '' (agent_id alone), 'all', ids and ranges "
                        "such as '0-9,12', or an integer array")
         sc = self.scenario = load_scenario(self, AGENT_PARAMS)
-        leader_timeout = declare(
-            self, 'leader_timeout', 1.0, 'seconds without the leader state (lockstep: for a '
-            'step whose odometry is complete) before the agents apply the uninformed law, '
-            'until it returns; below the world step_timeout')
-        if isinstance(leader_timeout, bool) or \
-                not isinstance(leader_timeout, (int, float)) or leader_timeout <= 0:
-            raise ScenarioError('leader_timeout', f'must be > 0, got {leader_timeout!r}')
-        leader_start_timeout = declare(
-            self, 'leader_start_timeout', 30.0, 'lockstep: seconds to wait for the leader\'s '
-            'first state (it answers its first tick only once every node has matched its '
-            'topics, up to its own start_timeout) before the agents apply the uninformed law')
-        if not leader_start_timeout > 0:
-            raise ScenarioError('leader_start_timeout',
-                                f'must be > 0, got {leader_start_timeout!r}')
+        timeouts = {}
+        for key, (default, what) in TIMEOUTS.items():
+            value = timeouts[key] = declare(self, key, default, what)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
+                raise ScenarioError(key, f'must be > 0, got {value!r}')
         self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents),
-                                          self.get_logger(), leader_timeout,
-                                          leader_start_timeout)
+                                          self.get_logger(), **timeouts)
         self.clock = StepClock(sc.dt)
         self.lockstep = self.get_parameter('mode').value == 'lockstep'
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)

@@ -14,6 +14,7 @@ import json
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
+
 import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
