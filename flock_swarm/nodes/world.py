@@ -78,7 +78,7 @@ def next_resend_wait(wait: float, last_step_s: float) -> float:
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
-    'expect_subscribers', 'staleness'}
+    'expect_subscribers', 'staleness', 'bag_max_size', 'bag_max_duration'}
 
 
 class WorldNode(Node):
@@ -97,6 +97,12 @@ class WorldNode(Node):
         out_dir = declare(self, 'out_dir', '', 'directory for bag/, summary.json and '
                           'timeseries.npz (empty: out/<scenario>_ros)')
         self.record = declare(self, 'record', True, 'write the MCAP bag')
+        self.bag_max_size = declare(self, 'bag_max_size', 0,
+                                    'split the bag into bag_0.mcap, bag_1.mcap, ... once a '
+                                    'file is larger than this many bytes (0: no split)')
+        self.bag_max_duration = declare(self, 'bag_max_duration', 0.0,
+                                        'split the bag once a file spans more than this many '
+                                        'seconds of simulation time (0: no split)')
         self.step_timeout = declare(self, 'step_timeout', 2.0,
                                     'lockstep: seconds to wait for commands before a missing '
                                     'agent gets a zero command')
@@ -116,7 +122,10 @@ class WorldNode(Node):
                                ('start_timeout', self.start_timeout, self.start_timeout >= 0),
                                ('marker_every', self.marker_every, self.marker_every >= 1),
                                ('metrics_every', self.metrics_every, self.metrics_every >= 1),
-                               ('staleness', self.staleness, self.staleness > 0)):
+                               ('staleness', self.staleness, self.staleness > 0),
+                               ('bag_max_size', self.bag_max_size, self.bag_max_size >= 0),
+                               ('bag_max_duration', self.bag_max_duration,
+                                0 <= self.bag_max_duration < float('inf'))):
             if not ok:
                 raise ScenarioError(key, f'invalid value {value!r}')
         sc = self.scenario = load_scenario(self, WORLD_PARAMS)
@@ -207,7 +216,8 @@ class WorldNode(Node):
                                     'packages, or -p record:=false') from None
         try:
             self.out.mkdir(parents=True, exist_ok=True)
-            bag = BagWriter(path)
+            bag = BagWriter(path, max_bagfile_size=self.bag_max_size,
+                            max_bagfile_duration=self.bag_max_duration)
         except OSError as exc:
             raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
                 from None
