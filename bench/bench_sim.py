@@ -4,7 +4,7 @@
                               [--steps 20] [--repeats 5] [--json out/bench/sim.json]
 
 Scenario: Su, Wang, Lin 2009 Fig. 3 (density N / L^2 = 0.05, protocol (10), 10 % informed,
-2-D). For each N it times the steps of :func:`flock_swarm.sim.simulate` itself (neighbour
+2-D). For each N it times the steps of :func:`flock_swarm.core.run.simulate` itself (neighbour
 search, law, integration, whole-run metrics; the first ``--steps`` steps from the preset's
 random start), best of ``--repeats`` runs for N below 10000, and reports steps/s and the
 time per agent-step. The baseline is the straightforward implementation most published flocking
@@ -32,7 +32,7 @@ from flock_swarm.core.protocols import SuParams, swarm_control
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.reproduce import machine
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 #: Issue 5: sim's speed over the per-agent loop at N = SPEEDUP_N, at least SPEEDUP_MIN.
 SPEEDUP_N, SPEEDUP_MIN = 300, 100.0

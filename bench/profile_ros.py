@@ -30,7 +30,7 @@ TIMED = [
     ('flock_swarm.nodes.world', 'WorldNode', 'on_leader_accel', 'world: leader accel in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'finish_step', 'world: close the step', 1),
     ('flock_swarm.nodes.world', 'WorldNode', 'observe', 'record, metrics, telemetry', 2),
-    ('flock_swarm.sim', 'RunLog', 'observe', 'time series and run metrics', 3),
+    ('flock_swarm.core.run', 'RunLog', 'observe', 'time series and run metrics', 3),
     ('flock_swarm.nodes.world', None, 'disk_graph', 'the r-disk graph', 3),
     ('flock_swarm.nodes.world', 'WorldNode', '_publish', 'markers and metrics out', 3),
     ('flock_swarm.nodes.world', 'WorldNode', 'advance', 'integrate', 2),

@@ -30,7 +30,8 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
-from flock_swarm.sim import RunLog, build_summary, ensure_writable, json_text, simulate
+from flock_swarm.core.run import RunLog, build_summary, simulate
+from flock_swarm.outputs import ensure_writable, json_text
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
 EXIT_VERIFY_FAILED = 1
@@ -667,7 +668,7 @@ def verify_run(run: RunData, tolerance: float = VERIFY_TOLERANCE,
 
     :param run: a run whose bag stores its scenario.
     :param tolerance: the largest accepted error (m and m/s).
-    :param progress: forwarded to :func:`flock_swarm.sim.simulate`.
+    :param progress: forwarded to :func:`flock_swarm.core.run.simulate`.
     :return: the largest errors.
     :raises AnalyzeError: if the bag has no scenario.
     """

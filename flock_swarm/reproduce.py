@@ -41,10 +41,11 @@ from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.potentials import psi_alpha
 from flock_swarm.core.protocols import heading
 from flock_swarm.core.pseudo_leaders import minor_lambda_max, select_pseudo_leaders
+from flock_swarm.core.run import simulate, simulate_stack
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.stability import check_step
 from flock_swarm.scenarios import load, resolve
-from flock_swarm.sim import simulate, simulate_stack, write_outputs
+from flock_swarm.outputs import write_outputs
 
 #: Su, Wang, Lin 2009, Section V.A: Fig. 3 keeps the density N / L^2 at this value.
 FIG3_DENSITY = 0.05
@@ -64,8 +65,8 @@ FIG3_TOLERANCES = (0.05, 0.15, 0.5, 1.0)
 FIG3_ETA_EVERY = 10.0
 #: The loose tolerance [m/s] the report also shows Fig. 3 at.
 FIG3_LOOSE = 1.0
-#: Fig. 3 runs of one N and seed are stacked (:func:`flock_swarm.sim.simulate_stack`) up to
-#: about this many agents per stack: the per-step cost of Python is then paid once for
+#: Fig. 3 runs of one N and seed are stacked (:func:`~flock_swarm.core.run.simulate_stack`) up
+#: to about this many agents per stack: the per-step cost of Python is then paid once for
 #: several swarms (measured: 0.70 against 1.20 CPU-s per 30 s run at N = 300 stacked by 10,
 #: 9 % less at N = 1000 stacked by 2), and the pool still gets several jobs per realisation.
 FIG3_STACK_AGENTS = 3000
@@ -1240,7 +1241,7 @@ def fig3_record(task: dict, sc: Scenario, result) -> dict:
 
     :param task: the run (see :func:`fig3_tasks`).
     :param sc: its scenario.
-    :param result: its :class:`~flock_swarm.sim.SimResult`.
+    :param result: its :class:`~flock_swarm.core.run.SimResult`.
     :return: the record (one JSON line of ``fig3_runs.jsonl``).
     """
     s, series = result.summary, result.series

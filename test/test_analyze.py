@@ -23,7 +23,7 @@ from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.plots import plot_analysis
 from flock_swarm.runner import resolve_scenario, run_in_process
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 pytestmark = pytest.mark.ros
 

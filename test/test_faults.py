@@ -35,7 +35,7 @@ from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock,
                                       make_odometry)
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
-from flock_swarm.sim import interaction_graph, simulate, static_graph
+from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from conftest import start_nodes, wait_for
 
 pytestmark = pytest.mark.ros

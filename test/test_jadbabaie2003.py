@@ -13,7 +13,7 @@ import pytest
 from scipy.sparse.csgraph import connected_components
 
 from flock_swarm.core.scenario import parse_scenario
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 THETA_0 = np.pi / 4
 # One step of the discrete model is one step dt of the simulator.

@@ -23,7 +23,7 @@ from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.common import StepClock
 from flock_swarm.runner import (executable, resolve_scenario, run_in_process, run_processes,
                                 stop)
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 from conftest import start_nodes, wait_for
 
 pytestmark = pytest.mark.ros

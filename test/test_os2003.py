@@ -18,7 +18,7 @@ import pytest
 from scipy.sparse.csgraph import connected_components
 
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 
 def influence(z, delta, k):

@@ -13,10 +13,10 @@ from flock_swarm.core.graphs import diffusive_matrix, disk_graph
 from flock_swarm.core.protocols import AgentData, advance_adaptive, local_control
 from flock_swarm.core.pseudo_leaders import minor_lambda_max
 from flock_swarm.core.scenario import realize
-from flock_swarm import sim
+from flock_swarm.core import run
+from flock_swarm.core.run import keep_freed_memory, simulate, simulate_stack, stack_mismatch
 from flock_swarm.scenarios import load
-from flock_swarm.sim import (keep_freed_memory, main, simulate, simulate_stack,
-                             stack_mismatch)
+from flock_swarm.sim import main
 
 SUMMARY_KEYS = {'n_agents', 't_final', 'steps', 'eta', 'eta_tolerance', 'velocity_mismatch_max',
                 'com_position_error', 'com_velocity_error', 'min_pair_distance', 'collisions',
@@ -173,14 +173,14 @@ def test_stacked_realisations_equal_their_own_runs():
 def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypatch):
     # The Su laws do not diverge at moderate positions: inject NaN inputs for informed agents
     # beyond x = 25, which some realisations reach at different steps, one never.
-    real_control = sim.swarm_control
+    real_control = run.swarm_control
 
     def failing(law, q, p, edges, leader, agents, dt):
         u = real_control(law, q, p, edges, leader, agents, dt)
         u[(q[:, 0] > 25.0) & agents.informed] = np.nan
         return u
 
-    monkeypatch.setattr(sim, 'swarm_control', failing)
+    monkeypatch.setattr(run, 'swarm_control', failing)
     scenarios = fig3_realisations(20, 20.0, (1.0, 0.0, 0.5), 4.0)
     alone = [simulate(sc) for sc in scenarios]
     assert [r.summary['status'] for r in alone] == ['diverged', 'completed', 'diverged']

@@ -31,7 +31,7 @@ from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 # Interaction parameters of Su09 Fig. 2 (r, d, epsilon) and Olfati-Saber's a = b = 5.
 R, D, EPS, A, B = 4.0, 3.3, 0.1, 5.0, 5.0

@@ -11,7 +11,7 @@ import pytest
 from scipy.sparse.csgraph import connected_components
 
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 # Section 4.1: a, b, c_bar, r_s, c; agents 1-3 (ids 0-2) observe component 1 (index 0),
 # agents 4-6 (ids 3-5) component 2 (index 1), with unit gains D_i = H_i^T.

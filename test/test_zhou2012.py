@@ -12,7 +12,7 @@ import pytest
 
 from flock_swarm.core.scenario import realize
 from flock_swarm.scenarios import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 # Section 5.1: the 10 x 10 diffusive matrix B, w = 70, Lu constant alpha, k, h(0), sigma, c1, c2.
 B_51 = np.array([

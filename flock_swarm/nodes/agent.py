@@ -28,13 +28,13 @@ from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.protocols import advance_adaptive, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
+from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                       StepClock, claimants, cmd_topic, declare, declare_common,
                                       load_scenario, odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
-from flock_swarm.sim import interaction_graph, static_graph
 
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
 MAX_PENDING = 8

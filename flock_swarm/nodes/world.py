@@ -37,6 +37,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.scenario import realize
+from flock_swarm.core.run import RunLog, SimResult, build_summary
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
                                       TELEMETRY_QOS, LatencyHistogram, StepClock, agent_hosts,
@@ -46,7 +47,7 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import (MalformedMessage, OdometryEncoder, decode_accel,
                                     decode_odometry, encode_clock)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers_cdr
-from flock_swarm.sim import RunLog, SimResult, build_summary, json_text, write_outputs
+from flock_swarm.outputs import json_text, write_outputs
 
 #: Seconds after which a stalled lockstep step is first offered again (see ``resend_step``).
 RESEND_PERIOD = 0.5

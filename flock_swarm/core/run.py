@@ -1,0 +1,431 @@
+"""The run machinery: a whole swarm, vectorised over agents, stepped from one scenario.
+
+:func:`simulate` (and :func:`simulate_stack`, several realisations side by side) runs a scenario
+to its end; :class:`RunLog` is the bookkeeping of a run (whole-run metrics and the subsampled
+time series) shared by ``sim``, the world node and ``analyze``; :func:`build_summary` assembles
+``summary.json`` (see ``docs/outputs.md``). The step uses the same law functions as the agent
+node (:mod:`flock_swarm.core.protocols`). No file I/O here: :mod:`flock_swarm.outputs` writes.
+"""
+
+import ctypes
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from flock_swarm import __version__
+from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
+from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
+from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
+                                      update_stacked_from_edges)
+from flock_swarm.core.protocols import AgentData, advance_adaptive, swarm_control
+from flock_swarm.core.pseudo_leaders import Reselector
+from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
+
+#: glibc's mallopt() parameters (malloc.h) and the values simulate() sets: blocks below
+#: 32 MB come from the heap, and up to 64 MB freed at its top are kept (see keep_freed_memory).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_HEAP_MMAP_THRESHOLD, _HEAP_TRIM_THRESHOLD = 32 << 20, 64 << 20
+
+
+@dataclass
+class SimResult:
+    """What a run produced: the summary (``summary.json``) and the recorded time series."""
+
+    summary: dict
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class Recorder:
+    """Collects subsampled states and metrics into growing lists, then stacks them."""
+
+    def __init__(self) -> None:
+        """Create an empty recorder."""
+        self.rows: dict[str, list] = {}
+
+    def add(self, **values) -> None:
+        """Append one recorded instant."""
+        for key, value in values.items():
+            self.rows.setdefault(key, []).append(np.array(value, copy=True))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Return the recorded columns as arrays (first axis: time)."""
+        return {key: np.stack(rows) for key, rows in self.rows.items()}
+
+
+class RunLog:
+    """Whole-run metrics and the subsampled time series, fed one step at a time.
+
+    The one bookkeeping of a run, shared by ``sim``, the world node and ``analyze``: every
+    step updates the whole-run metrics from the step's edges; every ``record_every``-th step
+    and the last are measured with :func:`step_metrics` and recorded.
+    """
+
+    def __init__(self, eta_tolerance: float, collision_distance: float, radius: float,
+                 strict: bool, record_every: int) -> None:
+        """Create the log.
+
+        :param eta_tolerance: velocity tolerance of ``eta``.
+        :param collision_distance: pairs closer than this count as collisions.
+        :param radius: radius of the r-disk graph whose components are counted.
+        :param strict: ``< r`` (``True``) or ``<= r`` neighbourhoods.
+        :param record_every: subsampling of the time series.
+        """
+        self.eta_tolerance = eta_tolerance
+        self.radius, self.strict, self.every = radius, strict, record_every
+        self.metrics = RunMetrics(collision_distance)
+        self.rec = Recorder()
+        self.latest: dict = {}
+
+    @classmethod
+    def for_scenario(cls, sc: Scenario) -> 'RunLog':
+        """Return the log of a scenario's run."""
+        return cls(sc.eta_tolerance, sc.collision_distance, sc.law.radius,
+                   sc.law.strict_radius, sc.record_every)
+
+    def observe(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
+                leader: LeaderState, informed: np.ndarray, edges: EdgeList,
+                edges_radius: float, last: bool, **extra) -> dict | None:
+        """Fold in step ``k``; return its metrics when it is recorded, else ``None``.
+
+        :param edges: the step's graph, complete within ``edges_radius``.
+        :param extra: further per-step arrays to record (e.g. adaptive gains ``h``).
+        """
+        self.metrics.update_from_edges(q, edges, edges_radius)
+        return self.record(k, t, q, p, u, leader, informed, last, **extra)
+
+    def record(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
+               leader: LeaderState, informed: np.ndarray, last: bool,
+               **extra) -> dict | None:
+        """Measure and record step ``k`` if it is a recorded one; return its metrics or ``None``.
+
+        The part of :meth:`observe` after the whole-run metrics, for callers that fold those
+        in themselves (a stack of runs, :func:`simulate_stack`).
+        """
+        if k % self.every and not last:
+            return None
+        now = step_metrics(q, p, leader, self.eta_tolerance, self.radius, self.strict)
+        self.metrics.update(q, now['min_pair_distance'])
+        self.rec.add(t=t, q=q, p=p, u=u, leader_q=leader.q, leader_p=leader.p,
+                     leader_a=leader.a, informed=informed, **extra,
+                     **{f'metric_{name}': now[name] for name in STEP_METRICS})
+        self.latest = now
+        return now
+
+
+def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
+                      static: EdgeList | None) -> EdgeList:
+    """Return the interaction edges at positions ``q`` (the fixed graph when there is one).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param q: positions.
+    :param static: the precomputed fixed graph, or ``None``.
+    :return: the edge list.
+    """
+    if static is not None:
+        return static
+    if sc.law.all_pairs:
+        return all_pairs_weights(sc.n_agents, None, q, sc.law)
+    return disk_graph(q, sc.law.radius, sc.law.strict_radius)
+
+
+def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
+    """Return the time-invariant edge list of a fixed-graph scenario, or ``None``."""
+    if real.adjacency is None:
+        return None
+    if sc.law.all_pairs:
+        return all_pairs_weights(sc.n_agents, real.adjacency, np.zeros((sc.n_agents, sc.dim)),
+                                 sc.law)
+    return fixed_graph(real.adjacency)
+
+
+def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
+             progress_every: float = 2.0) -> SimResult:
+    """Run a scenario to its end and return the summary and the recorded time series.
+
+    :param sc: the validated scenario.
+    :param progress: called with a one-line status roughly every ``progress_every`` seconds.
+    :param progress_every: wall-clock seconds between progress lines.
+    :return: the result; ``summary['status']`` is ``completed``, ``interrupted`` or
+        ``diverged``.
+    """
+    return simulate_stack([sc], progress, progress_every)[0]
+
+
+def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | None = None,
+                   progress_every: float = 2.0) -> list[SimResult]:
+    """Run independent realisations side by side in one vectorised state; return each result.
+
+    A Monte Carlo sweep pays the per-step cost of Python once for the whole stack instead of
+    once per run. Each realisation is drawn by :func:`realize` from its own scenario (seed,
+    informed set, initial boxes) and the stack's graph links no two of them, with every
+    realisation's edges in the order of its own run: each result is that of
+    :func:`simulate` on its scenario alone, up to the summation order of the metrics.
+    Realisations that diverge leave the stack at that step; the others go on.
+
+    :param scenarios: the realisations; more than one must agree in everything but seed,
+        informed set and initial state (:func:`stack_mismatch`).
+    :param progress: called with a one-line status (of the first realisation still running)
+        roughly every ``progress_every`` seconds.
+    :param progress_every: wall-clock seconds between progress lines.
+    :return: one result per scenario, in order; ``summary['wall_time_s']`` is the stack's
+        wall time divided among its realisations.
+    :raises ValueError: when the scenarios cannot share a stack.
+    """
+    reason = stack_mismatch(scenarios)
+    if reason is not None:
+        raise ValueError(f'cannot stack these scenarios: {reason}')
+    keep_freed_memory()
+    sc = scenarios[0]
+    reals = [realize(s) for s in scenarios]
+    leader = VirtualLeader(sc.leader.field, sc.leader.position, sc.leader.velocity)
+    intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+    stack = _Stack(scenarios, reals, static_graph(sc, reals[0]) if len(reals) == 1 else None)
+    started = time.monotonic()
+    # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
+    with np.errstate(over='ignore', invalid='ignore'):
+        _run_loop(stack, leader, intrinsic, progress, progress_every)
+    wall = (time.monotonic() - started) / len(scenarios)
+    results = []
+    for g, (s, real) in enumerate(zip(scenarios, reals)):
+        status, step = stack.outcome[g]
+        log = stack.logs[g]
+        series = log.rec.arrays()
+        summary = build_summary(s, real, series, log.metrics, step, status)
+        summary['pseudo_leader_reselections'] = 0 if stack.reselector is None \
+            else stack.reselector.count
+        summary['wall_time_s'] = round(wall, 3)
+        results.append(SimResult(summary, series))
+    return results
+
+
+def keep_freed_memory() -> None:
+    """Let the C library keep freed memory for the next arrays rather than return it.
+
+    A step allocates and frees temporaries of a few hundred kB (one value per edge); by
+    default glibc gives such blocks back to the kernel (munmap, heap trimming) and takes
+    them again at the next step, a page fault per 4 kB. Measured on a stack of three
+    N = 1000 Fig. 3 runs: 495 000 -> 19 000 minor page faults in 400 steps, 0.7 -> 0.07 s of
+    system time, 7.1 -> 5.2 ms per step. Process-wide and idempotent; nothing happens where
+    the C library has no ``mallopt`` (it is glibc's).
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (AttributeError, OSError, TypeError):
+        return
+    mallopt(_M_MMAP_THRESHOLD, _HEAP_MMAP_THRESHOLD)
+    mallopt(_M_TRIM_THRESHOLD, _HEAP_TRIM_THRESHOLD)
+
+
+def stack_mismatch(scenarios: list[Scenario]) -> str | None:
+    """Return why scenarios cannot run in one stack (:func:`simulate_stack`), or ``None``.
+
+    One scenario always can. Several need an r-disk graph (no fixed graph, no law acting on
+    all pairs, no re-selected pseudo-leaders) and must agree in everything a step or the
+    record depends on: dimension, size, step, duration, law, leader, intrinsic dynamics,
+    recording and metric settings.
+    """
+    if not scenarios:
+        return 'no scenario'
+    if len(scenarios) == 1:
+        return None
+    first = scenarios[0]
+    for sc in scenarios:
+        if sc.graph_type != 'disk' or sc.law.all_pairs or sc.informed.reselect:
+            return f'{sc.name}: only r-disk graphs without re-selection stack'
+        same = {'dim': sc.dim == first.dim, 'n_agents': sc.n_agents == first.n_agents,
+                'dt': sc.dt == first.dt, 'duration': sc.steps == first.steps,
+                'protocol': sc.law == first.law, 'intrinsic': sc.intrinsic == first.intrinsic,
+                'record_every': sc.record_every == first.record_every,
+                'metrics': (sc.eta_tolerance, sc.collision_distance)
+                == (first.eta_tolerance, first.collision_distance),
+                'leader': sc.leader.model == first.leader.model
+                and sc.leader.field == first.leader.field
+                and np.array_equal(sc.leader.position, first.leader.position)
+                and np.array_equal(sc.leader.velocity, first.leader.velocity),
+                'observers': bool(sc.observers) == bool(first.observers)}
+        differ = [key for key, ok in same.items() if not ok]
+        if differ:
+            return f'{sc.name} (seed {sc.seed}) differs in {", ".join(differ)}'
+    return None
+
+
+class _Stack:
+    """The state of the realisations of :func:`simulate_stack` still running.
+
+    Agents ``b m .. (b + 1) m - 1`` of the arrays belong to the ``b``-th realisation in
+    ``active``; a realisation that ends early (diverges) is cut out of the arrays.
+    """
+
+    def __init__(self, scenarios: list[Scenario], reals: list[Realization],
+                 static: EdgeList | None) -> None:
+        """Stack the initial states, per-agent data and logs of the realisations."""
+        sc = scenarios[0]
+        self.scenarios, self.reals, self.static = scenarios, reals, static
+        self.size = sc.n_agents
+        self.logs = [RunLog.for_scenario(s) for s in scenarios]
+        self.outcome: dict[int, tuple[str, int]] = {}
+        self.active = list(range(len(scenarios)))
+        self.q = np.concatenate([r.q0 for r in reals])
+        self.p = np.concatenate([r.p0 for r in reals])
+        self.agents = stack_agents([r.agents for r in reals])
+        self.reselector = Reselector(sc.law) if sc.informed.reselect and static is None \
+            else None
+        self._disk = static is None and not sc.law.all_pairs
+        self.graph = self._new_graph()
+
+    def _new_graph(self) -> VerletDiskGraph | None:
+        """Return the r-disk graph tracker of the active realisations (``None``: not r-disk)."""
+        if not self._disk:
+            return None
+        law = self.scenarios[0].law
+        return VerletDiskGraph(law.radius, law.strict_radius, blocks=len(self.active))
+
+    def edges(self) -> EdgeList:
+        """Return the interaction graph at the current positions."""
+        if self.graph is not None:
+            return self.graph.edges(self.q)
+        return interaction_graph(self.scenarios[0], self.reals[0], self.q, self.static)
+
+    def failed(self, *arrays: np.ndarray) -> np.ndarray:
+        """Return, per active realisation, whether any of its rows is not finite."""
+        if all(np.isfinite(a).all() for a in arrays):
+            return np.zeros(len(self.active), dtype=bool)
+        ok = np.ones(self.q.shape[0], dtype=bool)
+        for a in arrays:
+            ok &= np.isfinite(a).all(axis=1)
+        return ~ok.reshape(len(self.active), self.size).all(axis=1)
+
+    def end(self, gone: np.ndarray, status: str, step: int) -> np.ndarray:
+        """End the realisations flagged in ``gone`` at ``step``; return the rows kept."""
+        keep = np.repeat(~gone, self.size)
+        for b in np.flatnonzero(gone).tolist():
+            self.outcome[self.active[b]] = (status, step)
+        self.active = [g for g, out in zip(self.active, gone.tolist()) if not out]
+        self.q, self.p = self.q[keep], self.p[keep]
+        self.agents = self.agents.subset(keep)
+        self.graph = self._new_graph()
+        return keep
+
+    def finish(self, status: str, step: int) -> None:
+        """End every realisation still running."""
+        for g in self.active:
+            self.outcome[g] = (status, step)
+
+    def extra(self, rows: slice) -> dict:
+        """Return the per-agent protocol state to record for some rows."""
+        return {} if self.agents.adaptive is None else {'h': self.agents.adaptive[rows]}
+
+
+def stack_agents(parts: list[AgentData]) -> AgentData:
+    """Return the per-agent data of several realisations, stacked in order."""
+    def joined(arrays):
+        return None if arrays[0] is None else np.concatenate(arrays)
+    return AgentData(np.concatenate([a.informed for a in parts]),
+                     joined([a.nav_gains for a in parts]), joined([a.adaptive for a in parts]))
+
+
+def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every):
+    """Advance the stack to the end (or divergence of all, or Ctrl-C); record how each ended."""
+    sc = stack.scenarios[0]
+    law, dt, steps, every = sc.law, sc.dt, sc.steps, sc.record_every
+    step = 0
+    started = last = time.monotonic()
+    try:
+        for step in range(steps + 1):
+            gone = stack.failed(stack.q, stack.p)
+            if gone.any():
+                stack.end(gone, 'diverged', step)
+            if not stack.active:
+                return
+            state = leader.state
+            edges = stack.edges()
+            if stack.reselector is not None:
+                stack.reselector.update(stack.agents, edges)
+            u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
+            gone = stack.failed(u)
+            if gone.any():
+                u = u[stack.end(gone, 'diverged', step)]
+                if not stack.active:
+                    return
+                edges = stack.edges()
+            q, p, m = stack.q, stack.p, stack.size
+            if stack.static is None:
+                # r-disk edges cover every pair within the radius; all-pairs edges every pair.
+                covered, radius = edges, np.inf if law.all_pairs else law.radius
+            else:
+                covered = disk_graph(q, sc.collision_distance)
+                radius = sc.collision_distance
+            logs = [stack.logs[g] for g in stack.active]
+            update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
+                                      None if stack.graph is None else stack.graph.sq_dist)
+            if step % every == 0 or step == steps:
+                for b, log in enumerate(logs):
+                    rows = slice(b * m, (b + 1) * m)
+                    log.record(step, step * dt, q[rows], p[rows], u[rows], state,
+                               stack.agents.informed[rows], step == steps,
+                               **stack.extra(rows))
+            if step == steps:
+                break
+            advance_adaptive(law, q, p, state, stack.agents, dt)
+            stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
+            leader.step(dt)
+            now = time.monotonic()
+            if progress is not None and now - last >= progress_every:
+                last = now
+                rate = (step + 1) / max(now - started, 1e-9)
+                latest = logs[0].latest
+                stacked = f'  {len(logs)} stacked' if len(stack.scenarios) > 1 else ''
+                progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
+                         f'step {step + 1}/{steps}  eta = {latest.get("eta", 0):.2f}  '
+                         f'mismatch = {latest.get("velocity_mismatch_max", 0):.3g}  '
+                         f'({rate:.0f} steps/s){stacked}')
+    except KeyboardInterrupt:
+        stack.finish('interrupted', step)
+        return
+    stack.finish('completed', step)
+
+
+def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics,
+                  step: int, status: str) -> dict:
+    """Return the ``summary.json`` mapping from the last recorded instant and the run totals.
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param series: the recorded time series.
+    :param run: the whole-run metrics.
+    :param step: the last step reached.
+    :param status: ``completed``, ``interrupted`` or ``diverged``.
+    :return: the summary (keys of DESIGN.md plus provenance).
+    """
+    last = {k: float(series[f'metric_{k}'][-1]) for k in STEP_METRICS}
+    summary = {
+        'n_agents': sc.n_agents,
+        't_final': float(series['t'][-1]),
+        'steps': int(step),
+        'eta': last['eta'],
+        'eta_tolerance': sc.eta_tolerance,
+        'velocity_mismatch_max': last['velocity_mismatch_max'],
+        'com_position_error': last['com_position_error'],
+        'com_velocity_error': last['com_velocity_error'],
+        'min_pair_distance': run.min_pair_distance,
+        'collisions': len(run.collision_pairs),
+        'collision_distance': sc.collision_distance,
+        'components_final': int(last['components']),
+        'informed': [int(i) for i in np.flatnonzero(series['informed'][0])],
+        'scenario': sc.name,
+        'seed': sc.seed,
+        'protocol': sc.law.name,
+        'dt': sc.dt,
+        'status': status,
+        'flock_swarm_version': __version__,
+    }
+    if real.selection is not None:
+        summary['pseudo_leader_certificate'] = {
+            'lambda_max': real.selection.lambda_max, 'alpha': real.selection.alpha,
+            'satisfied': real.selection.satisfied, 'components': real.selection.components}
+    if 'h' in series:
+        summary['adaptive_gain_final'] = [float(x) for x in series['h'][-1]]
+    return summary
