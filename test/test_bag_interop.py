@@ -73,6 +73,8 @@ def split_run(tmp_path_factory):
                              domain_id=domain, timeout=RUN_TIMEOUT,
                              world_params={'bag_max_duration': MAX_DURATION})
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    # The world's time series was spooled to disk and the spool removed once written.
+    assert not list(out.glob('.timeseries-*'))
     return out
 
 

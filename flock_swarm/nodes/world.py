@@ -47,7 +47,7 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import (MalformedMessage, OdometryEncoder, decode_accel,
                                     decode_odometry, encode_clock)
 from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers_cdr
-from flock_swarm.outputs import json_text, write_outputs
+from flock_swarm.outputs import SpooledRecorder, json_text, write_outputs
 
 #: Seconds after which a stalled lockstep step is first offered again (see ``resend_step``).
 RESEND_PERIOD = 0.5
@@ -161,7 +161,6 @@ class WorldNode(Node):
         # Realtime: wall time each step's odometry went out, and how long commands took.
         self.published_at: dict[int, float] = {}
         self.latency = LatencyHistogram()
-        self.log = RunLog.for_scenario(sc)
         self.done = False
         self.started = False
         self.status = 'running'
@@ -176,6 +175,12 @@ class WorldNode(Node):
         self.metrics_now: dict = {}
 
         self.bag = self._open_bag() if self.record else None
+        # The time series goes to disk as it is recorded: memory stays flat on long runs.
+        try:
+            self.log = RunLog.for_scenario(sc, SpooledRecorder(self.out))
+        except OSError as exc:
+            raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
+                from None
         self.clock_pub = self._publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self._publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(n)]
@@ -633,7 +638,7 @@ class WorldNode(Node):
 
     def write_results(self) -> None:
         """Write what was recorded so far (also on an interrupted run)."""
-        if not self.log.rec.rows:
+        if not self.log.rec.count:
             self.close_bag()
             return
         series = self.log.rec.arrays()
@@ -659,7 +664,10 @@ class WorldNode(Node):
             write_outputs(self.result, self.out, self.scenario)
         except OSError as exc:
             self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
-                                    f'{exc.strerror or exc}')
+                                    f'{exc.strerror or exc}; the time series stays in '
+                                    f'{self.log.rec.spool}')
+        else:
+            self.log.rec.discard()
 
     def close_bag(self) -> None:
         """Write what is queued, finalise the bag (MCAP summary and metadata.yaml)."""
