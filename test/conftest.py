@@ -34,6 +34,17 @@ def ros_domain() -> int:
 
 
 @pytest.fixture
+def ros_context(ros_domain):
+    """Return an initialised ``rclpy`` context of its own on the test's domain id."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
 def other_ros_domain(ros_domain) -> int:
     """Return a second domain id for the same test, different from :func:`ros_domain`'s."""
     return _unique_domain()

@@ -22,8 +22,6 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
-import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -209,21 +207,13 @@ class Listener(Node):
         return sum(len(items) for items in self.received.values())
 
 
-@pytest.fixture
-def context(ros_domain):
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=ros_domain)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
-def replay_bag(context, bag: Path, types: dict[str, type]) -> dict[str, list[bytes]]:
+def replay_bag(ros_context, bag: Path, types: dict[str, type]) -> dict[str, list[bytes]]:
     """Replay ``types``' topics of ``bag`` at 10x; return what a subscriber received."""
-    listener = Listener(types, context=context)
+    listener = Listener(types, context=ros_context)
     player = Player(bag, rate=10.0, topics=list(types), wait_subscribers=1,
-                    wait_timeout=TIMEOUT, progress=None, context=context)
+                    wait_timeout=TIMEOUT, progress=None, context=ros_context)
     expected = sum(BagReader(bag).message_counts()[topic] for topic in types)
-    executor = SingleThreadedExecutor(context=context)
+    executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(listener)
     thread = threading.Thread(target=player.play)
     thread.start()
@@ -260,14 +250,14 @@ REPLAYED = {'/agent_1/odom': Odometry, '/agent_2/cmd_accel': AccelStamped,
             '/leader/odom': Odometry}
 
 
-def test_replay_plays_a_split_bag_across_its_files(split_run, context):
-    received = replay_bag(context, split_run / 'bag', REPLAYED)
+def test_replay_plays_a_split_bag_across_its_files(split_run, ros_context):
+    received = replay_bag(ros_context, split_run / 'bag', REPLAYED)
     assert received == rosbags_payloads(split_run / 'bag', REPLAYED)
 
 
-def test_replay_plays_a_bag_written_by_rosbags(foreign, context):
+def test_replay_plays_a_bag_written_by_rosbags(foreign, ros_context):
     """The rosbags bag's bytes, with its recorded QoS (reliable, volatile)."""
-    received = replay_bag(context, foreign, REPLAYED)
+    received = replay_bag(ros_context, foreign, REPLAYED)
     assert received == rosbags_payloads(foreign, REPLAYED)
 
 
