@@ -183,8 +183,10 @@ class _BagFile:
     def __init__(self, directory: Path, relative: str, chunk_size: int,
                  compression: CompressionType) -> None:
         self.relative = relative
-        self.stream = _FlushingFile(directory / relative)
-        self.writer = Writer(self.stream, chunk_size=chunk_size, compression=compression)
+        # Both dropped once the file is finished: mcap's writer keeps every chunk index.
+        self.stream: _FlushingFile | None = _FlushingFile(directory / relative)
+        self.writer: Writer | None = Writer(self.stream, chunk_size=chunk_size,
+                                            compression=compression)
         self.writer.start(profile=PROFILE, library=_library())
         self.schema_ids: dict[str, int] = {}
         self.start_ns: int | None = None
@@ -352,6 +354,7 @@ class BagWriter:
             self._writer.finish()
         finally:
             self._file.close()
+            self._files[-1].writer = self._files[-1].stream = None
 
     def _split_before(self, t_ns: int) -> None:
         """Finish the open file and start the next if a message at ``t_ns`` is over a limit.
