@@ -27,7 +27,7 @@ class SpooledRecorder(Recorder):
     output directory, created if needed); :meth:`arrays` reads them back as the arrays the
     in-memory recorder stacks (the same values, dtypes and shapes), and :meth:`discard`
     removes the files once ``timeseries.npz`` is written. A killed process leaves them
-    behind, so nothing recorded is lost.
+    behind, holding every instant but what the files had buffered (a few kB each).
 
     :param directory: where the spool directory goes.
     :raises OSError: if the directory cannot be created or written.
