@@ -164,7 +164,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
     from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
                                           LOCKSTEP_QOS, cmd_topic, odom_topic)
-    from flock_swarm.nodes.world import RESEND_PERIOD, first_resend_wait, next_resend_wait
+    from flock_swarm.nodes.stepper import RESEND_PERIOD, first_resend_wait, next_resend_wait
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
                         'began': 0.0, 'last_step_s': 0.0, 'resends': 0,

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from flock_swarm.cli import OneLineParser
+from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm import __version__
 from flock_swarm.bag import BagError, BagReader
 from flock_swarm.core.dynamics import LeaderState
@@ -35,8 +35,6 @@ from flock_swarm.outputs import ensure_writable, json_text
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
 EXIT_VERIFY_FAILED = 1
-#: Exit status for invalid input: not a bag, a missing path, an unwritable ``--out``.
-EXIT_USAGE = 2
 #: Exit status after Ctrl-C.
 EXIT_INTERRUPTED = 130
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
@@ -623,8 +621,9 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
     :param run: the run.
     :param series: its recomputed series.
     :param metrics: its whole-run metrics.
-    :return: the DESIGN.md keys, provenance, the world's ``mode`` and missed-command counts,
-        and where the data came from (``bag``, ``complete_steps``, ``bag_warning``).
+    :return: the keys of ``docs/outputs.md``, provenance, the world's ``mode`` and
+        missed-command counts, and where the data came from (``bag``, ``complete_steps``,
+        ``bag_warning``).
     """
     status = _status(run)
     last_step = int(run.steps[-1])

@@ -3,7 +3,7 @@
 import argparse
 import signal
 
-#: Exit status for invalid input (as argparse uses).
+#: Exit status for invalid input (as argparse uses), of every command and node of the package.
 EXIT_USAGE = 2
 
 

@@ -29,30 +29,40 @@ class SpooledRecorder(Recorder):
     removes the files once ``timeseries.npz`` is written. A killed process leaves them
     behind, holding every instant but what the files had buffered (a few kB each).
 
-    :param directory: where the spool directory goes.
-    :raises OSError: if the directory cannot be created or written.
+    :param directory: where the spool directory goes (made by :meth:`open`, or at the first
+        instant).
     """
 
     def __init__(self, directory: Path) -> None:
-        """Create the recorder and its spool directory."""
+        """Create the recorder; its spool directory is made by :meth:`open`."""
         super().__init__()
-        Path(directory).mkdir(parents=True, exist_ok=True)
-        self._spool: Path | None = Path(
-            tempfile.mkdtemp(prefix='.timeseries-', dir=directory))
+        self._parent = Path(directory)
+        self._spool: Path | None = None
         # column -> [dtype, shape of one row, open file, rows written]
         self._columns: dict[str, list] = {}
 
     @property
     def spool(self) -> Path | None:
-        """The directory holding the columns' files (``None`` once discarded)."""
+        """The directory holding the columns' files (``None`` before :meth:`open`)."""
         return self._spool
+
+    def open(self) -> None:
+        """Make the spool directory now (and ``directory`` if needed), if not yet made.
+
+        :raises OSError: if the directory cannot be created or written.
+        """
+        if self._spool is None:
+            self._parent.mkdir(parents=True, exist_ok=True)
+            self._spool = Path(tempfile.mkdtemp(prefix='.timeseries-', dir=self._parent))
 
     def add(self, **values) -> None:
         """Append one recorded instant to the columns' files.
 
         :raises ValueError: if a column's row changes shape, or has a type its first row's
             dtype cannot hold without the promotion stacking would have made.
+        :raises OSError: if the spool cannot be written.
         """
+        self.open()
         for key, value in values.items():
             row = np.asarray(value)
             column = self._columns.get(key)

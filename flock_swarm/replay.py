@@ -40,12 +40,10 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.cli import OneLineParser
+from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
 
-#: Exit status for invalid input (as argparse uses).
-EXIT_USAGE = 2
 #: Exit status when the bag turns out unreadable during playback.
 EXIT_FAILURE = 1
 #: The simulation clock topic (REP-2008 ``/clock``).

@@ -2,8 +2,8 @@
 
 ``python -m flock_swarm.reproduce [--out out/reproduce] [--report docs/reproduction.md]
 [--figures docs/figures] [--realisations R] [--quick] [--skip-ros] [--jobs 2] [--fresh]``
-(or ``scripts/reproduce ...``) runs each experiment of ``shared/README.md`` with the
-reference simulator on its preset (the papers' numbers), the sweep of Su, Wang, Lin 2009
+(or ``scripts/reproduce ...``) runs each experiment (the presets of ``docs/scenarios.md``)
+with the reference simulator on its preset (the papers' numbers), the sweep of Su, Wang, Lin 2009
 Fig. 3 over ``R`` realisations per point, and one shortened experiment per paper through the
 real ROS 2 nodes (lockstep, one process); it then writes one JSON result per experiment
 (``OUT/results/<experiment>.json``), one figure per experiment and the Markdown report.
@@ -96,7 +96,7 @@ HEADING_ALIGNED = 1e-3
 
 @dataclass(frozen=True)
 class Experiment:
-    """One experiment of ``shared/README.md`` and how the report treats it.
+    """One experiment of the five papers (a preset) and how the report treats it.
 
     :ivar key: the preset name, also the name of its JSON result and figure.
     :ivar title: section title.
@@ -2057,9 +2057,10 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
     lines = [
         '# Reproduction report',
         '',
-        'Every experiment listed in `shared/README.md`, run with the reference simulator on '
-        'its preset (the papers\' numbers; `config/<preset>.yaml`), set against what the '
-        'paper claims. All numbers below are written by the run; none is typed by hand.'
+        'Every experiment of the five papers (the presets of `docs/scenarios.md`), run with the '
+        'reference simulator on its preset (the papers\' numbers; `config/<preset>.yaml`), '
+        'set against what the paper claims. All numbers below are written by the run; none is '
+        'typed by hand.'
         + (' **This is a `--quick` run (tiny sizes and durations): its numbers are not a '
            'reproduction.**' if plan.quick else ''),
         '',

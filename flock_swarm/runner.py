@@ -19,12 +19,10 @@ from pathlib import Path
 
 import yaml
 
-from flock_swarm.cli import OneLineParser, accept_sigint
+from flock_swarm.cli import EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml
 from flock_swarm.scenarios import load_mapping
-
-EXIT_USAGE = 2
 
 
 def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Path) -> Path:

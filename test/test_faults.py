@@ -25,18 +25,20 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.node import Node
 
 from flock_swarm.analyze import main as analyze_main
-from flock_swarm.nodes import world as world_module
+from flock_swarm.nodes import controller as controller_module
+from flock_swarm.nodes import stepper as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
-from flock_swarm.nodes.common import (LOCKSTEP_QOS, LatencyHistogram, StepClock, make_accel,
-                                      make_odometry)
+from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock
+from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from conftest import start_nodes, wait_for
+from ros_messages import make_accel, make_odometry
 
 pytestmark = pytest.mark.ros
 
@@ -154,6 +156,33 @@ def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):
     assert summary['duplicate_agent_ids'] == [1]
 
 
+def test_non_finite_command_is_published_as_zero(tmp_path, ros_domain, monkeypatch, capfd):
+    """A law that returns NaN for agent 1 at every step: the agent node publishes a zero
+    command for it (counted, logged once) instead of one the world would reject, so the
+    world misses no command and records agent 1's input as zero."""
+    real_control = controller_module.group_control
+
+    def nan_for_agent_1(law, ids, *args):
+        u = real_control(law, ids, *args)
+        u[list(ids).index(1)] = math.nan
+        return u
+
+    monkeypatch.setattr(controller_module, 'group_control', nan_for_agent_1)
+    path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
+                                           'record_every=1'])
+    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        counts = dict(swarm.agents.controller.non_finite)
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    assert 'non_finite' not in summary['rejected_messages']
+    assert counts == {1: sc.steps + 1}
+    with np.load(out / 'timeseries.npz') as ros:
+        assert_array_equal(ros['u'][:, 1], np.zeros((sc.steps + 1, sc.dim)))
+        assert np.abs(ros['u'][:, 0]).max() > 0
+    assert capfd.readouterr().err.count('agent 1: the law gave a non-finite command') == 1
+
+
 # ----------------------------------------------------------------------------------------------
 # The leader disappears and comes back
 
@@ -190,7 +219,7 @@ def test_stalled_step_is_offered_again_with_backoff(tmp_path, ros_domain):
     overrides = ['n_agents=3', 'informed.count=1', 'duration=10', 'record_every=1']
     path, _, out = scenario_of(tmp_path, overrides)
     with InProcessSwarm(path, out, domain_id=ros_domain, step_timeout=30.0) as swarm:
-        world = swarm.world
+        world = swarm.world.stepper
         swarm.spin_until(lambda: world.k >= 5, RUN_TIMEOUT)
         swarm.remove(swarm.agents)
         # The step in progress may still close (its commands were in); the next one stalls.

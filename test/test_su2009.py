@@ -1,8 +1,7 @@
 """Su, Wang, Lin 2009 (IEEE TAC 54(2)): Theorems 1 and 2 checked on the reference simulator.
 
 Oracles, all from the paper (or from Olfati-Saber 2006 for ``psi_alpha``, which the paper uses
-without spelling it out, see ``shared/README.md``), re-implemented here and never taken from
-the package:
+without spelling it out), re-implemented here and never taken from the package:
 
 - Theorem 2 (iii): under protocol (33) the centre-of-mass error obeys (45), solved in closed
   form by (46)-(48);

@@ -408,7 +408,7 @@ def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics
     :param run: the whole-run metrics.
     :param step: the last step reached.
     :param status: ``completed``, ``interrupted`` or ``diverged``.
-    :return: the summary (keys of DESIGN.md plus provenance).
+    :return: the summary (the keys of ``docs/outputs.md``, provenance included).
     """
     last = {k: float(series[f'metric_{k}'][-1]) for k in STEP_METRICS}
     summary = {

@@ -4,7 +4,9 @@ An agent node subscribes to the odometry of every agent (one topic per agent, as
 would broadcast it), selects the neighbours within ``r`` (or the scenario's fixed graph), adds
 the leader's state if informed, and calls the same law functions as ``sim``
 (:func:`flock_swarm.core.protocols.group_control`). Each command is stamped with the
-odometry stamp it answers. Adaptive state (Zhou's gain ``h_i``) lives here.
+odometry stamp it answers. The decisions, and the adaptive state (Zhou's gain ``h_i``), are
+those of :class:`~flock_swarm.nodes.controller.AgentController` (no ROS); this node is its
+plumbing. A command the law returns non-finite is published as zero (counted, logged).
 
 One node hosts one agent (``ros2 run flock_swarm agent --ros-args -p agent_id:=3``, the
 robot's own process) or many (``ros2 run flock_swarm agents``, a container): the hosted
@@ -16,159 +18,22 @@ agent still publishes on its own ``agent_<i>/cmd_accel``.
 import re
 import sys
 import time
-from dataclasses import dataclass, field
-from typing import Any, Sequence
 
 import numpy as np
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 
-from flock_swarm.core.dynamics import LeaderState
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.protocols import advance_adaptive, group_control
-from flock_swarm.core.pseudo_leaders import Reselector
-from flock_swarm.core.run import interaction_graph, static_graph
-from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                       StepClock, claimants, cmd_topic, declare, declare_common,
                                       load_scenario, odom_topic, run_node, timer_period)
+from flock_swarm.nodes.controller import AgentController, parse_agent_ids
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
 
-#: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
-MAX_PENDING = 8
-
 AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout',
                                                'leader_start_timeout'}
-
-
-@dataclass
-class StepInputs:
-    """What the hosted agents have received for one step."""
-
-    odom: dict = field(default_factory=dict)
-    leader_odom: tuple | None = None
-    leader_accel: np.ndarray | None = None
-
-    def has_odometry(self, n_agents: int) -> bool:
-        """Return whether every agent's odometry is in."""
-        return len(self.odom) == n_agents
-
-    @property
-    def has_leader(self) -> bool:
-        """Return whether the leader's state (odometry and acceleration) is in."""
-        return self.leader_odom is not None and self.leader_accel is not None
-
-    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
-        """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
-        odom = self.odom
-        qp = np.array([odom[j] for j in range(n_agents)])
-        leader = LeaderState(np.array(self.leader_odom[0]), np.array(self.leader_odom[1]),
-                             np.array(self.leader_accel)) if self.has_leader else None
-        return qp[:, 0], qp[:, 1], leader
-
-
-def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
-    """Return the ascending ids a node hosts from its ``agent_ids`` parameter.
-
-    :param spec: ``''`` (just ``agent_id``), ``'all'``, a string of ids and ranges such as
-        ``'0-9,12'``, or a list of integers.
-    :param agent_id: the ``agent_id`` parameter.
-    :param n_agents: the swarm's size.
-    :return: the ids.
-    :raises ScenarioError: on a malformed, repeated or out-of-range id.
-    """
-    if isinstance(spec, str):
-        text = spec.strip()
-        if text == '':
-            ids = [agent_id]
-        elif text == 'all':
-            ids = list(range(n_agents))
-        else:
-            ids = []
-            for part in text.split(','):
-                m = re.fullmatch(r'\s*(\d+)\s*(?:-\s*(\d+)\s*)?', part)
-                if m is None:
-                    raise ScenarioError('agent_ids', f'expected ids and ranges such as '
-                                        f"'0-9,12', got {spec!r}")
-                lo, hi = int(m.group(1)), int(m.group(2) or m.group(1))
-                if hi < lo:
-                    raise ScenarioError('agent_ids', f'empty range {part.strip()!r}')
-                ids += range(lo, hi + 1)
-    elif isinstance(spec, (list, tuple, np.ndarray)) and all(
-            isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in spec):
-        ids = [int(x) for x in spec]
-    else:
-        raise ScenarioError('agent_ids', f'expected a string or an integer array, got {spec!r}')
-    if not ids:
-        raise ScenarioError('agent_ids', 'hosts no agent')
-    bad = [i for i in ids if not 0 <= i < n_agents]
-    if bad:
-        key = 'agent_id' if isinstance(spec, str) and spec.strip() == '' else 'agent_ids'
-        raise ScenarioError(key, f'must be in [0, {n_agents - 1}] (n_agents = {n_agents}), '
-                            f'got {bad[0]}')
-    if len(set(ids)) != len(ids):
-        raise ScenarioError('agent_ids', f'lists an agent twice: {spec!r}')
-    return np.array(sorted(ids), dtype=np.intp)
-
-
-class AgentController:
-    """The decision logic of the agents ``ids`` (no ROS): collect a step's inputs, answer once.
-
-    :ivar answered: the last step answered (``-1`` before the first).
-    """
-
-    def __init__(self, sc: Scenario, ids: Sequence[int]) -> None:
-        """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``."""
-        self.sc = sc
-        self.ids = np.asarray(ids, dtype=np.intp)
-        self.real = realize(sc)
-        self.static = static_graph(sc, self.real)
-        # The whole swarm's law data: re-selecting pseudo-leaders needs everybody's flags.
-        self.swarm = self.real.agents
-        self.reselector = Reselector(sc.law) if sc.informed.reselect and \
-            self.static is None else None
-        self.pending: dict[int, StepInputs] = {}
-        self.answered = -1
-
-    def inputs(self, k: int) -> StepInputs | None:
-        """Return the buffer of step ``k`` (``None`` for a step already answered).
-
-        At most ``MAX_PENDING`` steps are buffered: the one farthest ahead (a forged or
-        corrupted stamp, in lockstep) makes room.
-        """
-        if k <= self.answered:
-            return None
-        if k not in self.pending and len(self.pending) >= MAX_PENDING:
-            del self.pending[max(self.pending)]
-        return self.pending.setdefault(k, StepInputs())
-
-    def answer(self, k: int) -> np.ndarray:
-        """Compute the commands of step ``k`` from its inputs, advance adaptive state.
-
-        :param k: the step (every agent's odometry in; without the leader's state the
-            uninformed law applies).
-        :return: ``u`` of the hosted agents, shape ``(m, dim)``.
-        """
-        box = self.pending.pop(k)
-        for old in [s for s in self.pending if s < k]:
-            del self.pending[old]
-        self.answered = k
-        return self.command(*box.swarm(self.sc.n_agents))
-
-    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None) -> np.ndarray:
-        """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains."""
-        law, ids = self.sc.law, self.ids
-        edges = interaction_graph(self.sc, self.real, q, self.static)
-        if self.reselector is not None:
-            self.reselector.update(self.swarm, edges)
-        group = self.swarm.subset(ids)
-        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
-        if group.adaptive is not None:
-            advance_adaptive(law, q[ids], p[ids], leader, group, self.sc.dt)
-            self.swarm.adaptive[ids] = group.adaptive
-        return u
 
 
 class AgentNode(Node):
@@ -190,26 +55,26 @@ class AgentNode(Node):
         spec = declare(self, 'agent_ids', default_agent_ids,
                        "agents this node hosts: '' (agent_id alone), 'all', ids and ranges "
                        "such as '0-9,12', or an integer array")
-        sc = load_scenario(self, AGENT_PARAMS)
-        self.scenario = sc
-        self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents))
-        self.clock = StepClock(sc.dt)
-        self.lockstep = self.get_parameter('mode').value == 'lockstep'
-        self.leader_timeout = declare(
+        sc = self.scenario = load_scenario(self, AGENT_PARAMS)
+        leader_timeout = declare(
             self, 'leader_timeout', 1.0, 'seconds without the leader state (lockstep: for a '
             'step whose odometry is complete) before the agents apply the uninformed law, '
             'until it returns; below the world step_timeout')
-        if isinstance(self.leader_timeout, bool) or \
-                not isinstance(self.leader_timeout, (int, float)) or self.leader_timeout <= 0:
-            raise ScenarioError('leader_timeout', f'must be > 0, got {self.leader_timeout!r}')
-        self.leader_start_timeout = declare(
+        if isinstance(leader_timeout, bool) or \
+                not isinstance(leader_timeout, (int, float)) or leader_timeout <= 0:
+            raise ScenarioError('leader_timeout', f'must be > 0, got {leader_timeout!r}')
+        leader_start_timeout = declare(
             self, 'leader_start_timeout', 30.0, 'lockstep: seconds to wait for the leader\'s '
             'first state (it answers its first tick only once every node has matched its '
             'topics, up to its own start_timeout) before the agents apply the uninformed law')
-        if not self.leader_start_timeout > 0:
+        if not leader_start_timeout > 0:
             raise ScenarioError('leader_start_timeout',
-                                f'must be > 0, got {self.leader_start_timeout!r}')
-        self.leader_ever_heard = False
+                                f'must be > 0, got {leader_start_timeout!r}')
+        self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents),
+                                          self.get_logger(), leader_timeout,
+                                          leader_start_timeout)
+        self.clock = StepClock(sc.dt)
+        self.lockstep = self.get_parameter('mode').value == 'lockstep'
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
                          for i in self.controller.ids]
@@ -224,22 +89,20 @@ class AgentNode(Node):
                                  raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel,
                                  LOCKSTEP_QOS, raw=True)
-        self.latest: StepInputs = StepInputs()
-        self.latest_stamp: int | None = None
         self.encoder = AccelEncoder()
         self.outbox: list[tuple[int, bytes]] = []
         self.matched = [False] * len(self.cmd_pubs)
         self.sent: list[tuple[int, bytes]] = []
         self.repeated = -1
-        self.leader_lost = False
-        self.leader_seen_at = time.monotonic()
-        self.waiting_since: float | None = None
         self.duplicates: set[int] = set()
         self.create_timer(1.0, self.check_claims)
         if self.lockstep:
             self.create_timer(0.01, self.on_lockstep_timer)
         else:
             self.create_timer(timer_period(self, sc.dt), self.on_timer)
+
+    leader_lost = property(lambda self: self.controller.leader.lost,
+                           doc='Whether the agents apply the uninformed law (leader lost).')
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -249,15 +112,9 @@ class AgentNode(Node):
         if checked is None:
             return
         k, state = checked
-        self.latest.odom[j] = state
-        self.latest_stamp = self.clock.ns(k)
-        if self.lockstep:
-            box = self.controller.inputs(k)
-            if box is None:
-                self.answered_again(k, self.odom_topics[j])
-            else:
-                box.odom[j] = state
-                self.try_answer(k)
+        self.controller.latest.odom[j] = state
+        self.controller.latest_step = k
+        self.stash(k, lambda box: box.odom.__setitem__(j, state), self.odom_topics[j])
 
     def check_odometry(self, topic: str, data: bytes,
                        child: str) -> tuple[int, tuple[tuple, tuple]] | None:
@@ -281,8 +138,8 @@ class AgentNode(Node):
         if checked is None:
             return
         k, state = checked
-        self.leader_heard(k)
-        self.latest.leader_odom = state
+        self.controller.leader_heard(k, time.monotonic())
+        self.controller.latest.leader_odom = state
         self.stash(k, lambda box: setattr(box, 'leader_odom', state), LEADER_ODOM)
 
     def on_leader_accel(self, data: bytes) -> None:
@@ -296,32 +153,10 @@ class AgentNode(Node):
                              ordered=not self.lockstep)
         if k is None:
             return
-        self.leader_heard(k)
+        self.controller.leader_heard(k, time.monotonic())
         a = lin[:self.scenario.dim]
-        self.latest.leader_accel = a
+        self.controller.latest.leader_accel = a
         self.stash(k, lambda box: setattr(box, 'leader_accel', a), LEADER_ACCEL)
-
-    # -- the leader lost and found --------------------------------------------------------------
-
-    def leader_heard(self, k: int) -> None:
-        """Note a leader message of step ``k``; a lost leader is back."""
-        self.leader_seen_at = time.monotonic()
-        self.leader_ever_heard = True
-        if self.waiting_since is not None:
-            # A step waiting for the leader's state has half of it now: the timeout counts
-            # from here, or its other half could be given up on the moment it is due.
-            self.waiting_since = self.leader_seen_at
-        if self.leader_lost:
-            self.leader_lost = False
-            self.get_logger().info(f'leader back at step {k}: informed agents track it again')
-
-    def lose_leader(self, k: int) -> None:
-        """Switch to the uninformed law (logged once per loss)."""
-        if not self.leader_lost:
-            self.leader_lost = True
-            self.get_logger().warning(
-                f'no leader state for {self.leader_timeout:g} s at step {k}: the uninformed '
-                'law applies until it returns')
 
     # -- lockstep -------------------------------------------------------------------------------
 
@@ -352,27 +187,14 @@ class AgentNode(Node):
 
     def try_answer(self, k: int) -> None:
         """Answer step ``k`` once every odometry is in, and the leader's state or its timeout."""
-        box = self.controller.pending.get(k)
-        if box is None or not box.has_odometry(self.scenario.n_agents):
-            return
-        if not box.has_leader and not self.leader_lost:
-            now = time.monotonic()
-            if self.waiting_since is None:
-                self.waiting_since = now
-            # A leader not heard yet may still be matching the swarm's topics: it answers
-            # its first tick only then, which can take longer than leader_timeout.
-            patience = self.leader_timeout if self.leader_ever_heard \
-                else self.leader_start_timeout
-            if now - self.waiting_since < patience:
-                return
-            self.lose_leader(k)
-        self.waiting_since = None
-        self.publish_commands(self.controller.answer(k), self.clock.ns(k))
+        if self.controller.ready(k, time.monotonic()):
+            self.publish_commands(self.controller.answer(k), self.clock.ns(k))
 
     def on_lockstep_timer(self) -> None:
         """Answer a step that waits for the leader once its timeout is over; send the queue."""
-        if self.waiting_since is not None and self.controller.pending:
-            self.try_answer(max(self.controller.pending))
+        k = self.controller.waiting()
+        if k is not None:
+            self.try_answer(k)
         self.flush()
 
     def publish_commands(self, u: np.ndarray, stamp_ns: int) -> None:
@@ -407,15 +229,9 @@ class AgentNode(Node):
 
     def on_timer(self) -> None:
         """Realtime mode: answer with the latest known states (zero-order hold)."""
-        latest = self.latest
-        if not latest.has_odometry(self.scenario.n_agents):
-            return
-        q, p, leader = latest.swarm(self.scenario.n_agents)
-        if leader is not None and time.monotonic() - self.leader_seen_at > self.leader_timeout:
-            self.lose_leader(self.clock.step_at(self.latest_stamp))
-        if self.leader_lost:
-            leader = None
-        self.publish_commands(self.controller.command(q, p, leader), self.latest_stamp)
+        u = self.controller.realtime_answer(time.monotonic())
+        if u is not None:
+            self.publish_commands(u, self.clock.ns(self.controller.latest_step))
 
     def check_claims(self) -> None:
         """Report another node publishing commands for one of our agents (a duplicate id)."""
@@ -429,9 +245,12 @@ class AgentNode(Node):
                                         'two nodes command the same agent')
 
     def close(self) -> None:
-        """Log what was rejected (called on shutdown)."""
+        """Log what was rejected and what was replaced by zero (called on shutdown)."""
         if self.guard.rejected:
             self.get_logger().warning(f'rejected inputs: {self.guard.counts()}')
+        if self.controller.non_finite:
+            self.get_logger().warning('non-finite commands replaced by zero, per agent: '
+                                      f'{dict(sorted(self.controller.non_finite.items()))}')
 
 
 def main(args: list[str] | None = None) -> int:

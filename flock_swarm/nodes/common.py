@@ -5,22 +5,19 @@ other parameter whose name is a dotted scenario key overrides that single value,
 ``ros2 run flock_swarm agent --ros-args -p agent_id:=3 -p scenario:=demo -p protocol.c1:=0.8``.
 """
 
-import bisect
 import math
 import re
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped
-from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from flock_swarm.cli import accept_sigint
+from flock_swarm.cli import EXIT_USAGE, accept_sigint
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.scenarios import load
@@ -44,44 +41,6 @@ TELEMETRY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
 ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
 #: The fixed frame of every position (REP-103).
 FRAME = 'world'
-#: Exit status for invalid configuration.
-EXIT_CONFIG = 2
-
-
-class LatencyHistogram:
-    """Latencies in constant memory: 100 log-spaced bins per decade from 1 us to 100 s.
-
-    Percentiles are read off the bins (their upper edges: at most 2.3 % high), so a soak of
-    any length costs the same few kilobytes.
-    """
-
-    EDGES = [10.0 ** (-6 + k / 100.0) for k in range(801)]
-
-    def __init__(self) -> None:
-        """Create an empty histogram."""
-        self.counts = [0] * (len(self.EDGES) + 1)
-        self.count = 0
-        self.max = 0.0
-
-    def add(self, seconds: float) -> None:
-        """Add one latency [s]."""
-        self.counts[bisect.bisect_left(self.EDGES, seconds)] += 1
-        self.count += 1
-        self.max = max(self.max, seconds)
-
-    def summary_ms(self) -> dict:
-        """Return ``count``, ``p50``, ``p90``, ``p99`` and ``max`` in milliseconds."""
-        out = {'count': self.count}
-        for name, q in (('p50', 0.5), ('p90', 0.9), ('p99', 0.99)):
-            target, seen, value = q * self.count, 0, None
-            for k, c in enumerate(self.counts):
-                seen += c
-                if c and seen >= target:
-                    value = self.EDGES[min(k, len(self.EDGES) - 1)]
-                    break
-            out[name] = None if value is None else round(1e3 * min(value, self.max), 3)
-        out['max'] = round(1e3 * self.max, 3) if self.count else None
-        return out
 
 
 def odom_topic(i: int) -> str:
@@ -229,48 +188,6 @@ def timer_period(node: Node, dt: float) -> float:
 COMMON_PARAMS = {'scenario', 'seed', 'mode', 'realtime_factor'}
 
 
-def make_odometry(q: Sequence[float], p: Sequence[float], stamp: Time, child: str,
-                  msg: Odometry | None = None) -> Odometry:
-    """Return an Odometry with position ``q`` and world-frame velocity ``p`` (2-D: z = 0).
-
-    :param q: position (an array or a list of floats, length ``dim``).
-    :param p: velocity.
-    :param stamp: the header stamp.
-    :param child: ``child_frame_id`` (used when a new message is built).
-    :param msg: a message to fill in place (a node publishing every step reuses one per
-        topic, since building a nested message costs more than sending it); ``None``: new.
-    """
-    if msg is None:
-        msg = Odometry()
-        msg.header.frame_id = FRAME
-        msg.child_frame_id = child
-    msg.header.stamp = stamp
-    pos = msg.pose.pose.position
-    vel = msg.twist.twist.linear
-    pos.x, pos.y = float(q[0]), float(q[1])
-    vel.x, vel.y = float(p[0]), float(p[1])
-    if len(q) == 3:
-        pos.z, vel.z = float(q[2]), float(p[2])
-    return msg
-
-
-def make_accel(a: Sequence[float], stamp: Time,
-               msg: AccelStamped | None = None) -> AccelStamped:
-    """Return an AccelStamped with linear acceleration ``a`` in the world frame.
-
-    :param msg: a message to fill in place (see :func:`make_odometry`); ``None``: new.
-    """
-    if msg is None:
-        msg = AccelStamped()
-        msg.header.frame_id = FRAME
-    msg.header.stamp = stamp
-    lin = msg.accel.linear
-    lin.x, lin.y = float(a[0]), float(a[1])
-    if len(a) == 3:
-        lin.z = float(a[2])
-    return msg
-
-
 def agent_hosts(node: Node, n_agents: int) -> int | None:
     """Return how many nodes host the swarm's agents, or ``None`` while one is not there yet.
 
@@ -338,7 +255,7 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
         # params file): rcl's message, without the C source locations it appends.
         reason = re.split(r'(?:\. Error: |, at /)', reason, maxsplit=1)[0]
         print(f'{name}: error: --ros-args: {one_line(reason)}', file=sys.stderr)
-        return EXIT_CONFIG
+        return EXIT_USAGE
     if get_logger_level('rcl') == LoggingSeverity.FATAL:
         # Unless --ros-args --log-level set the rcl logger's level itself.
         set_logger_level('rcl', previous)
@@ -353,7 +270,7 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
             executor.spin_once(timeout_sec=0.1)
     except ScenarioError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
-        status = EXIT_CONFIG
+        status = EXIT_USAGE
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:

@@ -1,0 +1,240 @@
+"""The agents' decisions without ROS: a step's inputs collected, the law evaluated once.
+
+:class:`AgentController` is what an agent node (one agent, or a container of many) decides:
+which inputs belong to which step, when a step can be answered (the leader's state or its
+timeout), the commands (the same law functions as ``sim``,
+:func:`flock_swarm.core.protocols.group_control`) and the adaptive state. The node turns
+messages into its calls and its commands into messages.
+"""
+
+import logging
+import re
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from flock_swarm.core.dynamics import LeaderState
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.protocols import advance_adaptive, group_control
+from flock_swarm.core.pseudo_leaders import Reselector
+from flock_swarm.core.run import interaction_graph, static_graph
+from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.nodes.leader_watch import LeaderWatch, Log
+
+#: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
+MAX_PENDING = 8
+
+
+@dataclass
+class StepInputs:
+    """What the hosted agents have received for one step."""
+
+    odom: dict = field(default_factory=dict)
+    leader_odom: tuple | None = None
+    leader_accel: np.ndarray | None = None
+
+    def has_odometry(self, n_agents: int) -> bool:
+        """Return whether every agent's odometry is in."""
+        return len(self.odom) == n_agents
+
+    @property
+    def has_leader(self) -> bool:
+        """Return whether the leader's state (odometry and acceleration) is in."""
+        return self.leader_odom is not None and self.leader_accel is not None
+
+    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
+        """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
+        odom = self.odom
+        qp = np.array([odom[j] for j in range(n_agents)])
+        leader = LeaderState(np.array(self.leader_odom[0]), np.array(self.leader_odom[1]),
+                             np.array(self.leader_accel)) if self.has_leader else None
+        return qp[:, 0], qp[:, 1], leader
+
+
+def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
+    """Return the ascending ids a node hosts from its ``agent_ids`` parameter.
+
+    :param spec: ``''`` (just ``agent_id``), ``'all'``, a string of ids and ranges such as
+        ``'0-9,12'``, or a list of integers.
+    :param agent_id: the ``agent_id`` parameter.
+    :param n_agents: the swarm's size.
+    :return: the ids.
+    :raises ScenarioError: on a malformed, repeated or out-of-range id.
+    """
+    if isinstance(spec, str):
+        text = spec.strip()
+        if text == '':
+            ids = [agent_id]
+        elif text == 'all':
+            ids = list(range(n_agents))
+        else:
+            ids = []
+            for part in text.split(','):
+                m = re.fullmatch(r'\s*(\d+)\s*(?:-\s*(\d+)\s*)?', part)
+                if m is None:
+                    raise ScenarioError('agent_ids', f'expected ids and ranges such as '
+                                        f"'0-9,12', got {spec!r}")
+                lo, hi = int(m.group(1)), int(m.group(2) or m.group(1))
+                if hi < lo:
+                    raise ScenarioError('agent_ids', f'empty range {part.strip()!r}')
+                ids += range(lo, hi + 1)
+    elif isinstance(spec, (list, tuple, np.ndarray)) and all(
+            isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in spec):
+        ids = [int(x) for x in spec]
+    else:
+        raise ScenarioError('agent_ids', f'expected a string or an integer array, got {spec!r}')
+    if not ids:
+        raise ScenarioError('agent_ids', 'hosts no agent')
+    bad = [i for i in ids if not 0 <= i < n_agents]
+    if bad:
+        key = 'agent_id' if isinstance(spec, str) and spec.strip() == '' else 'agent_ids'
+        raise ScenarioError(key, f'must be in [0, {n_agents - 1}] (n_agents = {n_agents}), '
+                            f'got {bad[0]}')
+    if len(set(ids)) != len(ids):
+        raise ScenarioError('agent_ids', f'lists an agent twice: {spec!r}')
+    return np.array(sorted(ids), dtype=np.intp)
+
+
+class AgentController:
+    """The decision logic of the agents ``ids`` (no ROS): collect a step's inputs, answer once.
+
+    It also follows the leader (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`): a step
+    whose odometry is complete waits for the leader's state at most ``leader_timeout``
+    (``leader_start_timeout`` before the leader was first heard), then the uninformed law
+    applies until the leader is back. A command the law returns non-finite is replaced by
+    zero (counted per agent in ``non_finite``, the first of each agent logged).
+
+    :ivar answered: the last step answered (``-1`` before the first).
+    """
+
+    def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
+                 leader_timeout: float = 1.0, leader_start_timeout: float = 30.0,
+                 now: float | None = None) -> None:
+        """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``.
+
+        :param log: where the leader's loss and non-finite commands are told (default: the
+            :mod:`logging` logger ``flock_swarm.agent``).
+        :param leader_timeout: seconds without the leader state before the uninformed law.
+        :param leader_start_timeout: the same before the leader was first heard.
+        :param now: the time [s, a monotonic clock] the leader's silence counts from.
+        """
+        self.sc = sc
+        self.ids = np.asarray(ids, dtype=np.intp)
+        self.real = realize(sc)
+        self.static = static_graph(sc, self.real)
+        # The whole swarm's law data: re-selecting pseudo-leaders needs everybody's flags.
+        self.swarm = self.real.agents
+        self.reselector = Reselector(sc.law) if sc.informed.reselect and \
+            self.static is None else None
+        self.pending: dict[int, StepInputs] = {}
+        self.answered = -1
+        self.log = logging.getLogger('flock_swarm.agent') if log is None else log
+        self.leader_timeout, self.leader_start_timeout = leader_timeout, leader_start_timeout
+        self.leader = LeaderWatch(time.monotonic() if now is None else now)
+        self.waiting_since: float | None = None
+        # Realtime: the latest input of every kind, and the step of the latest odometry.
+        self.latest = StepInputs()
+        self.latest_step: int | None = None
+        self.non_finite: Counter = Counter()
+
+    def inputs(self, k: int) -> StepInputs | None:
+        """Return the buffer of step ``k`` (``None`` for a step already answered).
+
+        At most ``MAX_PENDING`` steps are buffered: the one farthest ahead (a forged or
+        corrupted stamp, in lockstep) makes room.
+        """
+        if k <= self.answered:
+            return None
+        if k not in self.pending and len(self.pending) >= MAX_PENDING:
+            del self.pending[max(self.pending)]
+        return self.pending.setdefault(k, StepInputs())
+
+    def leader_heard(self, k: int, now: float) -> None:
+        """Note a leader message of step ``k``; a lost leader is back."""
+        back = self.leader.heard(k, now)
+        if self.waiting_since is not None:
+            # A step waiting for the leader's state has half of it now: the timeout counts
+            # from here, or its other half could be given up on the moment it is due.
+            self.waiting_since = now
+        if back:
+            self.log.info(f'leader back at step {k}: informed agents track it again')
+
+    def lose_leader(self, k: int) -> None:
+        """Switch to the uninformed law (logged once per loss)."""
+        if self.leader.lose(k):
+            self.log.warning(f'no leader state for {self.leader_timeout:g} s at step {k}: the '
+                             'uninformed law applies until it returns')
+
+    def ready(self, k: int, now: float) -> bool:
+        """Return whether step ``k`` can be answered: every odometry in, and the leader's
+        state or its timeout (then the leader counts as lost)."""
+        box = self.pending.get(k)
+        if box is None or not box.has_odometry(self.sc.n_agents):
+            return False
+        if not box.has_leader and not self.leader.lost:
+            if self.waiting_since is None:
+                self.waiting_since = now
+            # A leader not heard yet may still be matching the swarm's topics: it answers
+            # its first tick only then, which can take longer than leader_timeout.
+            patience = self.leader_timeout if self.leader.ever_heard \
+                else self.leader_start_timeout
+            if now - self.waiting_since < patience:
+                return False
+            self.lose_leader(k)
+        self.waiting_since = None
+        return True
+
+    def waiting(self) -> int | None:
+        """Return the step that waits for the leader's state, or ``None``."""
+        return max(self.pending) if self.waiting_since is not None and self.pending else None
+
+    def answer(self, k: int) -> np.ndarray:
+        """Compute the commands of step ``k`` from its inputs, advance adaptive state.
+
+        :param k: the step (every agent's odometry in; without the leader's state the
+            uninformed law applies).
+        :return: ``u`` of the hosted agents, shape ``(m, dim)``.
+        """
+        box = self.pending.pop(k)
+        for old in [s for s in self.pending if s < k]:
+            del self.pending[old]
+        self.answered = k
+        return self.command(*box.swarm(self.sc.n_agents))
+
+    def realtime_answer(self, now: float) -> np.ndarray | None:
+        """Realtime: return the commands for the latest known states (``None`` before every
+        agent's odometry came in); a leader silent for ``leader_timeout`` is lost."""
+        latest = self.latest
+        if not latest.has_odometry(self.sc.n_agents):
+            return None
+        q, p, leader = latest.swarm(self.sc.n_agents)
+        if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
+            self.lose_leader(self.latest_step)
+        return self.command(q, p, None if self.leader.lost else leader)
+
+    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None) -> np.ndarray:
+        """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains.
+
+        A non-finite row (the law failed: an overflow, a division by zero) is zero.
+        """
+        law, ids = self.sc.law, self.ids
+        edges = interaction_graph(self.sc, self.real, q, self.static)
+        if self.reselector is not None:
+            self.reselector.update(self.swarm, edges)
+        group = self.swarm.subset(ids)
+        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
+        if group.adaptive is not None:
+            advance_adaptive(law, q[ids], p[ids], leader, group, self.sc.dt)
+            self.swarm.adaptive[ids] = group.adaptive
+        if np.isfinite(u).all():
+            return u
+        bad = ~np.isfinite(u).all(axis=1)
+        for i in ids[bad].tolist():
+            if not self.non_finite[i]:
+                self.log.warning(f'agent {i}: the law gave a non-finite command; a zero '
+                                 'command is published instead (further ones are counted)')
+            self.non_finite[i] += 1
+        return np.where(bad[:, None], 0.0, u)

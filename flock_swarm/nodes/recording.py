@@ -1,0 +1,148 @@
+"""Where the world's messages go besides the wire: sinks, and the bag as one of them.
+
+The world hands every message it publishes or receives to each of its sinks as
+``write(topic, data, t_ns)`` (the serialised bytes, the simulation time of their step);
+:class:`BagSink` queues them and writes them to the MCAP bag once a step.
+"""
+
+import json
+import os
+from itertools import groupby
+from operator import itemgetter
+from pathlib import Path
+from typing import Callable, Protocol
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import AccelStamped
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from visualization_msgs.msg import MarkerArray
+
+from flock_swarm import __version__
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.scenario import Realization, Scenario
+from flock_swarm.outputs import json_text
+
+
+class Sink(Protocol):
+    """A consumer of the world's messages (the bag; a live viewer could be another)."""
+
+    def add_topic(self, name: str, msg_type: type, qos) -> None:
+        """Declare a topic before its first message."""
+
+    def write(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Take one serialised message of simulation time ``t_ns`` [ns]."""
+
+    def flush(self) -> None:
+        """Deliver what was taken (called once a step)."""
+
+    def close(self) -> None:
+        """Deliver the rest and finish (idempotent)."""
+
+
+class BagSink:
+    """The rosbag2-compatible MCAP bag of a run, written once a step.
+
+    :ivar error: why writing failed (``None``: it did not).
+    """
+
+    def __init__(self, path: Path, sc: Scenario, real: Realization, mode: str,
+                 failed: Callable[[str], None], max_bagfile_size: int = 0,
+                 max_bagfile_duration: float = 0.0) -> None:
+        """Open the bag at ``path`` (a directory) with the run's provenance as metadata.
+
+        :param path: the bag directory (must be empty or absent).
+        :param sc: the scenario (stored as metadata, with its seed and informed set).
+        :param real: its realisation.
+        :param mode: ``lockstep`` or ``realtime``.
+        :param failed: called with the reason when writing fails (the run stops).
+        :param max_bagfile_size: split the bag at this file size [bytes] (0: never).
+        :param max_bagfile_duration: split the bag at this span of simulation time [s]
+            (0: never); see :class:`~flock_swarm.bag.BagWriter`.
+        :raises ScenarioError: naming ``out_dir`` or ``record`` when the bag cannot be made.
+        """
+        from flock_swarm.bag import (BagWriter, DefinitionNotFoundError, message_definition,
+                                     type_name_of)
+        if path.exists() and any(path.iterdir()):
+            raise ScenarioError('out_dir', f'{path} already holds a bag; choose another out_dir')
+        # Every schema is found before the bag file exists: a failure leaves nothing behind.
+        for msg_type in (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray):
+            try:
+                message_definition(type_name_of(msg_type))
+            except DefinitionNotFoundError as exc:
+                raise ScenarioError('record', f'{exc} (AMENT_PREFIX_PATH='
+                                    f'{os.environ.get("AMENT_PREFIX_PATH", "")!r}); '
+                                    'set it to the prefixes holding the ROS message '
+                                    'packages, or -p record:=false') from None
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.bag = BagWriter(path, max_bagfile_size=max_bagfile_size,
+                                 max_bagfile_duration=max_bagfile_duration)
+        except OSError as exc:
+            raise ScenarioError('out_dir', f'cannot write to {path.parent}: {exc.strerror}') \
+                from None
+        self.bag.add_metadata('flock_swarm', {
+            'scenario': json_text(sc.raw, indent=None).strip(),
+            'scenario_name': sc.name,
+            'seed': str(sc.seed),
+            'informed': json.dumps(real.informed_ids),
+            'mode': mode,
+            'flock_swarm_version': __version__,
+        })
+        self.path = path
+        self.failed = failed
+        self.error: str | None = None
+        # Messages waiting for the bag: (topic, data, t_ns), written once a step.
+        self.records: list[tuple[str, bytes, int]] = []
+
+    def add_topic(self, name: str, msg_type: type, qos) -> None:
+        """Add a topic (its schema and QoS) to the bag."""
+        if self.bag is not None:
+            self.bag.add_topic(name, msg_type, qos)
+
+    def write(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Queue a message for the bag (written by :meth:`flush`, once a step)."""
+        if self.bag is not None:
+            self.records.append((topic, data, t_ns))
+
+    def flush(self) -> None:
+        """Write the queued messages, in the order they were queued, a run of equal times at
+        once (:meth:`~flock_swarm.bag.BagWriter.write_serialized_many`)."""
+        queue, self.records = self.records, []
+        if self.bag is None or not queue:
+            return
+        try:
+            for t_ns, run in groupby(queue, key=itemgetter(2)):
+                self.bag.write_serialized_many([(topic, data) for topic, data, _ in run], t_ns)
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        """Give the bag up when it cannot be written (a full disk, say).
+
+        The bag is left as it is on disk: every chunk completed before the failure is
+        readable (``analyze`` says how much it recovered), and no ``metadata.yaml`` claims it
+        complete.
+        """
+        self.error = f'{exc.strerror or exc} ({self.path})'
+        bag, self.bag = self.bag, None
+        try:
+            bag.abandon()
+        except OSError:
+            pass
+        self.failed(self.error)
+
+    def close(self) -> None:
+        """Write what is queued, finalise the bag (MCAP summary and ``metadata.yaml``).
+
+        :raises OSError: when finalising fails (:attr:`error` says why); the complete chunks
+            stay readable.
+        """
+        self.flush()
+        if self.bag is not None:
+            bag, self.bag = self.bag, None
+            try:
+                bag.close()
+            except OSError as exc:
+                self.error = f'{exc.strerror or exc} ({self.path})'
+                raise

@@ -1,0 +1,467 @@
+"""The world's stepping without ROS: commands in, the step closed, the swarm integrated.
+
+:class:`WorldStepper` owns what the world node decides: the open step and the commands
+received for it, the step timeout and the agents that missed it (zero command), the
+leader's buffered states and its loss (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`),
+the resend policy of a stalled step, the integration (the same
+:func:`~flock_swarm.core.dynamics.step_agents` as ``sim``), the run log and the summary. The
+node turns messages into its calls and its :class:`Observation` into messages; every time is
+passed in (seconds of a monotonic clock), so the stepper runs as well from a unit test.
+"""
+
+import bisect
+import json
+import time
+from dataclasses import dataclass
+import numpy as np
+
+from flock_swarm.core.dynamics import LeaderState, step_agents
+from flock_swarm.core.graphs import EdgeList, disk_graph
+from flock_swarm.core.metrics import step_metrics
+from flock_swarm.core.run import Recorder, RunLog, SimResult, build_summary
+from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.nodes.leader_watch import LeaderWatch, Log
+
+#: Seconds after which a stalled lockstep step is first offered again (see ``resent``).
+RESEND_PERIOD = 0.5
+#: A step is stalled only once it has taken this many times as long as the step before it,
+#: and each further offer of the same step waits twice as long as the last.
+RESEND_SLOWER = 3.0
+#: Realtime: steps the leader's buffered states are kept for.
+LEADER_KEEP = 10
+#: Realtime: steps the publication time of odometry is kept for (command latencies).
+PUBLISHED_KEEP = 100
+
+
+def first_resend_wait(last_step_s: float, step_timeout: float = float('inf')) -> float:
+    """Seconds before a step is first offered again, given the previous step's duration.
+
+    At most half the step timeout, so that every step is offered at least twice before a
+    missing command is zeroed: with a step timeout below ``RESEND_PERIOD`` a sample DDS
+    dropped (a reader not matched yet, a participant that joined or died) was never offered
+    again, and the agent lost the step.
+    """
+    return min(max(RESEND_PERIOD, RESEND_SLOWER * last_step_s), step_timeout / 2)
+
+
+def next_resend_wait(wait: float, last_step_s: float) -> float:
+    """Seconds before the next offer of a step offered again after ``wait``.
+
+    Doubling once a step's duration is known (an overloaded swarm); before the first step
+    has finished (``last_step_s`` 0) a lost sample means a reader not yet matched, and the
+    step is offered every ``wait`` as long as it stalls.
+    """
+    return 2.0 * wait if last_step_s > 0 else wait
+
+
+class LatencyHistogram:
+    """Latencies in constant memory: 100 log-spaced bins per decade from 1 us to 100 s.
+
+    Percentiles are read off the bins (their upper edges: at most 2.3 % high), so a soak of
+    any length costs the same few kilobytes.
+    """
+
+    EDGES = [10.0 ** (-6 + k / 100.0) for k in range(801)]
+
+    def __init__(self) -> None:
+        """Create an empty histogram."""
+        self.counts = [0] * (len(self.EDGES) + 1)
+        self.count = 0
+        self.max = 0.0
+
+    def add(self, seconds: float) -> None:
+        """Add one latency [s]."""
+        self.counts[bisect.bisect_left(self.EDGES, seconds)] += 1
+        self.count += 1
+        self.max = max(self.max, seconds)
+
+    def summary_ms(self) -> dict:
+        """Return ``count``, ``p50``, ``p90``, ``p99`` and ``max`` in milliseconds."""
+        out = {'count': self.count}
+        for name, q in (('p50', 0.5), ('p90', 0.9), ('p99', 0.99)):
+            target, seen, value = q * self.count, 0, None
+            for k, c in enumerate(self.counts):
+                seen += c
+                if c and seen >= target:
+                    value = self.EDGES[min(k, len(self.EDGES) - 1)]
+                    break
+            out[name] = None if value is None else round(1e3 * min(value, self.max), 3)
+        out['max'] = round(1e3 * self.max, 3) if self.count else None
+        return out
+
+
+@dataclass(frozen=True)
+class WorldSettings:
+    """The world's own parameters (see ``docs/ros.md``).
+
+    :ivar lockstep: lockstep (``True``) or realtime mode.
+    :ivar step_timeout: lockstep: seconds before a missing command is zeroed.
+    :ivar start_timeout: lockstep: seconds to wait for everybody before starting anyway.
+    :ivar staleness: realtime: seconds a held command or the leader state stays valid.
+    :ivar marker_every: markers every this many steps.
+    :ivar metrics_every: metrics every this many steps.
+    """
+
+    lockstep: bool = True
+    step_timeout: float = 2.0
+    start_timeout: float = 30.0
+    staleness: float = 0.5
+    marker_every: int = 10
+    metrics_every: int = 10
+
+
+@dataclass
+class Observation:
+    """A step as the world saw it: what to publish about it.
+
+    :ivar k: the step.
+    :ivar q: positions at step ``k``.
+    :ivar p: velocities.
+    :ivar u: the commands applied.
+    :ivar leader: the leader state used.
+    :ivar edges: the r-disk graph at ``q``.
+    :ivar missing: agents whose command was missing (zero applied).
+    :ivar markers: whether markers are due.
+    :ivar metrics: the ``/swarm/metrics`` values when they are due, else ``None``.
+    :ivar problems: what made the step a warning (empty: ok).
+    :ivar last: whether it is the scenario's last step.
+    """
+
+    k: int
+    q: np.ndarray
+    p: np.ndarray
+    u: np.ndarray
+    leader: LeaderState
+    edges: EdgeList
+    missing: list[int]
+    markers: bool
+    metrics: dict | None
+    problems: list[str]
+    last: bool
+
+
+class WorldStepper:
+    """The world's decisions, step by step, without ROS.
+
+    :ivar k: the open step.
+    :ivar started: whether the first step was opened.
+    :ivar done: whether the run has ended (``status`` says how).
+    """
+
+    def __init__(self, sc: Scenario, settings: WorldSettings, log: Log,
+                 now: float | None = None, recorder: Recorder | None = None) -> None:
+        """Create the stepper at the scenario's initial state.
+
+        :param sc: the scenario.
+        :param settings: the world's parameters.
+        :param log: where missing commands and the leader's loss are told.
+        :param now: the time of creation (start timeout counts from it); default: now.
+        :param recorder: where the run log records the time series (default: in memory;
+            the node streams it to disk).
+        """
+        self.scenario, self.settings, self.log = sc, settings, log
+        self.lockstep = settings.lockstep
+        self.real = realize(sc)
+        self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
+        self.intrinsic = sc.intrinsic.build() if sc.intrinsic is not None else None
+        n = sc.n_agents
+        self.k = 0
+        self.commands: dict[int, np.ndarray] = {}
+        self.held = np.zeros((n, sc.dim))
+        self.held_at = np.full(n, -np.inf)
+        self.stale_agents: set[int] = set()
+        self.leader_odom: dict[int, tuple] = {}
+        self.leader_accel: dict[int, np.ndarray] = {}
+        self.last_leader = LeaderState(sc.leader.position.copy(), sc.leader.velocity.copy(),
+                                       np.zeros(sc.dim))
+        self.leader = LeaderWatch()
+        self.missed = np.zeros(n, dtype=int)
+        self.leader_missed = 0
+        self.last_missing: set[int] = set()
+        # Realtime: wall time each step's odometry went out, and how long commands took.
+        self.published_at: dict[int, float] = {}
+        self.latency = LatencyHistogram()
+        self.run_log = RunLog.for_scenario(sc, recorder)
+        self.metrics_now: dict = {}
+        self.done = False
+        self.started = False
+        self.status = 'running'
+        self.deadline = 0.0
+        self.resend_at = 0.0
+        self.resend_wait = RESEND_PERIOD
+        self.resends = 0
+        self.step_began = 0.0
+        self.last_step_s = 0.0
+        self.t_created = self.t_wall0 = time.monotonic() if now is None else now
+        self.t_last_progress = self.t_wall0
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def window(self) -> tuple[int, int] | None:
+        """Return the steps whose inputs are accepted now (lockstep: the open step and the
+        one just closed; realtime: any)."""
+        return (self.k - 1, self.k) if self.lockstep else None
+
+    def command(self, i: int, k: int, u: np.ndarray, now: float) -> bool:
+        """Take agent ``i``'s (checked) command for step ``k``; return whether it is late.
+
+        Lockstep: a command for the open step is kept for it; one for the step just closed
+        that went without it came too late (a repeated command for that step, after the
+        world offered it again, is no fault). Realtime: the command is held until the next.
+        """
+        if not self.lockstep:
+            self.held[i] = u
+            self.held_at[i] = now
+            sent = self.published_at.get(k)
+            if sent is not None:
+                self.latency.add(now - sent)
+            return False
+        if not self.started or self.done:
+            return False
+        if k == self.k:
+            self.commands[i] = u
+            return False
+        return i in self.last_missing
+
+    def leader_state(self, k: int, now: float, q: np.ndarray | None = None,
+                     p: np.ndarray | None = None, a: np.ndarray | None = None) -> None:
+        """Take the leader's (checked) odometry ``q, p`` or acceleration ``a`` of step ``k``."""
+        if self.leader.heard(self.k, now):
+            self.log.info(f'leader back at step {self.k} (its state of step {k})')
+        if q is not None:
+            self.leader_odom[k] = (q, p)
+        if a is not None:
+            self.leader_accel[k] = a
+
+    def lose_leader(self) -> None:
+        """Note that the leader is gone (logged, recorded in the metrics and the summary)."""
+        if self.leader.lose(self.k):
+            self.log.warning(f'leader lost at step {self.k}: steps go on without waiting '
+                             'for it')
+
+    # -- lockstep -----------------------------------------------------------------------------
+
+    def start_due(self, now: float) -> bool:
+        """Return whether the start timeout is over."""
+        return now - self.t_created >= self.settings.start_timeout
+
+    def start(self, now: float) -> None:
+        """Start the run (the wall time of the summary counts from here)."""
+        self.started = True
+        self.t_wall0 = now
+
+    def begin_step(self, now: float) -> None:
+        """Open the current step: no command yet, its timeout and first resend ahead."""
+        self.commands = {}
+        self.step_began = now
+        self.deadline = now + self.settings.step_timeout
+        if self.k == 0:
+            # Step 0 completes the start: the world has matched the others' endpoints, but
+            # an agent's reader may not have matched the world's writers yet (DDS matches
+            # each side on its own), so step 0 waits out what is left of start_timeout.
+            self.deadline = max(self.deadline, self.t_created + self.settings.start_timeout)
+        self.resend_wait = first_resend_wait(self.last_step_s, self.settings.step_timeout)
+        self.resend_at = now + self.resend_wait
+
+    def due(self, now: float) -> str | None:
+        """Return what the open step needs at ``now``: ``'timeout'``, ``'resend'`` or ``None``."""
+        if now >= self.deadline:
+            return 'timeout'
+        return 'resend' if now >= self.resend_at else None
+
+    def resent(self, now: float) -> None:
+        """Note that the open step was offered again; schedule the next offer.
+
+        DDS drops a sample that reaches a reader before the reader has matched its writer,
+        and a reliable writer repairs it only at its next heartbeat (3 s in Fast DDS), so a
+        stalled step is offered again until its timeout: the leader answers a repeated tick,
+        and agents repeat the commands they already sent. A step counts as stalled after
+        ``RESEND_PERIOD`` or ``RESEND_SLOWER`` times the previous step's duration, whichever
+        is longer but at most half the step timeout (``first_resend_wait``). Once a step has
+        finished, every further offer waits twice as long (``next_resend_wait``), so an
+        overloaded swarm (tens of agent processes on two cores, a second or more a step) is
+        not flooded with copies of every message, which made it slower still (measured: 100
+        steps of 50 agent processes at 0.5 steps/s, 303 offers, 1919 commands timed out).
+        """
+        self.resends += 1
+        self.resend_wait = next_resend_wait(self.resend_wait, self.last_step_s)
+        self.resend_at = now + self.resend_wait
+
+    def complete(self) -> bool:
+        """Return whether the open lockstep step has every command and the leader's state."""
+        return (self.lockstep and self.started and not self.done
+                and len(self.commands) == self.scenario.n_agents
+                and (self.leader.lost
+                     or (self.k in self.leader_odom and self.k in self.leader_accel)))
+
+    def close_step(self, timed_out: bool, now: float) -> Observation:
+        """Close the open step: zero commands for absentees, take the leader's state.
+
+        :param timed_out: whether the step timeout closed it.
+        :param now: the time.
+        :return: the step observed (recorded in the run log); :meth:`advance` follows
+            unless it is the last.
+        """
+        sc, k, n = self.scenario, self.k, self.scenario.n_agents
+        u = np.zeros((n, sc.dim))
+        missing = [i for i in range(n) if i not in self.commands]
+        for i, ui in self.commands.items():
+            u[i] = ui
+        leader_missing = k not in self.leader_odom or k not in self.leader_accel
+        if missing:
+            self.missed[missing] += 1
+            self.log.warning(f'step {k}: no command from agent(s) {missing} within '
+                             f'{self.settings.step_timeout:g} s; zero command applied')
+        self.last_missing = set(missing)
+        if leader_missing:
+            self.leader_missed += 1
+            self.lose_leader()
+        else:
+            q_l, p_l = self.leader_odom.pop(k)
+            self.last_leader = LeaderState(q_l, p_l, self.leader_accel.pop(k))
+        self._forget_leader_before(k)
+        if not timed_out:
+            # How long a step takes now (a timed-out step says nothing about that).
+            self.last_step_s = now - self.step_began
+        return self.observe(u, missing)
+
+    # -- realtime -----------------------------------------------------------------------------
+
+    def realtime_begin(self, now: float) -> None:
+        """Realtime: take the leader's latest complete state; lose a silent leader."""
+        k = self.k
+        latest = k if k in self.leader_odom and k in self.leader_accel \
+            else max(self.leader_odom, default=None)
+        if latest is not None and latest in self.leader_accel:
+            q_l, p_l = self.leader_odom[latest]
+            self.last_leader = LeaderState(q_l, p_l, self.leader_accel[latest])
+        self._forget_leader_before(k - LEADER_KEEP)
+        if not self.started:
+            # Staleness counts from the first step, not from the node's construction.
+            self.held_at[:] = now
+            self.leader.seen_at = max(self.leader.seen_at, now)
+        if self.leader.silent_for(now) > self.settings.staleness:
+            self.lose_leader()
+
+    def realtime_close(self, now: float, published: float) -> Observation:
+        """Realtime: observe the step with the held commands (a stale one zeroed).
+
+        :param now: the time the step began (:meth:`realtime_begin`).
+        :param published: the time its odometry went out.
+        """
+        k = self.k
+        self.published_at[k] = published
+        self.published_at.pop(k - PUBLISHED_KEEP, None)
+        u = self.held.copy()
+        stale = np.flatnonzero(now - self.held_at > self.settings.staleness)
+        u[stale] = 0.0
+        self.missed[stale] += 1
+        self._note_stale({int(i) for i in stale})
+        self.started = True
+        return self.observe(u, [int(i) for i in stale])
+
+    def _note_stale(self, stale: set[int]) -> None:
+        """Log agents whose held command went stale (zero from now) or came back."""
+        for i in sorted(stale - self.stale_agents):
+            self.log.warning(f'step {self.k}: agent {i} sent no command for '
+                             f'{self.settings.staleness:g} s; zero command until it does')
+        for i in sorted(self.stale_agents - stale):
+            self.log.info(f'step {self.k}: agent {i} commands again')
+        self.stale_agents = stale
+
+    # -- both modes ---------------------------------------------------------------------------
+
+    def _forget_leader_before(self, k: int) -> None:
+        for old in [s for s in self.leader_odom if s < k]:
+            del self.leader_odom[old]
+        for old in [s for s in self.leader_accel if s < k]:
+            del self.leader_accel[old]
+
+    def observe(self, u: np.ndarray, missing: list[int]) -> Observation:
+        """Record the open step in the run log; return it with the telemetry due."""
+        sc, k, st = self.scenario, self.k, self.settings
+        law = sc.law
+        leader = self.last_leader
+        edges = disk_graph(self.q, law.radius, law.strict_radius)
+        last = k >= sc.steps
+        now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
+                                   self.real.agents.informed, edges, law.radius, last)
+        if now is not None:
+            self.metrics_now = now
+        events = self.leader.events
+        event = bool(events) and events[-1][0] == k
+        values, problems = None, []
+        if k % st.metrics_every == 0 or missing or last or event:
+            if not self.metrics_now:
+                self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
+                                                law.radius, law.strict_radius)
+            values = dict(self.metrics_now, step=k, missed_commands=int(self.missed.sum()),
+                          missed_this_step=json.dumps(missing),
+                          leader_missed=self.leader_missed,
+                          leader='lost' if self.leader.lost else 'ok')
+            problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
+                + (['leader lost'] if self.leader.lost else [])
+        return Observation(k, self.q, self.p, u, leader, edges, missing,
+                           k % st.marker_every == 0 or last, values, problems, last)
+
+    def advance(self, u: np.ndarray) -> bool:
+        """Integrate every agent over one step with ``u`` held; return whether the state is
+        still finite."""
+        self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
+        self.k += 1
+        return bool(np.isfinite(self.q).all() and np.isfinite(self.p).all())
+
+    def progress_line(self, now: float, every: float = 2.0) -> str | None:
+        """Return a one-line status when ``every`` seconds have passed since the last."""
+        if now - self.t_last_progress < every:
+            return None
+        self.t_last_progress = now
+        sc, m = self.scenario, self.metrics_now
+        return (f'[world] t = {self.k * sc.dt:.2f}/{sc.duration:g} s  step {self.k}/{sc.steps}'
+                f'  {self.k / max(now - self.t_wall0, 1e-9):.1f} steps/s'
+                f'  eta = {m.get("eta", 0.0):.2f}'
+                f'  mismatch = {m.get("velocity_mismatch_max", 0.0):.3g}'
+                f'  missed = {int(self.missed.sum())}')
+
+    # -- the end ------------------------------------------------------------------------------
+
+    def end(self, status: str) -> bool:
+        """End the run with ``status``; return ``False`` when it had ended already."""
+        if self.done:
+            return False
+        self.done = True
+        self.status = status
+        return True
+
+    def result(self, now: float, rejected: dict, duplicates: list[int],
+               bag_error: str | None, bag: str | None) -> SimResult | None:
+        """Return the run so far (``None`` before anything was recorded).
+
+        :param now: the time (for the wall time).
+        :param rejected: the rejected messages by reason (the node's input guard).
+        :param duplicates: agent ids claimed by more than one node.
+        :param bag_error: why recording failed, or ``None``.
+        :param bag: the bag's path (``None``: not recorded).
+        :return: the summary (``docs/outputs.md``) and the recorded time series.
+        """
+        log = self.run_log
+        if not log.rec.count:
+            return None
+        series = log.rec.arrays()
+        summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
+                                self.status)
+        summary.update({
+            'mode': 'lockstep' if self.lockstep else 'realtime',
+            'missed_commands': int(self.missed.sum()),
+            'missed_commands_per_agent': [int(x) for x in self.missed],
+            'rejected_messages': rejected,
+            'leader_events': self.leader.events,
+            'duplicate_agent_ids': duplicates,
+            'bag_error': bag_error,
+            'command_latency_ms': None if self.lockstep else self.latency.summary_ms(),
+            'resent_steps': self.resends,
+            'leader_missed': self.leader_missed,
+            'wall_time_s': round(now - self.t_wall0, 3),
+            'bag': bag,
+        })
+        return SimResult(summary, series)
