@@ -100,7 +100,7 @@ class WorldNode(Node):
         self.lockstep = self.mode == 'lockstep'
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
-        self.spool = SpooledRecorder(self.out)
+        self.spool = SpooledRecorder(self.out, self.get_logger().warning)
         self.stepper = WorldStepper(sc, WorldSettings(self.lockstep, **values),
                                     self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
