@@ -18,7 +18,7 @@ For each layout and N it runs, in fresh processes and one after the other:
     messages; a leader answering each tick; agent hosts answering once they have every
     odometry and the leader's state. Messages are built once and reused; subscriptions
     deliver rclpy messages (the typed API every rclpy node uses by default). A stalled step
-    is offered again by the world node's rule (``WorldNode.resend_step``: after max(0.5 s,
+    is offered again by the world node's rule (``WorldStepper.resent``: after max(0.5 s,
     3x the previous step), then doubling); re-offered steps are counted for every run.
 ``raw floor``
     the same with serialised bytes: every message of the run serialised before the clock
@@ -179,7 +179,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                      for i in range(n)]
 
         def tick(again: bool = False):
-            # The world node's rule for a stalled step (``WorldNode.resend_step``): offered
+            # The world node's rule for a stalled step (``WorldStepper.resent``): offered
             # again after first_resend_wait(the previous step), then with
             # doubling waits, so an overloaded layout is not flooded with copies.
             now = time.monotonic()
@@ -526,7 +526,7 @@ def main(argv: list[str] | None = None) -> int:
                    'discovery': discovery_range(layout, n),
                    'floor_runs': rates(fls), 'raw_floor_runs': rates(raws),
                    'pipeline_runs': rates(fulls), 'no_record_runs': rates(bares),
-                   # Steps offered again (stalled: see WorldNode.resend_step), per run.
+                   # Steps offered again (stalled: see WorldStepper.resent), per run.
                    'resent_steps': {name: [r['resent_steps'] for r in runs] for name, runs in
                                     (('floor', fls), ('raw_floor', raws),
                                      ('pipeline', fulls), ('no_record', bares))},

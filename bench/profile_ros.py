@@ -29,18 +29,19 @@ TIMED = [
     ('flock_swarm.nodes.world', 'WorldNode', 'on_leader_odom', 'world: leader odometry in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'on_leader_accel', 'world: leader accel in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'finish_step', 'world: close the step', 1),
-    ('flock_swarm.nodes.world', 'WorldNode', 'observe', 'record, metrics, telemetry', 2),
+    ('flock_swarm.nodes.stepper', 'WorldStepper', 'observe', 'record, metrics, telemetry', 2),
     ('flock_swarm.core.run', 'RunLog', 'observe', 'time series and run metrics', 3),
-    ('flock_swarm.nodes.world', None, 'disk_graph', 'the r-disk graph', 3),
-    ('flock_swarm.nodes.world', 'WorldNode', '_publish', 'markers and metrics out', 3),
-    ('flock_swarm.nodes.world', 'WorldNode', 'advance', 'integrate', 2),
+    ('flock_swarm.nodes.stepper', None, 'disk_graph', 'the r-disk graph', 3),
+    ('flock_swarm.nodes.markers', 'Telemetry', 'emit', 'markers and metrics out', 2),
+    ('flock_swarm.nodes.stepper', 'WorldStepper', 'advance', 'integrate', 2),
     ('flock_swarm.nodes.world', 'WorldNode', 'publish_states', '/clock and odometry out', 2),
-    ('flock_swarm.nodes.world', 'WorldNode', '_write', 'recording: queue a message', 0),
+    ('flock_swarm.nodes.recording', 'RecordedNode', 'record_message',
+     'recording: queue a message', 0),
     ('flock_swarm.bag.writer', 'BagWriter', 'write_serialized_many', 'recording: write to the bag',
      0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_odom', 'agents: an odometry in', 0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'try_answer', 'agents: answer the step', 1),
-    ('flock_swarm.nodes.agent', 'AgentController', 'command', 'graph and law', 2),
+    ('flock_swarm.nodes.controller', 'AgentController', 'command', 'graph and law', 2),
     ('flock_swarm.nodes.agent', 'AgentNode', 'publish_commands', 'commands out', 2),
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_leader_odom', 'agents: leader odometry in', 0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_leader_accel', 'agents: leader accel in', 0),
@@ -49,7 +50,7 @@ TIMED = [
 
 
 #: Rows of the recording, timed inside the handlers above them (not added to their sum).
-RECORDING = ('_write', 'write_serialized_many')
+RECORDING = ('record_message', 'write_serialized_many')
 
 
 def instrument(totals: dict) -> None:

@@ -587,7 +587,7 @@ def recompute(run: RunData, record_every: int | None = None,
     Every complete step updates the whole-run metrics from its r-disk edges
     (:meth:`RunMetrics.update_from_edges`: minimum distance, collision pairs); every
     ``record_every``-th step and the last are recorded with :func:`step_metrics`, exactly as
-    in ``WorldNode.observe`` (and ``sim`` for r-disk scenarios).
+    in ``WorldStepper.observe`` (and ``sim`` for r-disk scenarios).
 
     :param run: the run.
     :param record_every: subsampling of the series (default: the scenario's).

@@ -25,7 +25,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.node import Node
 
 from flock_swarm.analyze import main as analyze_main
-from flock_swarm.nodes import controller as controller_module
 from flock_swarm.nodes import stepper as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.dynamics import LeaderState
@@ -37,6 +36,7 @@ from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
+from broken_law import nan_command_for
 from conftest import start_nodes, wait_for
 from ros_messages import make_accel, make_odometry
 
@@ -160,14 +160,7 @@ def test_non_finite_command_is_published_as_zero(tmp_path, ros_domain, monkeypat
     """A law that returns NaN for agent 1 at every step: the agent node publishes a zero
     command for it (counted, logged once) instead of one the world would reject, so the
     world misses no command and records agent 1's input as zero."""
-    real_control = controller_module.group_control
-
-    def nan_for_agent_1(law, ids, *args):
-        u = real_control(law, ids, *args)
-        u[list(ids).index(1)] = math.nan
-        return u
-
-    monkeypatch.setattr(controller_module, 'group_control', nan_for_agent_1)
+    nan_command_for(monkeypatch, 1)
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
                                            'record_every=1'])
     with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:

@@ -16,11 +16,11 @@ from flock_swarm.core.dynamics import LeaderState, VirtualLeader, step_agents
 from flock_swarm.core.protocols import swarm_control
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import realize
-from flock_swarm.nodes import controller as controller_module
 from flock_swarm.nodes.controller import AgentController
 from flock_swarm.nodes.leader_watch import LeaderWatch
 from flock_swarm.nodes.stepper import WorldSettings, WorldStepper
 from flock_swarm.scenarios import load
+from broken_law import nan_command_for
 
 LOG = logging.getLogger('test_stepper')
 
@@ -42,7 +42,7 @@ def leader_at(sc, k: int) -> LeaderState:
 def started(sc, **settings) -> WorldStepper:
     """Return a lockstep stepper created at t = 0, started and with step 0 open at t = 0."""
     st = WorldStepper(sc, WorldSettings(start_timeout=0.0, **settings), LOG, now=0.0)
-    st.start(0.0)
+    assert st.tick(0.0, lambda: True) == 'begin' and st.started
     st.begin_step(0.0)
     return st
 
@@ -74,9 +74,9 @@ def test_a_step_is_assembled_and_a_missing_command_zeroed_after_the_timeout(capl
         assert st.command(i, 0, u_in[i], 0.1) is False
     give_leader(st, leader_at(sc, 0), 0, 0.1)
     assert not st.complete()
-    assert st.due(0.4) is None
-    assert st.due(0.5) == 'resend'
-    assert st.due(2.0) == 'timeout'
+    assert st.tick(0.4, lambda: True) is None
+    assert st.tick(0.5, lambda: True) == 'resend' and st.resends == 1
+    assert st.tick(2.0, lambda: True) == 'timeout'
     with caplog.at_level(logging.WARNING, logger=LOG.name):
         obs = st.close_step(True, 2.0)
     assert 'no command from agent(s) [3]' in caplog.text
@@ -124,13 +124,30 @@ def test_resend_waits_back_off_once_a_step_has_finished():
     give_leader(st, leader_at(sc, 0), 0, 1.0)
     st.advance(st.close_step(False, 1.0).u)
     st.begin_step(1.0)
-    assert st.resend_wait == 3.0 and st.due(3.9) is None and st.due(4.0) == 'resend'
-    st.resent(4.0)
+    assert st.resend_wait == 3.0 and st.tick(3.9, lambda: True) is None
+    assert st.tick(4.0, lambda: True) == 'resend'
     assert st.resend_at == 10.0
     st.resent(10.0)
     assert st.resend_at == 22.0
     short = started(sc, step_timeout=0.3)
     assert short.resend_at == 0.15
+
+
+def test_the_start_waits_for_everybody_or_the_start_timeout(caplog):
+    """Nobody there: no start before the start timeout (5 s), then a start with a warning;
+    step 0 waits out what is left of the start timeout, later steps the step timeout."""
+    sc = small()
+    st = WorldStepper(sc, WorldSettings(start_timeout=5.0), LOG, now=0.0)
+    assert st.tick(4.9, lambda: False) is None and not st.started
+    with caplog.at_level(logging.WARNING, logger=LOG.name):
+        assert st.tick(5.0, lambda: False) == 'begin'
+    assert 'start timeout: starting without every agent or the leader' in caplog.text
+    st.begin_step(5.0)
+    assert st.deadline == 7.0
+    early = WorldStepper(sc, WorldSettings(start_timeout=5.0), LOG, now=0.0)
+    assert early.tick(1.0, lambda: True) == 'begin'
+    early.begin_step(1.0)
+    assert early.deadline == 5.0
 
 
 def test_the_leader_lost_and_back(caplog):
@@ -296,14 +313,7 @@ def test_controller_realtime_answers_from_the_latest_inputs():
 def test_controller_publishes_zero_for_a_non_finite_command(monkeypatch, caplog):
     """A law returning NaN for agent 1 gives it a zero command, counted at every step and
     logged once; the other agent's command is untouched."""
-    real_control = controller_module.group_control
-
-    def nan_for_agent_1(law, ids, *args):
-        u = real_control(law, ids, *args)
-        u[list(ids).index(1)] = np.nan
-        return u
-
-    monkeypatch.setattr(controller_module, 'group_control', nan_for_agent_1)
+    nan_command_for(monkeypatch, 1)
     sc = small()
     real = realize(sc)
     ctrl = AgentController(sc, [1, 2], LOG, now=0.0)

@@ -1,9 +1,11 @@
-"""RViz / Foxglove markers and diagnostic metrics of the swarm (message building only).
+"""RViz / Foxglove markers and diagnostic metrics of the swarm.
 
 :func:`swarm_markers` builds the markers as rclpy messages; :func:`swarm_markers_cdr`
 writes the same message serialised (tested equal), at a fraction of the cost, and is what
-the world publishes.
+the world publishes, with the metrics, through :class:`Telemetry`.
 """
+
+import json
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -13,6 +15,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from flock_swarm.core.graphs import EdgeList
+from flock_swarm.nodes.common import FRAME, MARKERS, METRICS, TELEMETRY_QOS
 from flock_swarm.nodes.wire import CdrWriter
 
 UNINFORMED = ColorRGBA(r=0.2, g=0.45, b=0.9, a=1.0)
@@ -151,3 +154,37 @@ def metrics_message(values: dict[str, float | int | str], stamp: Time, level: in
     out.header.stamp = stamp
     out.status = [status]
     return out
+
+
+class Telemetry:
+    """The markers and ``/swarm/metrics`` of the steps the world observes, published and
+    recorded (the world is a :class:`~flock_swarm.nodes.recording.RecordedNode`)."""
+
+    def __init__(self, node, radius: float, informed: np.ndarray) -> None:
+        """Create the two publishers on ``node``.
+
+        :param node: the world node (its ``clock`` stamps the messages).
+        :param radius: the interaction radius (the markers' scale).
+        :param informed: which agents are informed (their colour).
+        """
+        self.node, self.radius, self.informed = node, radius, informed
+        self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
+        self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
+
+    def emit(self, obs, rejected: dict) -> None:
+        """Publish the markers and metrics due for an observed step.
+
+        :param obs: the :class:`~flock_swarm.nodes.stepper.Observation`.
+        :param rejected: the messages rejected so far, by reason (a metrics value).
+        """
+        node, clock = self.node, self.node.clock
+        t_ns = clock.ns(obs.k)
+        if obs.markers:
+            node.publish_recorded(self.marker_pub, swarm_markers_cdr(
+                obs.q, obs.p, obs.leader.q, self.informed, obs.edges, t_ns, FRAME,
+                0.1 * self.radius), t_ns)
+        if obs.metrics is not None:
+            values = dict(obs.metrics, rejected_messages=json.dumps(rejected))
+            node.publish_recorded(self.metrics_pub, metrics_message(
+                values, clock.stamp(obs.k), WARN if obs.problems else OK,
+                ', '.join(obs.problems) or 'ok'), t_ns)

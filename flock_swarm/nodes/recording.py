@@ -1,8 +1,8 @@
 """Where the world's messages go besides the wire: sinks, and the bag as one of them.
 
-The world hands every message it publishes or receives to each of its sinks as
-``write(topic, data, t_ns)`` (the serialised bytes, the simulation time of their step);
-:class:`BagSink` queues them and writes them to the MCAP bag once a step.
+The world (a :class:`RecordedNode`) hands every message it publishes or receives to each of
+its sinks as ``write(topic, data, t_ns)`` (the serialised bytes, the simulation time of their
+step); :class:`BagSink` queues them and writes them to the MCAP bag once a step.
 """
 
 import json
@@ -15,12 +15,16 @@ from typing import Callable, Protocol
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import Realization, Scenario
+from flock_swarm.nodes.common import LOCKSTEP_QOS
+from flock_swarm.nodes.wire import MalformedMessage
 from flock_swarm.outputs import json_text
 
 
@@ -95,6 +99,10 @@ class BagSink:
         # Messages waiting for the bag: (topic, data, t_ns), written once a step.
         self.records: list[tuple[str, bytes, int]] = []
 
+    def __str__(self) -> str:
+        """Return ``the bag PATH`` (for log lines)."""
+        return f'the bag {self.path}'
+
     def add_topic(self, name: str, msg_type: type, qos) -> None:
         """Add a topic (its schema and QoS) to the bag."""
         if self.bag is not None:
@@ -146,3 +154,61 @@ class BagSink:
             except OSError as exc:
                 self.error = f'{exc.strerror or exc} ({self.path})'
                 raise
+
+
+class RecordedNode(Node):
+    """A node whose publications and subscriptions also go to its sinks, as the same bytes.
+
+    A subclass sets ``clock`` (a :class:`~flock_swarm.nodes.common.StepClock`), ``guard``
+    (an :class:`~flock_swarm.nodes.guard.InputGuard`) and ``k`` (the open step) before it
+    subscribes, and fills ``sinks`` before it creates its topics.
+    """
+
+    def __init__(self, name: str, **kwargs) -> None:
+        """Create the node, without sinks yet (``kwargs``: :class:`rclpy.node.Node`'s)."""
+        super().__init__(name, **kwargs)
+        self.sinks: list[Sink] = []
+
+    def recorded_publisher(self, msg_type, topic: str, qos):
+        """Create a publisher whose topic every sink knows."""
+        pub = self.create_publisher(msg_type, topic, qos)
+        for sink in self.sinks:
+            sink.add_topic(pub.topic_name, msg_type, qos)
+        return pub
+
+    def publish_recorded(self, pub, msg, t_ns: int) -> None:
+        """Publish ``msg`` (a message, or its bytes) and record it: the same bytes for both."""
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        pub.publish(data)
+        self.record_message(pub.topic_name, data, t_ns)
+
+    def record_message(self, topic: str, data: bytes, t_ns: int) -> None:
+        """Hand a serialised message of simulation time ``t_ns`` [ns] to every sink."""
+        for sink in self.sinks:
+            sink.write(topic, data, t_ns)
+
+    def recorded_subscription(self, msg_type, topic: str, decode: Callable,
+                              handler: Callable) -> str:
+        """Subscribe to ``topic``; record each message as received, then hand it on.
+
+        The subscription takes the serialised bytes, so the bag stores what came over the
+        wire (faulty messages included) without serialising it again; ``handler`` gets
+        ``decode(data)`` (:mod:`flock_swarm.nodes.wire`: its first item is the stamp [ns]).
+        Bytes that are no message of the type are recorded at the open step and rejected
+        (``malformed``). Return the resolved topic name.
+        """
+        def on_data(data: bytes) -> None:
+            try:
+                msg = decode(data)
+            except MalformedMessage as exc:
+                self.record_message(name, data, self.clock.ns(self.k))
+                self.guard.reject(name, 'malformed', str(exc))
+                return
+            self.record_message(name, data, self.clock.ns(max(self.clock.step_at(msg[0]), 0)))
+            handler(msg)
+
+        name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
+                                        raw=True).topic_name
+        for sink in self.sinks:
+            sink.add_topic(name, msg_type, LOCKSTEP_QOS)
+        return name

@@ -13,9 +13,11 @@ import bisect
 import json
 import time
 from dataclasses import dataclass
+from typing import Any, Callable
 import numpy as np
 
 from flock_swarm.core.dynamics import LeaderState, step_agents
+from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.run import Recorder, RunLog, SimResult, build_summary
@@ -108,6 +110,36 @@ class WorldSettings:
     staleness: float = 0.5
     marker_every: int = 10
     metrics_every: int = 10
+
+    @classmethod
+    def declare(cls, ask: Callable[[str, Any, str], Any], lockstep: bool) -> 'WorldSettings':
+        """Return the settings read as parameters.
+
+        :param ask: ``ask(key, default, description)`` returns a parameter's value (the
+            node declares it).
+        :param lockstep: the mode.
+        :raises ScenarioError: naming the key of an invalid value.
+        """
+        values = {}
+        for key, (what, ok) in SETTING_RULES.items():
+            values[key] = value = ask(key, getattr(cls, key), what)
+            if not ok(value):
+                raise ScenarioError(key, f'invalid value {value!r}')
+        return cls(lockstep, **values)
+
+
+#: The description of each setting and the check its value must pass.
+SETTING_RULES = {
+    'step_timeout': ('lockstep: seconds to wait for commands before a missing agent gets a '
+                     'zero command', lambda v: v > 0),
+    'start_timeout': ('lockstep: seconds to wait for agents and leader to appear and answer '
+                      'step 0 before starting anyway', lambda v: v >= 0),
+    'marker_every': ('publish markers every N steps', lambda v: v >= 1),
+    'metrics_every': ('publish metrics every N steps', lambda v: v >= 1),
+    'staleness': ('realtime: seconds a held command (or the leader state) stays valid; an '
+                  'older command counts as missing (zero), an older leader state as lost',
+                  lambda v: v > 0),
+}
 
 
 @dataclass
@@ -241,9 +273,30 @@ class WorldStepper:
 
     # -- lockstep -----------------------------------------------------------------------------
 
-    def start_due(self, now: float) -> bool:
-        """Return whether the start timeout is over."""
-        return now - self.t_created >= self.settings.start_timeout
+    def tick(self, now: float, ready: Callable[[], bool]) -> str | None:
+        """Return what the lockstep timer must do at ``now``.
+
+        :param ready: whether every agent and the leader are there (asked before the start).
+        :return: ``'begin'`` (the run starts: open step 0, once everybody is there or the
+            start timeout is over), ``'timeout'`` (close the open step), ``'resend'`` (offer
+            it again: :meth:`resent` was called) or ``None``.
+        """
+        if self.done:
+            return None
+        if not self.started:
+            is_ready = ready()
+            if not is_ready and now - self.t_created < self.settings.start_timeout:
+                return None
+            if not is_ready:
+                self.log.warning('start timeout: starting without every agent or the leader')
+            self.start(now)
+            return 'begin'
+        if now >= self.deadline:
+            return 'timeout'
+        if now >= self.resend_at:
+            self.resent(now)
+            return 'resend'
+        return None
 
     def start(self, now: float) -> None:
         """Start the run (the wall time of the summary counts from here)."""
@@ -262,12 +315,6 @@ class WorldStepper:
             self.deadline = max(self.deadline, self.t_created + self.settings.start_timeout)
         self.resend_wait = first_resend_wait(self.last_step_s, self.settings.step_timeout)
         self.resend_at = now + self.resend_wait
-
-    def due(self, now: float) -> str | None:
-        """Return what the open step needs at ``now``: ``'timeout'``, ``'resend'`` or ``None``."""
-        if now >= self.deadline:
-            return 'timeout'
-        return 'resend' if now >= self.resend_at else None
 
     def resent(self, now: float) -> None:
         """Note that the open step was offered again; schedule the next offer.

@@ -14,53 +14,34 @@ in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; t
 :class:`~flock_swarm.nodes.stepper.WorldStepper` (no ROS); this node is its plumbing.
 """
 
-import json
 import sys
 import time
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
-from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
-from visualization_msgs.msg import MarkerArray
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, FRAME, LEADER_ACCEL,
-                                      LEADER_ODOM, LOCKSTEP_QOS, MARKERS, METRICS,
-                                      TELEMETRY_QOS, StepClock, agent_hosts, claimants,
-                                      cmd_topic, declare, declare_common, load_scenario,
-                                      odom_topic, run_node, timer_period)
+from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
+                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
+                                      claimants, cmd_topic, declare, declare_common,
+                                      load_scenario, odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
-from flock_swarm.nodes.markers import OK, WARN, metrics_message, swarm_markers_cdr
-from flock_swarm.nodes.recording import BagSink, Sink
+from flock_swarm.nodes.markers import Telemetry
+from flock_swarm.nodes.recording import BagSink, RecordedNode
 from flock_swarm.nodes.stepper import Observation, WorldSettings, WorldStepper
-from flock_swarm.nodes.wire import (MalformedMessage, OdometryEncoder, decode_accel,
-                                    decode_odometry, encode_clock)
+from flock_swarm.nodes.wire import OdometryEncoder, decode_accel, decode_odometry, encode_clock
 from flock_swarm.outputs import SpooledRecorder, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
     'expect_subscribers', 'staleness', 'bag_max_size', 'bag_max_duration'}
-#: The world's own parameters: default, description, and the check a value must pass.
-SETTINGS = {
-    'step_timeout': (2.0, 'lockstep: seconds to wait for commands before a missing agent '
-                     'gets a zero command', lambda v: v > 0),
-    'start_timeout': (30.0, 'lockstep: seconds to wait for agents and leader to appear and '
-                      'answer step 0 before starting anyway', lambda v: v >= 0),
-    'marker_every': (10, 'publish markers every N steps', lambda v: v >= 1),
-    'metrics_every': (10, 'publish metrics every N steps', lambda v: v >= 1),
-    'staleness': (0.5, 'realtime: seconds a held command (or the leader state) stays valid; '
-                  'an older command counts as missing (zero), an older leader state as lost',
-                  lambda v: v > 0),
-}
 
 
-class WorldNode(Node):
+class WorldNode(RecordedNode):
     """Integrates the swarm, publishes odometry and ``/clock``, records everything."""
 
     def __init__(self, progress: Callable[[str], None] | None = None, **kwargs) -> None:
@@ -86,23 +67,20 @@ class WorldNode(Node):
         for key, value in zip(('bag_max_size', 'bag_max_duration'), split.values()):
             if not 0 <= value < float('inf'):
                 raise ScenarioError(key, f'invalid value {value!r}')
-        values = {}
-        for key, (default, what, ok) in SETTINGS.items():
-            values[key] = declare(self, key, default, what)
-            if not ok(values[key]):
-                raise ScenarioError(key, f'invalid value {values[key]!r}')
+        settings = WorldSettings.declare(
+            lambda key, default, what: declare(self, key, default, what),
+            self.get_parameter('mode').value == 'lockstep')
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
                                           'subscribers each odometry topic must have before '
                                           'the start (-1: one per node hosting agents)')
         sc = self.scenario = load_scenario(self, WORLD_PARAMS)
         self.progress = progress
         self.mode = self.get_parameter('mode').value
-        self.lockstep = self.mode == 'lockstep'
+        self.lockstep = settings.lockstep
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
         self.spool = SpooledRecorder(self.out, self.get_logger().warning)
-        self.stepper = WorldStepper(sc, WorldSettings(self.lockstep, **values),
-                                    self.get_logger(), recorder=self.spool)
+        self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
         self.duplicates: set[int] = set()
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
@@ -113,24 +91,24 @@ class WorldNode(Node):
         except OSError as exc:
             raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
                 from None
-        self.sinks: list[Sink] = [] if self.bag is None else [self.bag]
-        self.clock_pub = self._publisher(Clock, CLOCK, CLOCK_QOS)
-        self.odom_pubs = [self._publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
+        self.sinks = [] if self.bag is None else [self.bag]
+        self.clock_pub = self.recorded_publisher(Clock, CLOCK, CLOCK_QOS)
+        self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(sc.n_agents)]
         self.odom_encoders = [OdometryEncoder(f'agent_{i}') for i in range(sc.n_agents)]
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
-        # The current step's serialised /clock and odometry, offered again by resend_step.
+        # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
-        self.marker_pub = self._publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
-        self.metrics_pub = self._publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
-        self.cmd_topics = [self._subscribe(AccelStamped, cmd_topic(i), decode_accel,
-                                           lambda msg, i=i: self.on_command(i, msg))
+        self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed)
+        subscribe = self.recorded_subscription
+        self.cmd_topics = [subscribe(AccelStamped, cmd_topic(i), decode_accel,
+                                     lambda msg, i=i: self.on_command(i, msg))
                            for i in range(sc.n_agents)]
         self.create_timer(1.0, self.check_claims)
-        self.leader_odom_topic = self._subscribe(Odometry, LEADER_ODOM, decode_odometry,
-                                                 self.on_leader_odom)
-        self.leader_accel_topic = self._subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
-                                                  self.on_leader_accel)
+        self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
+                                           self.on_leader_odom)
+        self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
+                                            self.on_leader_accel)
         self.timer = self.create_timer(0.01, self.on_lockstep_timer) if self.lockstep else \
             self.create_timer(timer_period(self, sc.dt), self.on_realtime_timer)
 
@@ -143,47 +121,6 @@ class WorldNode(Node):
                          doc='Why recording failed, or ``None``.')
 
     # -- messages in and out ------------------------------------------------------------------
-
-    def _publisher(self, msg_type, topic: str, qos):
-        pub = self.create_publisher(msg_type, topic, qos)
-        for sink in self.sinks:
-            sink.add_topic(pub.topic_name, msg_type, qos)
-        return pub
-
-    def _publish(self, pub, msg, t_ns: int) -> None:
-        """Publish ``msg`` (a message, or its bytes) and record it: the same bytes for both."""
-        data = msg if isinstance(msg, bytes) else serialize_message(msg)
-        pub.publish(data)
-        self._write(pub.topic_name, data, t_ns)
-
-    def _write(self, topic: str, data: bytes, t_ns: int) -> None:
-        for sink in self.sinks:
-            sink.write(topic, data, t_ns)
-
-    def _subscribe(self, msg_type, topic: str, decode: Callable, handler: Callable) -> str:
-        """Subscribe to ``topic``; record each message as received, then hand it on.
-
-        The subscription takes the serialised bytes, so the bag stores what came over the
-        wire (faulty messages included) without serialising it again; ``handler`` gets
-        ``decode(data)`` (:mod:`flock_swarm.nodes.wire`: its first item is the stamp [ns]).
-        Bytes that are no message of the type are recorded at the open step and rejected
-        (``malformed``). Return the resolved topic name.
-        """
-        def on_data(data: bytes) -> None:
-            try:
-                msg = decode(data)
-            except MalformedMessage as exc:
-                self._write(name, data, self.clock.ns(self.k))
-                self.guard.reject(name, 'malformed', str(exc))
-                return
-            self._write(name, data, self.clock.ns(max(self.clock.step_at(msg[0]), 0)))
-            handler(msg)
-
-        name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
-                                        raw=True).topic_name
-        for sink in self.sinks:
-            sink.add_topic(name, msg_type, LOCKSTEP_QOS)
-        return name
 
     def on_command(self, i: int, msg: tuple) -> None:
         """Check agent ``i``'s command ``(stamp_ns, frame_id, linear)`` and hand it on."""
@@ -244,25 +181,12 @@ class WorldNode(Node):
             sink.flush()
         self.step_bytes = sent
 
-    def emit(self, obs: Observation) -> None:
-        """Publish (and record) the markers and metrics of a step; tell the progress."""
-        t_ns, radius = self.clock.ns(obs.k), self.scenario.law.radius
-        if obs.markers:
-            self._publish(self.marker_pub, swarm_markers_cdr(
-                obs.q, obs.p, obs.leader.q, self.stepper.real.agents.informed, obs.edges,
-                t_ns, FRAME, 0.1 * radius), t_ns)
-        if obs.metrics is not None:
-            values = dict(obs.metrics, rejected_messages=json.dumps(self.guard.counts()))
-            self._publish(self.metrics_pub, metrics_message(
-                values, self.clock.stamp(obs.k), WARN if obs.problems else OK,
-                ', '.join(obs.problems) or 'ok'), t_ns)
+    def go_on(self, obs: Observation) -> None:
+        """After a step observed: finish after the last, else integrate (or diverge)."""
+        self.telemetry.emit(obs, self.guard.counts())
         line = self.stepper.progress_line(time.monotonic())
         if line is not None:
             (self.progress or self.get_logger().info)(line)
-
-    def go_on(self, obs: Observation) -> None:
-        """After a step observed: finish after the last, else integrate (or diverge)."""
-        self.emit(obs)
         if obs.last:
             self.finish('completed')
         elif not self.done and not self.stepper.advance(obs.u):
@@ -287,25 +211,13 @@ class WorldNode(Node):
 
     def on_lockstep_timer(self) -> None:
         """Start when everybody is there; turn an expired step into zero commands."""
-        st = self.stepper
-        if st.done:
-            return
-        now = time.monotonic()
-        if not st.started:
-            ready = self.ready_to_start()
-            if ready or st.start_due(now):
-                if not ready:
-                    self.get_logger().warning('start timeout: starting without every agent '
-                                              'or the leader')
-                st.start(now)
-                self.begin_step()
-            return
-        due = st.due(now)
-        if due == 'timeout':
+        due = self.stepper.tick(time.monotonic(), self.ready_to_start)
+        if due == 'begin':
+            self.begin_step()
+        elif due == 'timeout':
             self.finish_step(timed_out=True)
         elif due == 'resend':
             # Offered again, not recorded again (see WorldStepper.resent).
-            st.resent(time.monotonic())
             for pub, data in self.step_bytes:
                 pub.publish(data)
 
@@ -361,8 +273,8 @@ class WorldNode(Node):
         for sink in self.sinks:
             try:
                 sink.close()
-            except OSError:
-                self.get_logger().error(f'cannot finalise the bag: {self.bag_error}; its '
+            except OSError as exc:
+                self.get_logger().error(f'cannot finalise {sink}: {exc.strerror or exc}; its '
                                         'complete chunks stay readable')
         if result is None:
             self.spool.discard()
@@ -388,17 +300,11 @@ def main(args: list[str] | None = None) -> int:
 
     The exit status is 2 for invalid configuration, 1 when recording failed, else 0.
     """
-    built = []
-
-    def factory() -> WorldNode:
-        built.append(WorldNode())
-        return built[0]
-
-    status = run_node('world', factory, args, until=lambda node: node.done)
-    if status == 0 and built and (built[0].status == 'recording_failed'
-                                  or built[0].bag_error):
-        return 1
-    return status
+    built: list[WorldNode] = []
+    status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
+                      until=lambda node: node.done)
+    failed = built and (built[0].status == 'recording_failed' or built[0].bag_error)
+    return 1 if status == 0 and failed else status
 
 
 if __name__ == '__main__':
