@@ -147,11 +147,15 @@ class SpooledRecorder(Recorder):
         table = parts[0] if len(parts) == 1 else np.concatenate(parts)
         return {key: np.ascontiguousarray(table[key]) for key in self._record.names}
 
-    def discard(self) -> None:
-        """Close and remove the spool (after ``timeseries.npz`` is written)."""
+    def close(self) -> None:
+        """Close the file, keeping it (when ``timeseries.npz`` could not be written)."""
         if self._stream is not None:
             self._stream.close()
             self._stream = None
+
+    def discard(self) -> None:
+        """Close and remove the spool (after ``timeseries.npz`` is written)."""
+        self.close()
         if self._spool is not None:
             shutil.rmtree(self._spool, ignore_errors=True)
             self._spool = None

@@ -286,6 +286,7 @@ class WorldNode(RecordedNode):
             self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
                                     f'{exc.strerror or exc}; the time series stays in '
                                     f'{self.spool.spool}')
+            self.spool.close()
         else:
             self.spool.discard()
 
