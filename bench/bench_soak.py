@@ -13,7 +13,9 @@ with ``--processes`` each node its own process) for the given wall time at real 
 - command latency percentiles: from the world publishing a step's odometry to each
   agent's command for it arriving (the world's constant-memory histogram);
 - memory over time: the resident set size of the swarm's process (world, leader and agents;
-  with ``--processes`` the world's) every 10 s (VmRSS).
+  with ``--processes`` the world's) every 10 s (VmRSS), its value at the start (the first
+  sample, 5 s in) and at the end (the last sample), and its growth per minute after the
+  first minute (a least-squares slope over the samples, so one allocator step weighs little).
 """
 
 import argparse
@@ -25,6 +27,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 #: Domain id of the soak (away from the test suite's 1-200 and bench_ros's 220).
 DOMAIN = 221
@@ -90,6 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     wall = summary['wall_time_s']
     nominal = int(wall / summary['dt'])
     after_warmup = [m for t, m in samples if t >= 60.0] or [m for _, m in samples]
+    warm = [(t, m) for t, m in samples if t >= 60.0]
+    slope = None
+    if len(warm) >= 2:
+        # MiB per second, fitted, then per minute.
+        slope = round(60.0 * float(np.polyfit(*zip(*warm), 1)[0]), 3)
     report = {
         'command': cmd, 'status': summary['status'], 'steps': summary['steps'],
         'wall_time_s': wall, 'missed_steps': max(0, nominal - summary['steps']),
@@ -100,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
                     'after_1_min': after_warmup[0] if after_warmup else None,
                     'max': max(m for _, m in samples) if samples else None,
                     'last': samples[-1][1] if samples else None},
+        'rss_growth_mib_per_min': slope,
         'rss_samples': samples,
     }
     lat = report['command_latency_ms']
@@ -109,8 +119,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f'command latency [ms]: p50 {lat["p50"]}, p90 {lat["p90"]}, p99 {lat["p99"]}, '
           f'max {lat["max"]} ({lat["count"]} commands)', flush=True)
     rss = report['rss_mib']
-    print(f'RSS [MiB]: first {rss["first"]}, after 1 min {rss["after_1_min"]}, '
-          f'max {rss["max"]}, last {rss["last"]}', flush=True)
+    print(f'RSS [MiB]: start {rss["first"]}, after 1 min {rss["after_1_min"]}, '
+          f'max {rss["max"]}, end {rss["last"]}; growth after 1 min '
+          f'{report["rss_growth_mib_per_min"]} MiB/min', flush=True)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1))

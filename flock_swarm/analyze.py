@@ -12,7 +12,7 @@ are analysed with ``--radius``, ``--eta-tolerance`` and ``--collision-distance``
 """
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
@@ -55,6 +55,11 @@ ODOMETRY = 'nav_msgs/msg/Odometry'
 ACCEL = 'geometry_msgs/msg/AccelStamped'
 DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
 _AGENT_TOPIC = re.compile(r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel)$')
+#: What ``analyze`` needs from a bag, in one sentence (said with every missing-topic error).
+NEEDS = ('analyze needs /agent_<i>/odom (nav_msgs/msg/Odometry) of every agent; it also '
+         'uses, when present, /agent_<i>/cmd_accel and /leader/accel '
+         '(geometry_msgs/msg/AccelStamped), /leader/odom (nav_msgs/msg/Odometry) and '
+         '/swarm/metrics (diagnostic_msgs/msg/DiagnosticArray)')
 
 Progress = Callable[[str], None]
 
@@ -198,7 +203,8 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
     :param n_agents: the number of agents the scenario says (``None``: from the topics).
     :return: the topics.
     :raises AnalyzeError: without agent odometry, with agents missing, or with topics of
-        several namespaces.
+        several namespaces; the message names the missing topics and what is needed
+        (:data:`NEEDS`).
     """
     found: dict[str, dict[str, dict[int, str]]] = {}
     for name, type_name in topics.items():
@@ -210,17 +216,19 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
     found = {ns: kinds for ns, kinds in found.items() if kinds['odom']}
     if not found:
         raise AnalyzeError('the bag has no /agent_<i>/odom topics of type nav_msgs/msg/Odometry'
-                           '; it is not a recording of a flock_swarm swarm')
+                           f' (it has {_topic_list(topics)}); {NEEDS}')
     if len(found) > 1:
         raise AnalyzeError('the bag holds swarms in several namespaces '
                            f'({", ".join(repr(ns) for ns in sorted(found))}); not supported')
     ns, kinds = next(iter(found.items()))
     odom = kinds['odom']
     n = n_agents if n_agents is not None else max(odom) + 1
-    missing = [i for i in range(n) if i not in odom]
+    missing = [f'{ns}/agent_{i}/odom' for i in range(n) if i not in odom]
     if missing:
-        raise AnalyzeError(f'the bag has no odometry of agent(s) {_id_list(missing)} '
-                           f'(expected agents 0..{n - 1})')
+        wrong = [f'{name} is {topics[name]}' for name in missing if name in topics]
+        typed = f' ({"; ".join(wrong)})' if wrong else ''
+        raise AnalyzeError(f'the bag lacks required topic(s) {_topic_list(missing)}{typed} '
+                           f'(expected agents 0..{n - 1}); {NEEDS}')
     extra = sorted(i for i in odom if i >= n)
     if extra:
         raise AnalyzeError(f'the bag has odometry of agent(s) {_id_list(extra)}, but its '
@@ -234,6 +242,30 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
                        {i: name for i, name in kinds['cmd_accel'].items() if i < n},
                        topic('leader/odom', ODOMETRY), topic('leader/accel', ACCEL),
                        topic('swarm/metrics', DIAGNOSTICS))
+
+
+def optional_topics_missing(topics: SwarmTopics) -> list[str]:
+    """Return the topics ``analyze`` uses when present that a bag lacks.
+
+    :param topics: the swarm's topics in the bag.
+    :return: names such as ``/leader/accel`` or ``/agent_<i>/cmd_accel of agent(s) 1, 2``.
+    """
+    ns = topics.namespace
+    missing = [f'{ns}/{suffix}' for suffix, name in (
+        ('leader/odom', topics.leader_odom), ('leader/accel', topics.leader_accel),
+        ('swarm/metrics', topics.metrics)) if name is None]
+    no_cmd = [i for i in range(len(topics.odom)) if i not in topics.cmd]
+    if no_cmd:
+        missing.insert(0, f'{ns}/agent_<i>/cmd_accel of agent(s) {_id_list(no_cmd)}')
+    return missing
+
+
+def _topic_list(names: Iterable[str]) -> str:
+    names = list(names)
+    if not names:
+        return 'no topics'
+    shown = ', '.join(names[:8])
+    return shown + (f' and {len(names) - 8} more' if len(names) > 8 else '')
 
 
 def _id_list(ids: list[int]) -> str:
@@ -291,6 +323,10 @@ def load_run(bag: Path | str, *, radius: float | None = None,
     notes: list[str] = []
     sc, meta = _stored_scenario(reader, notes)
     topics = swarm_topics(reader.topics(), sc.n_agents if sc is not None else None)
+    absent = optional_topics_missing(topics)
+    if absent:
+        notes.append(f'optional topic(s) not in the bag: {"; ".join(absent)} (the odometry '
+                     'of every agent is all analyze requires)')
     if sc is None:
         if radius is None:
             raise AnalyzeError('the bag has no flock_swarm scenario metadata: give --radius '

@@ -366,6 +366,18 @@ def other_ros_domain(ros_domain: int) -> int:
 
 
 @pytest.fixture
+def ros_context(ros_domain: int):
+    """Return an initialised ``rclpy`` context of its own on the test's domain id (shut down
+    after the test), for nodes a test creates itself."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
 def flock_swarm_run(tmp_path: Path, ros_domain: int) -> Callable[..., SwarmRun]:
     """Return ``run(scenario, overrides=(), **args)``: :func:`run_swarm` on the test's domain.
 

@@ -707,8 +707,10 @@ def test_chunk_compression(tmp_path, compression):
     assert [msg.clock.sec for _, msg in BagReader(path).decoded()] == list(range(50))
 
 
-def _write_steps(path: Path, batched: bool, steps: int = 120) -> BagWriter:
+def _write_steps(path: Path, batched: bool, steps: int = 120, **options) -> BagWriter:
     """Record ``steps`` lockstep steps of 1 + 3 odometry and 3 commands, as the world does.
+
+    ``options`` go to the writer (split limits).
 
     The messages come from flock_swarm.nodes.wire: rclpy leaves padding bytes uninitialised,
     so its bytes of one message may differ from call to call.
@@ -716,7 +718,7 @@ def _write_steps(path: Path, batched: bool, steps: int = 120) -> BagWriter:
     odom = [OdometryEncoder(f'agent_{i}').encode(0, (float(i + k), 0.0), (0.0, 0.0))
             for k in range(2) for i in range(3)]
     cmd = AccelEncoder().encode(0, (0.0, 0.0))
-    with BagWriter(path, chunk_size=3000) as writer:
+    with BagWriter(path, chunk_size=3000, **options) as writer:
         writer.add_topic('/clock', Clock)
         for i in range(3):
             writer.add_topic(f'/agent_{i}/odom', Odometry)
@@ -773,3 +775,122 @@ def test_batched_writes_misuse(tmp_path):
             writer.write_serialized_many([('/clock', data)], -1)
         writer.write_serialized_many([], 5)
         assert writer.message_counts == {'/clock': 0}
+
+
+# -- split bags ----------------------------------------------------------------------------
+
+#: Time between two steps of :func:`_write_steps` [ns].
+STEP_NS = 20_000_000
+
+
+def split_layout(path: Path) -> tuple[dict, list[Path]]:
+    """Return the bag's metadata and its MCAP files in the order metadata.yaml lists them."""
+    info = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    return info, [path / name for name in info['relative_file_paths']]
+
+
+def file_times(path: Path) -> list[tuple[str, int]]:
+    """The ``(topic, log time)`` of every message of one MCAP file, read by ``mcap``."""
+    with path.open('rb') as stream:
+        return [(channel.topic, message.log_time)
+                for _, channel, message in make_reader(stream).iter_messages()]
+
+
+def test_split_by_size(tmp_path):
+    """Files of just over the limit, each complete; together the whole bag, as written."""
+    one = _write_steps(tmp_path / 'one' / 'bag', batched=True)
+    split = _write_steps(tmp_path / 'split' / 'bag', batched=True, max_bagfile_size=7000)
+    info, files = split_layout(split.path)
+    assert [f.name for f in files] == [f'bag_{k}.mcap' for k in range(len(files))]
+    assert len(files) >= 5 and split.mcap_paths == files
+    assert sorted(split.path.iterdir()) == sorted(files + [split.path / 'metadata.yaml'])
+    # rosbag2's rule: a file is left once it is larger than the limit, so every file but
+    # the last ended above it, and none is empty.
+    assert all(f.stat().st_size > 7000 for f in files[:-1])
+    for path, entry in zip(files, info['files']):
+        times = file_times(path)
+        assert entry['path'] == path.name and entry['message_count'] == len(times) > 0
+        assert entry['starting_time']['nanoseconds_since_epoch'] == min(t for _, t in times)
+        assert entry['duration']['nanoseconds'] == max(t for _, t in times) - min(
+            t for _, t in times)
+    assert info['message_count'] == sum(e['message_count'] for e in info['files'])
+    assert info['message_count'] == 120 * 7
+    whole = BagReader(one.path)
+    assert [(m.topic, m.log_time_ns, m.data) for m in BagReader(split.path).messages()] == \
+        [(m.topic, m.log_time_ns, m.data) for m in whole.messages()]
+    with RosbagsReader(split.path) as reader:
+        assert reader.message_count == 120 * 7
+        assert sorted((c.topic, t) for c, t, _ in reader.messages()) == sorted(
+            (m.topic, m.log_time_ns) for m in whole.messages())
+
+
+def test_split_by_duration_keeps_a_batch_in_one_file(tmp_path):
+    """A file spans at most the limit, the next starts past it; a step is never cut."""
+    split = _write_steps(tmp_path / 'bag', batched=True, steps=100,
+                         max_bagfile_duration=0.25)
+    info, files = split_layout(split.path)
+    # 100 steps of 0.02 s, a file per 13 steps (0 .. 0.24 s after its first): 8 files.
+    assert len(files) == 8
+    starts = []
+    for path in files:
+        times = [t for _, t in file_times(path)]
+        assert max(times) - min(times) <= 250_000_000
+        assert len(times) == 7 * len(set(times))
+        starts.append(min(times))
+    assert all(b - a > 250_000_000 for a, b in zip(starts, starts[1:]))
+
+
+def test_every_file_carries_schemas_channels_and_custom_records(tmp_path):
+    with BagWriter(tmp_path / 'bag', chunk_size=500, max_bagfile_duration=0.1,
+                   custom_metadata={'flock_swarm': {'scenario': 'demo'}}) as writer:
+        writer.add_topic('/clock', Clock)
+        for k in range(40):
+            writer.write('/clock', Clock(clock=Time(sec=k)), k * STEP_NS)
+            if k == 5:
+                writer.add_topic('/late', Odometry)
+                writer.add_metadata('late_record', {'k': '5'})
+            if k >= 5:
+                writer.write('/late', odometry(k * STEP_NS, 'agent_0', k, 0), k * STEP_NS)
+    _, files = split_layout(tmp_path / 'bag')
+    # The first file holds steps 0..5, where the late topic and record came.
+    assert len(files) >= 3 and max(t for _, t in file_times(files[0])) == 5 * STEP_NS
+    for path in files:
+        with path.open('rb') as stream:
+            reader = make_reader(stream)
+            summary = reader.get_summary()
+            records = {record.name: record.metadata for record in reader.iter_metadata()}
+        assert sorted(c.topic for c in summary.channels.values()) == ['/clock', '/late']
+        assert records['flock_swarm'] == {'scenario': 'demo'}
+        assert records['late_record'] == {'k': '5'}
+        assert 'rosbag2' in records
+
+
+def test_abandoned_split_bag_keeps_its_finished_files(tmp_path):
+    """No metadata.yaml: the files are read in split order (bag_10 after bag_9), the
+    finished ones whole, the open one up to its last complete chunk."""
+    path = tmp_path / 'bag'
+    writer = BagWriter(path, chunk_size=500, max_bagfile_size=1000)
+    writer.add_topic('/clock', Clock)
+    for k in range(200):
+        writer.write('/clock', Clock(clock=Time(sec=k)), k * STEP_NS)
+    files = writer.mcap_paths
+    writer.abandon()
+    assert len(files) > 11 and not (path / 'metadata.yaml').exists()
+    finished = sum(len(file_times(file)) for file in files[:-1])
+    reader = BagReader(path)
+    assert reader.files == files
+    assert reader.recovered and files[-1].name in reader.warning
+    secs = [msg.clock.sec for _, msg in reader.decoded()]
+    assert secs == list(range(len(secs))) and finished < len(secs) <= 200
+
+
+@pytest.mark.parametrize('options, message', [
+    ({'max_bagfile_size': -1}, 'max_bagfile_size'),
+    ({'max_bagfile_duration': -0.5}, 'max_bagfile_duration'),
+    ({'max_bagfile_duration': float('nan')}, 'max_bagfile_duration'),
+    ({'max_bagfile_duration': float('inf')}, 'max_bagfile_duration'),
+])
+def test_split_limits_are_checked(tmp_path, options, message):
+    with pytest.raises(ValueError, match=message):
+        BagWriter(tmp_path / 'bag', **options)
+    assert not (tmp_path / 'bag').exists()

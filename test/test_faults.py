@@ -518,6 +518,28 @@ def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_dom
     assert reader.message_counts()['/agent_0/odom'] > 10
 
 
+def test_full_disk_under_the_time_series_keeps_it_in_memory(tmp_path, small_disk, ros_domain,
+                                                            capfd):
+    """The world's spooled time series fills the disk (no bag): the run goes on, the series
+    falls back to memory with one warning, and its every instant equals sim's."""
+    path = resolve_scenario('demo', ['n_agents=4', 'informed.count=2', 'duration=24',
+                                     'record_every=1'], None, tmp_path / 'scenario')
+    sc = parse_scenario(yaml.safe_load(path.read_text()))
+    with InProcessSwarm(path, small_disk / 'run', domain_id=ros_domain,
+                        world_params={'record': False}) as swarm:
+        swarm.spin_until(lambda: swarm.world.done, RUN_TIMEOUT)
+        world = swarm.world
+        assert world.status == 'completed'
+        series = world.result.series
+    # About 300 bytes an instant: the 256 KiB disk fills well before the 1201st instant.
+    assert world.spool.error is not None and 'No space left on device' in world.spool.error
+    assert capfd.readouterr().err.count('keeping it in memory') == 1
+    reference = simulate(sc).series
+    assert series['t'].shape == reference['t'].shape == (sc.steps + 1,)
+    for name in ('t', 'q', 'p', 'u', 'leader_q', 'leader_p', 'informed'):
+        assert_allclose(series[name], reference[name], rtol=0, atol=1e-9, err_msg=name)
+
+
 def test_stop_kills_processes_that_ignore_sigint_on_one_deadline():
     """``stop`` gives every process the same deadline: five stubborn processes are killed
     after ``timeout`` in all (one ``timeout`` each would take five times as long)."""

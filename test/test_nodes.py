@@ -278,6 +278,8 @@ def _stepped(out) -> bool:
     ({}, ['-p', 'out_dir:=/proc/version/run'], 'out_dir'),
     ({}, ['-p', 'max_abs_accel:=0.0'], 'max_abs_accel'),
     ({}, ['-p', 'staleness:=-1.0'], 'staleness'),
+    ({}, ['-p', 'bag_max_size:=-1'], 'bag_max_size'),
+    ({}, ['-p', 'bag_max_duration:=-0.5'], 'bag_max_duration'),
 ])
 def test_world_bad_configuration_is_one_line_exit_2(tmp_path, ros_domain, extra_env, args,
                                                     key):

@@ -492,17 +492,6 @@ def node_scenario(tmp_path_factory) -> Path:
     return path
 
 
-@pytest.fixture
-def ros_context(ros_domain):
-    """Return an initialised ``rclpy`` context of its own on the test's domain id."""
-    import rclpy
-    from rclpy.context import Context
-    context = Context()
-    rclpy.init(context=context, domain_id=ros_domain)
-    yield context
-    rclpy.try_shutdown(context=context)
-
-
 @st.composite
 def node_parameters(draw, kind: str):
     """Draw one to three parameter overrides of a node kind as ``{name: value}``."""

@@ -20,8 +20,6 @@ from geometry_msgs.msg import AccelStamped
 from mcap.writer import Writer
 from nav_msgs.msg import Odometry
 import pytest
-import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -112,14 +110,6 @@ class Listener(Node):
         self.clock.append((msg.clock.sec * 10**9 + msg.clock.nanosec, time.monotonic()))
 
 
-@pytest.fixture
-def context(ros_domain):
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=ros_domain)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
 def spin_until(executor, condition, timeout: float = TIMEOUT) -> bool:
     """Spin until ``condition()`` holds; return False if ``timeout`` passed first."""
     deadline = time.monotonic() + timeout
@@ -174,14 +164,14 @@ def assert_timing(received, recorded, rate: float, tol: float = TIMING_TOL) -> f
 
 
 @pytest.mark.parametrize('rate', [2.0, 0.5])
-def test_replays_selected_topics_in_order_with_scaled_timing(tmp_path, context, rate):
+def test_replays_selected_topics_in_order_with_scaled_timing(tmp_path, ros_context, rate):
     bag = write_bag(tmp_path / 'bag')
-    listener = Listener([A, B, CX], context=context)
+    listener = Listener([A, B, CX], context=ros_context)
     player = Player(bag, rate=rate, topics=[A, B], wait_subscribers=1,
-                    context=context)
+                    context=ros_context)
     try:
         recorded = bag_messages(bag, [A, B])
-        result = play(context, player, listener, len(recorded))
+        result = play(ros_context, player, listener, len(recorded))
         assert result.published == {A: 6, B: 4} and result.passes == 1
         assert result.matched and not result.interrupted
         assert [(t, d) for t, d, _ in listener.received] == [(t, d) for t, d, _ in recorded]
@@ -192,17 +182,17 @@ def test_replays_selected_topics_in_order_with_scaled_timing(tmp_path, context, 
         listener.destroy_node()
 
 
-def test_clock_follows_bag_time_and_replaces_the_recorded_clock(tmp_path, context):
+def test_clock_follows_bag_time_and_replaces_the_recorded_clock(tmp_path, ros_context):
     # The recorded /clock says 999 s: if it were replayed, the listener would see it.
     bag = write_bag(tmp_path / 'bag', clock_values=[999.0] * 5)
     notes = []
     rate, clock_rate = 2.0, 50.0
-    listener = Listener([A], clock=True, context=context)
+    listener = Listener([A], clock=True, context=ros_context)
     player = Player(bag, rate=rate, clock=True, clock_rate=clock_rate, topics=[A],
-                    wait_subscribers=1, say=notes.append, context=context)
+                    wait_subscribers=1, say=notes.append, context=ros_context)
     try:
         assert player.topics == [A]
-        result = play(context, player, listener, len(SCHEDULE[A]))
+        result = play(ros_context, player, listener, len(SCHEDULE[A]))
         assert notes == ['[replay] --clock: the recorded /clock is not replayed; /clock '
                          'follows bag time at 50 Hz']
         ticks = listener.clock
@@ -222,22 +212,22 @@ def test_clock_follows_bag_time_and_replaces_the_recorded_clock(tmp_path, contex
         listener.destroy_node()
 
 
-def test_recorded_clock_is_replayed_without_clock_and_refused_with_it(tmp_path, context):
+def test_recorded_clock_is_replayed_without_clock_and_refused_with_it(tmp_path, ros_context):
     bag = write_bag(tmp_path / 'bag', clock_values=[1.0, 2.0])
     notes = []
-    player = Player(bag, clock=True, say=notes.append, context=context)
+    player = Player(bag, clock=True, say=notes.append, context=ros_context)
     try:
         assert CLOCK_TOPIC not in player.topics
         assert len(notes) == 1 and 'recorded /clock is not replayed' in notes[0]
     finally:
         player.destroy_node()
-    player = Player(bag, context=context)
+    player = Player(bag, context=ros_context)
     try:
         assert CLOCK_TOPIC in player.topics
     finally:
         player.destroy_node()
     with pytest.raises(ReplayError, match='--topics: /clock cannot be replayed with --clock'):
-        Player(bag, clock=True, topics=['/clock', A], context=context)
+        Player(bag, clock=True, topics=['/clock', A], context=ros_context)
 
 
 BAG_TOPICS = ['/clock', '/agent_0/odom', '/agent_1/odom', '/leader/odom', '/swarm/markers']
@@ -278,16 +268,16 @@ class Terminal(io.StringIO):
         return True
 
 
-def test_player_filters_with_regex_and_exclude(tmp_path, context):
+def test_player_filters_with_regex_and_exclude(tmp_path, ros_context):
     bag = write_bag(tmp_path / 'bag')
-    listener = Listener([A, B, CX], context=context)
+    listener = Listener([A, B, CX], context=ros_context)
     terminal = Terminal()
     player = Player(bag, rate=4.0, regex='/[ac]', exclude='x$', wait_subscribers=1,
-                    progress=terminal, context=context)
+                    progress=terminal, context=ros_context)
     try:
         assert player.topics == [A]
         recorded = bag_messages(bag, [A])
-        play(context, player, listener, len(recorded))
+        play(ros_context, player, listener, len(recorded))
         assert [(t, d) for t, d, _ in listener.received] == [(t, d) for t, d, _ in recorded]
         # On a terminal the progress line is rewritten in place, and ended once.
         text = terminal.getvalue()
@@ -300,38 +290,38 @@ def test_player_filters_with_regex_and_exclude(tmp_path, context):
         listener.destroy_node()
 
 
-def test_start_offset_skips_earlier_messages(tmp_path, context):
+def test_start_offset_skips_earlier_messages(tmp_path, ros_context):
     bag = write_bag(tmp_path / 'bag')
     offset, rate = 0.5, 2.0
-    listener = Listener(list(SCHEDULE), context=context)
-    player = Player(bag, rate=rate, start_offset=offset, wait_subscribers=1, context=context)
+    listener = Listener(list(SCHEDULE), context=ros_context)
+    player = Player(bag, rate=rate, start_offset=offset, wait_subscribers=1, context=ros_context)
     try:
         recorded = [m for m in bag_messages(bag, list(SCHEDULE))
                     if m[2] >= T0_NS + offset * 1e9]
         assert len(recorded) == 5
-        play(context, player, listener, len(recorded))
+        play(ros_context, player, listener, len(recorded))
         assert [(t, d) for t, d, _ in listener.received] == [(t, d) for t, d, _ in recorded]
         assert_timing(listener.received, recorded, rate)
     finally:
         player.destroy_node()
         listener.destroy_node()
     with pytest.raises(ReplayError, match=r'--start-offset: 1.5 s is past the end of the bag'):
-        Player(bag, start_offset=1.5, context=context)
+        Player(bag, start_offset=1.5, context=ros_context)
 
 
-def test_loop_replays_again_until_stopped(tmp_path, context):
+def test_loop_replays_again_until_stopped(tmp_path, ros_context):
     bag = write_bag(tmp_path / 'bag')
     recorded = bag_messages(bag, [A, B])
-    listener = Listener([A, B], context=context)
+    listener = Listener([A, B], context=ros_context)
     player = Player(bag, rate=4.0, loop=True, topics=[A, B], wait_subscribers=1,
-                    context=context)
+                    context=ros_context)
     try:
-        result = play(context, player, listener, 2 * len(recorded), max_passes=2)
+        result = play(ros_context, player, listener, 2 * len(recorded), max_passes=2)
         assert result.passes == 2 and result.total == 2 * len(recorded)
         assert [d for _, d, _ in listener.received] == [d for _, d, _ in recorded] * 2
         # Without a bound, the loop runs until stop(): here in the middle of the third pass.
         listener.received.clear()
-        result = play(context, player, listener, 0,
+        result = play(ros_context, player, listener, 0,
                       stop_when=lambda node: len(node.received) >= 2 * len(recorded) + 3)
         assert result.interrupted and result.passes == 3
         data = [d for _, d, _ in listener.received]
@@ -342,21 +332,21 @@ def test_loop_replays_again_until_stopped(tmp_path, context):
         listener.destroy_node()
 
 
-def test_replays_a_bag_of_a_ros_run(tmp_path, context, ros_domain):
+def test_replays_a_bag_of_a_ros_run(tmp_path, ros_context, ros_domain):
     """A bag the world node recorded: its recorded QoS, byte-equal payloads."""
     out = tmp_path / 'run'
     run_in_process(resolve_scenario('demo', ['n_agents=3', 'informed.count=1', 'duration=1'],
                                     None, out), out, domain_id=ros_domain, timeout=60)
     topics = ['/agent_1/odom', '/leader/accel']
     recorded = bag_messages(out / 'bag', topics)
-    listener = Listener(dict(zip(topics, (Odometry, AccelStamped))), context=context)
-    player = Player(out / 'bag', rate=4.0, topics=topics, wait_subscribers=1, context=context)
+    listener = Listener(dict(zip(topics, (Odometry, AccelStamped))), context=ros_context)
+    player = Player(out / 'bag', rate=4.0, topics=topics, wait_subscribers=1, context=ros_context)
     try:
         # The world offers reliable, volatile, depth 100 on these topics (docs/ros.md).
         for qos in player.qos_profiles.values():
             assert qos.reliability == ReliabilityPolicy.RELIABLE
             assert qos.durability == DurabilityPolicy.VOLATILE and qos.depth == 100
-        play(context, player, listener, len(recorded))
+        play(ros_context, player, listener, len(recorded))
         # Each topic in its recorded order. Across topics DDS promises no order, and the
         # world records a step's odometry and the leader's acceleration at nearly the same
         # time, so the player publishes them back to back on two writers.
@@ -400,25 +390,25 @@ def write_foreign_mcap(path: Path) -> Path:
     return path
 
 
-def test_unknown_types_are_skipped_with_one_warning(tmp_path, context):
+def test_unknown_types_are_skipped_with_one_warning(tmp_path, ros_context):
     bag = write_foreign_mcap(tmp_path / 'foreign.mcap')
     notes = []
-    listener = Listener([A], context=context)
-    player = Player(bag, rate=4.0, say=notes.append, wait_subscribers=1, context=context)
+    listener = Listener([A], context=ros_context)
+    player = Player(bag, rate=4.0, say=notes.append, wait_subscribers=1, context=ros_context)
     try:
         assert notes == ['replay: warning: skipping topics whose message types are not '
                          f'installed: {NS}/thing (no_such_pkg/msg/Thing)']
         assert player.topics == [A] and player.duration_ns == 10**9
         assert player.qos_profiles[A].depth == REPLAY_DEPTH
         recorded = bag_messages(bag, [A])
-        play(context, player, listener, len(recorded))
+        play(ros_context, player, listener, len(recorded))
         assert [d for _, d, _ in listener.received] == [d for _, d, _ in recorded]
     finally:
         player.destroy_node()
         listener.destroy_node()
 
 
-def test_truncated_bag_replays_its_recovered_prefix(tmp_path, context):
+def test_truncated_bag_replays_its_recovered_prefix(tmp_path, ros_context):
     many = {A: [i / 100 for i in range(100)]}
     bag = write_bag(tmp_path / 'bag', schedule=many, chunk_size=256)
     whole = bag / 'bag_0.mcap'
@@ -429,13 +419,13 @@ def test_truncated_bag_replays_its_recovered_prefix(tmp_path, context):
     assert [d for _, d, _ in recovered] == [d for _, d, _ in bag_messages(bag, [A])][
         :len(recovered)]
     notes = []
-    listener = Listener([A], context=context)
-    player = Player(cut, rate=10.0, say=notes.append, wait_subscribers=1, context=context)
+    listener = Listener([A], context=ros_context)
+    player = Player(cut, rate=10.0, say=notes.append, wait_subscribers=1, context=ros_context)
     try:
         # "truncated" when the cut falls inside a record, "not closed" on a record boundary.
         assert len(notes) == 1 and notes[0].startswith('replay: warning: cut.mcap ')
         assert 'truncated' in notes[0] or 'not closed' in notes[0]
-        result = play(context, player, listener, len(recovered))
+        result = play(ros_context, player, listener, len(recovered))
         assert result.total == len(recovered)
         assert [d for _, d, _ in listener.received] == [d for _, d, _ in recovered]
     finally:

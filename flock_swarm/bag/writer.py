@@ -1,9 +1,9 @@
 """Write rosbag2-compatible MCAP bags (ROS 2 Jazzy) without rosbag2_py.
 
-A bag is a directory ``NAME/`` holding ``NAME_0.mcap`` and, once the writer is closed,
-``metadata.yaml``; ``ros2 bag info/play``, Foxglove, ``mcap`` and ``rosbags`` read it. The
-layout follows rosbag2's MCAP storage plugin (``rosbag2_storage_mcap``) and
-``rosbag2_cpp::SequentialWriter``:
+A bag is a directory ``NAME/`` holding ``NAME_0.mcap`` (``NAME_1.mcap``, ... when the bag is
+split) and, once the writer is closed, ``metadata.yaml``; ``ros2 bag info/play``, Foxglove,
+``mcap`` and ``rosbags`` read it. The layout follows rosbag2's MCAP storage plugin
+(``rosbag2_storage_mcap``) and ``rosbag2_cpp::SequentialWriter``:
 
 - MCAP header profile ``ros2``;
 - one schema per message type, named ``pkg/msg/Type``, encoding ``ros2msg``, data the full
@@ -12,8 +12,14 @@ layout follows rosbag2's MCAP storage plugin (``rosbag2_storage_mcap``) and
   (QoS YAML, metadata version 9) and ``topic_type_hash`` (``RIHS01_...``);
 - messages serialised by rclpy, ``log_time`` = ``publish_time`` = the given stamp;
 - an MCAP metadata record ``rosbag2`` (``serialized_metadata``: the bag metadata as YAML),
-  written when the bag opens and again when it closes, as rosbag2's ``update_metadata`` does;
-- ``metadata.yaml`` (``rosbag2_bagfile_information`` version 9) written on close.
+  written when the bag opens and again when each file closes, as rosbag2's
+  ``update_metadata`` does;
+- ``metadata.yaml`` (``rosbag2_bagfile_information`` version 9) written on close, listing
+  every file in ``relative_file_paths`` and ``files``;
+- split like rosbag2's ``max_bagfile_size`` / ``max_bagfile_duration``: before a message is
+  written, the open file is finished and the next one started when the file is larger than
+  the size limit or the message is later than the duration limit after the file's first
+  message. Every file is a complete MCAP file with all schemas and channels.
 
 Messages are grouped in compressed chunks of about ``chunk_size`` bytes, and each finished chunk
 goes to the file at once: a process killed while recording leaves an MCAP whose complete chunks
@@ -171,6 +177,49 @@ class _FlushingFile:
         self._file.close()
 
 
+class _BagFile:
+    """One MCAP file of the bag: its writer and what it holds."""
+
+    def __init__(self, directory: Path, relative: str, chunk_size: int,
+                 compression: CompressionType) -> None:
+        self.relative = relative
+        # Both dropped once the file is finished: mcap's writer keeps every chunk index.
+        self.stream: _FlushingFile | None = _FlushingFile(directory / relative)
+        self.writer: Writer | None = Writer(self.stream, chunk_size=chunk_size,
+                                            compression=compression)
+        self.writer.start(profile=PROFILE, library=_library())
+        self.schema_ids: dict[str, int] = {}
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.count = 0
+
+    def took(self, t_ns: int, count: int) -> None:
+        """Account for ``count`` messages written at ``t_ns``."""
+        self.count += count
+        self.start_ns = t_ns if self.start_ns is None else min(self.start_ns, t_ns)
+        self.end_ns = t_ns if self.end_ns is None else max(self.end_ns, t_ns)
+
+
+def _time_span(files: list[_BagFile]) -> tuple[int, int]:
+    """Return the start and duration (ns) of the messages of ``files``, as rosbag2 does."""
+    starts = [file.start_ns for file in files if file.start_ns is not None]
+    if not starts:
+        return NO_MESSAGES_START_NS, 0
+    start = min(starts)
+    return start, max(file.end_ns for file in files if file.end_ns is not None) - start
+
+
+def _file_entry(file: _BagFile) -> dict[str, Any]:
+    """Return a file's entry under ``files:`` in ``metadata.yaml``."""
+    start, duration = _time_span([file])
+    return {
+        'path': file.relative,
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'duration': {'nanoseconds': duration},
+        'message_count': file.count,
+    }
+
+
 class _PackedMessageIndex(MessageIndex):
     """mcap's MessageIndex record, its entries packed at once instead of two ``write8``
     calls each (a third of the recording cost of a 50-agent step; the same bytes)."""
@@ -187,14 +236,17 @@ class _PackedMessageIndex(MessageIndex):
 class _Topic:
     """What the writer knows of one topic."""
 
-    def __init__(self, name: str, type_name: str, msg_class: type, channel_id: int,
-                 qos_profiles: list[dict[str, Any]], type_hash: str) -> None:
+    def __init__(self, name: str, type_name: str, msg_class: type,
+                 profiles: list[QoSProfile], type_hash: str) -> None:
         self.name = name
         self.type_name = type_name
         self.msg_class = msg_class
-        self.channel_id = channel_id
-        self.qos_profiles = qos_profiles
+        self.qos_profiles = [qos_to_dict(p) for p in profiles]
+        # The channel metadata string, written again in every file of a split bag.
+        self.offered_qos_profiles = serialize_qos_profiles(profiles)
         self.type_hash = type_hash
+        # The topic's channel in the open file (set when it is registered there).
+        self.channel_id = 0
         self.count = 0
 
 
@@ -215,19 +267,32 @@ class BagWriter:
     :param compression: chunk compression, ``'zstd'``, ``'lz4'`` or ``'none'``.
     :param custom_metadata: MCAP metadata records written at once, name to string mapping
         (scenario provenance, for example); more can be added with :meth:`add_metadata`.
+    :param max_bagfile_size: split the bag once its open file holds more than this many bytes
+        (rosbag2's ``max_bagfile_size``); 0: no split by size. Chunks go to the file whole,
+        so a file ends up to one compressed chunk above the limit.
+    :param max_bagfile_duration: split the bag before a message more than this many seconds
+        (of message time) after the open file's first message (rosbag2's
+        ``max_bagfile_duration``); 0: no split by duration.
     :raises FileExistsError: if ``path`` is a file or a non-empty directory.
-    :raises ValueError: for an unknown compression or a chunk size below one byte.
+    :raises ValueError: for an unknown compression, a chunk size below one byte, or a
+        negative split limit.
     """
 
     def __init__(self, path: Path, *, chunk_size: int = 1 << 20, compression: str = 'zstd',
-                 custom_metadata: dict[str, dict[str, str]] | None = None) -> None:
-        """Create the bag directory and start its MCAP file."""
+                 custom_metadata: dict[str, dict[str, str]] | None = None,
+                 max_bagfile_size: int = 0, max_bagfile_duration: float = 0.0) -> None:
+        """Create the bag directory and start its first MCAP file."""
         path = Path(path)
         if compression not in _COMPRESSION:
             raise ValueError(f'unknown bag compression {compression!r}; '
                              f"expected one of {', '.join(sorted(_COMPRESSION))}")
         if chunk_size < 1:
             raise ValueError(f'chunk_size must be at least 1 byte, got {chunk_size}')
+        if not max_bagfile_size >= 0:
+            raise ValueError(f'max_bagfile_size must be >= 0 bytes, got {max_bagfile_size}')
+        if not max_bagfile_duration >= 0 or max_bagfile_duration == float('inf'):
+            raise ValueError('max_bagfile_duration must be a finite number >= 0 of seconds, '
+                             f'got {max_bagfile_duration}')
         if path.exists() and not path.is_dir():
             raise FileExistsError(f'cannot create bag directory {path}: a file of that name '
                                   'exists')
@@ -236,19 +301,75 @@ class BagWriter:
                                   'choose another name or remove it')
         path.mkdir(parents=True, exist_ok=True)
         self._path = path
-        self._relative_file = f'{path.name}_0.mcap'
-        self._file = _FlushingFile(path / self._relative_file)
-        self._writer = Writer(self._file, chunk_size=chunk_size,
-                              compression=_COMPRESSION[compression])
-        self._writer.start(profile=PROFILE, library=_library())
-        self._schema_ids: dict[str, int] = {}
+        self._chunk_size = chunk_size
+        self._compression = _COMPRESSION[compression]
+        self._max_size = int(max_bagfile_size)
+        self._max_duration_ns = round(max_bagfile_duration * 1e9)
         self._topics: dict[str, _Topic] = {}
-        self._start_ns: int | None = None
-        self._end_ns: int | None = None
+        # Custom metadata records, repeated in every file so that each one stands alone.
+        self._custom: list[tuple[str, dict[str, str]]] = []
+        self._files: list[_BagFile] = []
         self._closed = False
-        self._write_rosbag2_record()
+        self._open_file()
         for name, data in (custom_metadata or {}).items():
             self.add_metadata(name, data)
+
+    def _open_file(self) -> None:
+        """Start the next MCAP file with every schema, channel and custom record so far.
+
+        The first file gets the ``rosbag2`` record at once as well as at its close; a file
+        started by a split gets it at its close only, as rosbag2's ``update_metadata``
+        does (one YAML dump of the whole bag's metadata per split, ~0.15 s with 60 topics).
+        """
+        first = not self._files
+        file = _BagFile(self._path, f'{self._path.name}_{len(self._files)}.mcap',
+                        self._chunk_size, self._compression)
+        self._files.append(file)
+        self._file, self._writer = file.stream, file.writer
+        if first:
+            self._write_rosbag2_record()
+        for topic in self._topics.values():
+            self._register(topic)
+        for name, data in self._custom:
+            self._add_metadata(name, data)
+
+    def _register(self, topic: '_Topic') -> None:
+        """Register a topic's schema (once per file) and channel in the open file."""
+        file = self._files[-1]
+        if topic.type_name not in file.schema_ids:
+            definition = encoded_definition(topic.type_name)
+            file.schema_ids[topic.type_name] = self._writer.register_schema(
+                name=topic.type_name, encoding=definition.encoding,
+                data=definition.text.encode('utf-8'))
+        topic.channel_id = self._writer.register_channel(
+            topic=topic.name, message_encoding=SERIALIZATION_FORMAT,
+            schema_id=file.schema_ids[topic.type_name],
+            metadata={'offered_qos_profiles': topic.offered_qos_profiles,
+                      'topic_type_hash': topic.type_hash})
+
+    def _finish_file(self) -> None:
+        """Write the open file's rosbag2 record, summary and footer, and close it."""
+        try:
+            self._write_rosbag2_record()
+            self._writer.finish()
+        finally:
+            self._file.close()
+            self._files[-1].writer = self._files[-1].stream = None
+
+    def _split_before(self, t_ns: int) -> None:
+        """Finish the open file and start the next if a message at ``t_ns`` is over a limit.
+
+        As rosbag2's ``SequentialWriter::should_split_bagfile``: the size of the file on
+        disk above ``max_bagfile_size``, or ``t_ns`` more than ``max_bagfile_duration``
+        after the file's first message. An empty file is never left behind.
+        """
+        file = self._files[-1]
+        if file.count == 0:
+            return
+        if ((self._max_size and file.stream.tell() > self._max_size)
+                or (self._max_duration_ns and t_ns - file.start_ns > self._max_duration_ns)):
+            self._finish_file()
+            self._open_file()
 
     @property
     def path(self) -> Path:
@@ -257,8 +378,13 @@ class BagWriter:
 
     @property
     def mcap_path(self) -> Path:
-        """The MCAP file inside the bag directory."""
-        return self._path / self._relative_file
+        """The MCAP file being written (the last one of a split bag)."""
+        return self._path / self._files[-1].relative
+
+    @property
+    def mcap_paths(self) -> list[Path]:
+        """Every MCAP file of the bag so far, in split order."""
+        return [self._path / file.relative for file in self._files]
 
     @property
     def message_counts(self) -> dict[str, int]:
@@ -305,20 +431,10 @@ class BagWriter:
                                  f'{self._topics[name].type_name}, not {type_name}')
             return
         msg_class = msg_type if isinstance(msg_type, type) else message_class(type_name)
-        if type_name not in self._schema_ids:
-            definition = encoded_definition(type_name)
-            self._schema_ids[type_name] = self._writer.register_schema(
-                name=type_name, encoding=definition.encoding,
-                data=definition.text.encode('utf-8'))
-        profiles = [] if qos is None else [qos]
-        digest = type_hash(type_name)
-        channel_id = self._writer.register_channel(
-            topic=name, message_encoding=SERIALIZATION_FORMAT,
-            schema_id=self._schema_ids[type_name],
-            metadata={'offered_qos_profiles': serialize_qos_profiles(profiles),
-                      'topic_type_hash': digest})
-        self._topics[name] = _Topic(name, type_name, msg_class, channel_id,
-                                    [qos_to_dict(p) for p in profiles], digest)
+        topic = _Topic(name, type_name, msg_class, [] if qos is None else [qos],
+                       type_hash(type_name))
+        self._register(topic)
+        self._topics[name] = topic
 
     def write(self, topic: str, msg: Any, t_ns: int) -> None:
         """Serialise a message with rclpy and record it.
@@ -353,12 +469,12 @@ class BagWriter:
         t_ns = int(t_ns)
         if not 0 <= t_ns < 2**64:
             raise ValueError(f'message time must be a non-negative 64-bit ns count, got {t_ns}')
+        self._split_before(t_ns)
         # rosbag2 leaves the MCAP sequence at 0 (not assigned by the publisher).
         self._writer.add_message(channel_id=entry.channel_id, log_time=t_ns,
                                  data=bytes(data), publish_time=t_ns, sequence=0)
         entry.count += 1
-        self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
-        self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
+        self._files[-1].took(t_ns, 1)
 
     def write_serialized_many(self, messages: Iterable[tuple[str, bytes]], t_ns: int) -> None:
         """Record already serialised messages, all at time ``t_ns``, in order.
@@ -385,6 +501,8 @@ class BagWriter:
         if not messages:
             return
         t_ns = int(t_ns)
+        # The batch's messages share one time: they go to one file.
+        self._split_before(t_ns)
         fast = self._fast_path()
         if fast is None:
             for entry, data in messages:
@@ -424,8 +542,7 @@ class BagWriter:
                 # A fresh chunk (reset by mcap): its first message is the batch's next.
                 stream = chunk.record_writer._buffer
                 chunk.message_start_time = chunk.message_end_time = t_ns
-        self._start_ns = t_ns if self._start_ns is None else min(self._start_ns, t_ns)
-        self._end_ns = t_ns if self._end_ns is None else max(self._end_ns, t_ns)
+        self._files[-1].took(t_ns, len(messages))
 
     def _fast_path(self) -> tuple | None:
         """Return the mcap writer's ``(chunk builder, statistics, chunk size, finalize)``,
@@ -445,7 +562,8 @@ class BagWriter:
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write an MCAP metadata record (string keys and values), such as run provenance.
 
-        It goes to the file at once, so it survives a killed process.
+        It goes to the file at once, so it survives a killed process, and is repeated in
+        every later file of a split bag, so that each file carries it.
 
         :param name: record name; ``rosbag2`` is reserved for the bag metadata.
         :param data: the key-value pairs.
@@ -456,6 +574,7 @@ class BagWriter:
         if name == ROSBAG2_METADATA_RECORD:
             raise ValueError(f'metadata record name {name!r} is reserved for rosbag2')
         self._add_metadata(name, data)
+        self._custom.append((name, dict(data)))
 
     def _add_metadata(self, name: str, data: dict[str, str]) -> None:
         if not isinstance(name, str):
@@ -479,10 +598,7 @@ class BagWriter:
         :return: the mapping under ``rosbag2_bagfile_information`` in ``metadata.yaml``.
         """
         count = sum(topic.count for topic in self._topics.values())
-        if self._start_ns is None or self._end_ns is None:
-            start, duration = NO_MESSAGES_START_NS, 0
-        else:
-            start, duration = self._start_ns, self._end_ns - self._start_ns
+        start, duration = _time_span([file for file in self._files if file.count])
         return {
             'version': METADATA_VERSION,
             'storage_identifier': STORAGE_IDENTIFIER,
@@ -505,13 +621,8 @@ class BagWriter:
             # Chunk compression is internal to the MCAP storage; rosbag2 leaves these empty.
             'compression_format': '',
             'compression_mode': '',
-            'relative_file_paths': [self._relative_file],
-            'files': [{
-                'path': self._relative_file,
-                'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': {'nanoseconds': duration},
-                'message_count': count,
-            }],
+            'relative_file_paths': [file.relative for file in self._files],
+            'files': [_file_entry(file) for file in self._files],
             'custom_data': None,
             'ros_distro': ROS_DISTRO,
         }
@@ -523,8 +634,9 @@ class BagWriter:
     def abandon(self) -> None:
         """Stop recording without finishing the bag (after a write failed, say a full disk).
 
-        The file is closed as it is: its complete chunks stay readable (:class:`BagReader`
-        recovers them and says so), and no ``metadata.yaml`` claims the bag complete.
+        The open file is closed as it is: its complete chunks stay readable
+        (:class:`BagReader` recovers them and says so), the files finished before it by a
+        split are complete, and no ``metadata.yaml`` claims the bag complete.
 
         :raises OSError: if even closing the file fails; the chunks on disk are unaffected.
         """
@@ -534,18 +646,14 @@ class BagWriter:
         self._file.close()
 
     def close(self) -> None:
-        """Finish the MCAP file (summary and indexes) and write ``metadata.yaml``.
+        """Finish the open MCAP file (summary and indexes) and write ``metadata.yaml``.
 
         Closing again does nothing.
         """
         if self._closed:
             return
         self._closed = True
-        try:
-            self._write_rosbag2_record()
-            self._writer.finish()
-        finally:
-            self._file.close()
+        self._finish_file()
         text = dump_yaml({'rosbag2_bagfile_information': self.bag_metadata()})
         # Written whole then renamed: a metadata.yaml is either absent or complete.
         tmp = self._path / f'.{METADATA_FILENAME}.tmp'

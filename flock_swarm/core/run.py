@@ -40,16 +40,24 @@ class SimResult:
 
 
 class Recorder:
-    """Collects subsampled states and metrics into growing lists, then stacks them."""
+    """Collects subsampled states and metrics into growing lists, then stacks them.
+
+    The in-memory recorder of ``sim`` and ``analyze``; a recorder that keeps the rows
+    elsewhere (the world's :class:`flock_swarm.outputs.SpooledRecorder`, on disk) overrides
+    :meth:`add` and :meth:`arrays` and keeps :attr:`count`.
+    """
 
     def __init__(self) -> None:
         """Create an empty recorder."""
         self.rows: dict[str, list] = {}
+        #: Instants recorded so far.
+        self.count = 0
 
     def add(self, **values) -> None:
         """Append one recorded instant."""
         for key, value in values.items():
             self.rows.setdefault(key, []).append(np.array(value, copy=True))
+        self.count += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Return the recorded columns as arrays (first axis: time)."""
@@ -65,7 +73,7 @@ class RunLog:
     """
 
     def __init__(self, eta_tolerance: float, collision_distance: float, radius: float,
-                 strict: bool, record_every: int) -> None:
+                 strict: bool, record_every: int, recorder: Recorder | None = None) -> None:
         """Create the log.
 
         :param eta_tolerance: velocity tolerance of ``eta``.
@@ -73,18 +81,20 @@ class RunLog:
         :param radius: radius of the r-disk graph whose components are counted.
         :param strict: ``< r`` (``True``) or ``<= r`` neighbourhoods.
         :param record_every: subsampling of the time series.
+        :param recorder: where the recorded instants go (default: a :class:`Recorder`
+            in memory).
         """
         self.eta_tolerance = eta_tolerance
         self.radius, self.strict, self.every = radius, strict, record_every
         self.metrics = RunMetrics(collision_distance)
-        self.rec = Recorder()
+        self.rec = Recorder() if recorder is None else recorder
         self.latest: dict = {}
 
     @classmethod
-    def for_scenario(cls, sc: Scenario) -> 'RunLog':
-        """Return the log of a scenario's run."""
+    def for_scenario(cls, sc: Scenario, recorder: Recorder | None = None) -> 'RunLog':
+        """Return the log of a scenario's run (``recorder`` as in :class:`RunLog`)."""
         return cls(sc.eta_tolerance, sc.collision_distance, sc.law.radius,
-                   sc.law.strict_radius, sc.record_every)
+                   sc.law.strict_radius, sc.record_every, recorder)
 
     def observe(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
                 leader: LeaderState, informed: np.ndarray, edges: EdgeList,

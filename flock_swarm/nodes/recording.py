@@ -51,7 +51,8 @@ class BagSink:
     """
 
     def __init__(self, path: Path, sc: Scenario, real: Realization, mode: str,
-                 failed: Callable[[str], None]) -> None:
+                 failed: Callable[[str], None], max_bagfile_size: int = 0,
+                 max_bagfile_duration: float = 0.0) -> None:
         """Open the bag at ``path`` (a directory) with the run's provenance as metadata.
 
         :param path: the bag directory (must be empty or absent).
@@ -59,6 +60,9 @@ class BagSink:
         :param real: its realisation.
         :param mode: ``lockstep`` or ``realtime``.
         :param failed: called with the reason when writing fails (the run stops).
+        :param max_bagfile_size: split the bag at this file size [bytes] (0: never).
+        :param max_bagfile_duration: split the bag at this span of simulation time [s]
+            (0: never); see :class:`~flock_swarm.bag.BagWriter`.
         :raises ScenarioError: naming ``out_dir`` or ``record`` when the bag cannot be made.
         """
         from flock_swarm.bag import (BagWriter, DefinitionNotFoundError, message_definition,
@@ -76,7 +80,8 @@ class BagSink:
                                     'packages, or -p record:=false') from None
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            self.bag = BagWriter(path)
+            self.bag = BagWriter(path, max_bagfile_size=max_bagfile_size,
+                                 max_bagfile_duration=max_bagfile_duration)
         except OSError as exc:
             raise ScenarioError('out_dir', f'cannot write to {path.parent}: {exc.strerror}') \
                 from None

@@ -22,7 +22,7 @@ from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.metrics import step_metrics
-from flock_swarm.core.run import RunLog, SimResult, build_summary
+from flock_swarm.core.run import Recorder, RunLog, SimResult, build_summary
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
 
@@ -183,13 +183,15 @@ class WorldStepper:
     """
 
     def __init__(self, sc: Scenario, settings: WorldSettings, log: Log,
-                 now: float | None = None) -> None:
+                 now: float | None = None, recorder: Recorder | None = None) -> None:
         """Create the stepper at the scenario's initial state.
 
         :param sc: the scenario.
         :param settings: the world's parameters.
         :param log: where missing commands and the leader's loss are told.
         :param now: the time of creation (start timeout counts from it); default: now.
+        :param recorder: where the run log records the time series (default: in memory;
+            the node streams it to disk).
         """
         self.scenario, self.settings, self.log = sc, settings, log
         self.lockstep = settings.lockstep
@@ -213,7 +215,7 @@ class WorldStepper:
         # Realtime: wall time each step's odometry went out, and how long commands took.
         self.published_at: dict[int, float] = {}
         self.latency = LatencyHistogram()
-        self.run_log = RunLog.for_scenario(sc)
+        self.run_log = RunLog.for_scenario(sc, recorder)
         self.metrics_now: dict = {}
         self.done = False
         self.started = False
@@ -492,7 +494,7 @@ class WorldStepper:
         :return: the summary (``docs/outputs.md``) and the recorded time series.
         """
         log = self.run_log
-        if not log.rec.rows:
+        if not log.rec.count:
             return None
         series = log.rec.arrays()
         summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,

@@ -24,6 +24,7 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 
+from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
                                       claimants, cmd_topic, declare, declare_common,
@@ -33,11 +34,11 @@ from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.recording import BagSink, RecordedNode
 from flock_swarm.nodes.stepper import Observation, WorldSettings, WorldStepper
 from flock_swarm.nodes.wire import OdometryEncoder, decode_accel, decode_odometry, encode_clock
-from flock_swarm.outputs import write_outputs
+from flock_swarm.outputs import SpooledRecorder, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
-    'expect_subscribers', 'staleness'}
+    'expect_subscribers', 'staleness', 'bag_max_size', 'bag_max_duration'}
 
 
 class WorldNode(RecordedNode):
@@ -56,6 +57,16 @@ class WorldNode(RecordedNode):
         out_dir = declare(self, 'out_dir', '', 'directory for bag/, summary.json and '
                           'timeseries.npz (empty: out/<scenario>_ros)')
         self.record = declare(self, 'record', True, 'write the MCAP bag')
+        split = {
+            'max_bagfile_size': declare(
+                self, 'bag_max_size', 0, 'split the bag into bag_0.mcap, bag_1.mcap, ... '
+                'once a file is larger than this many bytes (0: no split)'),
+            'max_bagfile_duration': declare(
+                self, 'bag_max_duration', 0.0, 'split the bag once a file spans more than '
+                'this many seconds of simulation time (0: no split)')}
+        for key, value in zip(('bag_max_size', 'bag_max_duration'), split.values()):
+            if not 0 <= value < float('inf'):
+                raise ScenarioError(key, f'invalid value {value!r}')
         settings = WorldSettings.declare(
             lambda key, default, what: declare(self, key, default, what),
             self.get_parameter('mode').value == 'lockstep')
@@ -67,12 +78,19 @@ class WorldNode(RecordedNode):
         self.mode = self.get_parameter('mode').value
         self.lockstep = settings.lockstep
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
-        self.stepper = WorldStepper(sc, settings, self.get_logger())
+        # The time series goes to disk as it is recorded: memory stays flat on long runs.
+        self.spool = SpooledRecorder(self.out, self.get_logger().warning)
+        self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
         self.duplicates: set[int] = set()
         self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
         self.bag = BagSink(self.out / 'bag', sc, self.stepper.real, self.mode,
-                           self.recording_failed) if self.record else None
+                           self.recording_failed, **split) if self.record else None
+        try:
+            self.spool.open()
+        except OSError as exc:
+            raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
+                from None
         self.sinks = [] if self.bag is None else [self.bag]
         self.clock_pub = self.recorded_publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
@@ -259,13 +277,18 @@ class WorldNode(RecordedNode):
                 self.get_logger().error(f'cannot finalise {sink}: {exc.strerror or exc}; its '
                                         'complete chunks stay readable')
         if result is None:
+            self.spool.discard()
             return
         self.result = result
         try:
             write_outputs(result, self.out, self.scenario)
         except OSError as exc:
             self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
-                                    f'{exc.strerror or exc}')
+                                    f'{exc.strerror or exc}; the time series stays in '
+                                    f'{self.spool.spool}')
+            self.spool.close()
+        else:
+            self.spool.discard()
 
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``)."""
