@@ -33,7 +33,7 @@ from flock_swarm.core.laws.su2009 import SuParams
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.reproduce import machine
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 #: Issue 5: sim's speed over the per-agent loop at N = SPEEDUP_N, at least SPEEDUP_MIN.

@@ -80,7 +80,7 @@ def swarm_processes(scenario: str = 'demo', n_agents: str = '0', mode: str = 'lo
     :return: world (ends the launch), leader, the agents' process(es), and the live view.
     :raises ScenarioError: for an invalid argument or scenario, naming it.
     """
-    from flock_swarm.scenarios import load
+    from flock_swarm.presets import load
     count = _integer('n_agents', n_agents, 0, 10**6)
     if mode not in ('lockstep', 'realtime'):
         raise ScenarioError('mode', f'must be lockstep or realtime, got {mode!r}')

@@ -43,7 +43,7 @@ from flock_swarm.core.pseudo_leaders import minor_lambda_max, select_pseudo_lead
 from flock_swarm.core.run import SimResult, simulate
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.stability import check_step
-from flock_swarm.scenarios import load, resolve
+from flock_swarm.presets import load, resolve
 from flock_swarm.outputs import write_outputs
 from flock_swarm.study.execute import (DaskBackend, LocalPool, Progress, SerialBackend,
                                        SweepError, execute, terminal_line)

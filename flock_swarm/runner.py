@@ -26,7 +26,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import check_law_output
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml, realize
 from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
-from flock_swarm.scenarios import load_mapping
+from flock_swarm.presets import load_mapping
 
 
 def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Path) -> Path:

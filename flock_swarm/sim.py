@@ -44,7 +44,7 @@ def listing() -> str:
 
     :raises ScenarioError: when a registered plugin cannot be loaded (named).
     """
-    from flock_swarm.scenarios import preset_names
+    from flock_swarm.presets import preset_names
     lines = ['presets (sim NAME):']
     lines += [f'  {name}' for name in preset_names()]
     for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         # --help, or an argument error already printed: the status, as for every other error.
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
-    from flock_swarm.scenarios import load
+    from flock_swarm.presets import load
     try:
         sc = load(args.scenario, args.overrides, args.seed)
         if args.seed is not None and args.seed < 0:

@@ -25,7 +25,7 @@ def spec_path(name_or_path: str) -> Path:
 
     :raises ScenarioError: when nothing matches.
     """
-    from flock_swarm.scenarios import resolve
+    from flock_swarm.presets import resolve
     return resolve(name_or_path, 'sweeps', 'spec')
 
 

@@ -22,7 +22,7 @@ from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.plots import plot_analysis
 from flock_swarm.runner import resolve_scenario, run_in_process
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 pytestmark = pytest.mark.ros

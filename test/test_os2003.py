@@ -17,7 +17,7 @@ from numpy.testing import assert_allclose
 import pytest
 from scipy.sparse.csgraph import connected_components
 
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 

@@ -37,7 +37,7 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 from flock_swarm import sim
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import TOP_KEYS, apply_override, parse_yaml
-from flock_swarm.scenarios import load_mapping, preset_names
+from flock_swarm.presets import load_mapping, preset_names
 
 #: Steps every generated run is cut to (the property is about input, not long runs).
 SHORT_STEPS = 3

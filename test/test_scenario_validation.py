@@ -10,7 +10,7 @@ import yaml
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_value, realize
 from flock_swarm.core.stability import check_step, packing_degree, pd_dt_max, pd_stable
-from flock_swarm.scenarios import load, load_mapping, preset_names
+from flock_swarm.presets import load, load_mapping, preset_names
 
 BASE = {
     'name': 'base', 'dim': 2, 'n_agents': 5, 'dt': 0.01, 'duration': 1.0, 'seed': 3,

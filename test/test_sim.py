@@ -16,7 +16,7 @@ from flock_swarm.core.pseudo_leaders import minor_lambda_max
 from flock_swarm.core.scenario import realize
 from flock_swarm.core import run
 from flock_swarm.core.run import keep_freed_memory, simulate, simulate_stack, stack_mismatch
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.sim import main
 
 SUMMARY_KEYS = {'n_agents', 't_final', 'steps', 'eta', 'eta_tolerance', 'velocity_mismatch_max',

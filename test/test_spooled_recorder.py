@@ -9,7 +9,7 @@ import pytest
 from flock_swarm.core.run import Recorder
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.outputs import SpooledRecorder
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.sim import simulate
 
 

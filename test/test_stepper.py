@@ -20,7 +20,7 @@ from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.controller import AgentController
 from flock_swarm.nodes.leader_watch import LeaderWatch
 from flock_swarm.nodes.stepper import WorldSettings, WorldStepper
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from broken_law import nan_command_for
 
 LOG = logging.getLogger('test_stepper')

@@ -33,7 +33,7 @@ from flock_swarm.core.laws.su2009 import OlfatiSaber2006, SuInformedAccel
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import su_energy
 from flock_swarm.core.scenario import parse_scenario
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 # Interaction parameters of Su09 Fig. 2 (r, d, epsilon) and Olfati-Saber's a = b = 5.

@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 import pytest
 from scipy.sparse.csgraph import connected_components
 
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 # Section 4.1: a, b, c_bar, r_s, c; agents 1-3 (ids 0-2) observe component 1 (index 0),

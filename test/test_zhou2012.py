@@ -11,7 +11,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from flock_swarm.core.scenario import highest_degree, realize
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
 # Section 5.1: the 10 x 10 diffusive matrix B, w = 70, Lu constant alpha, k, h(0), sigma, c1, c2.

@@ -1,6 +1,6 @@
 """Scenario files: schema, validation, overrides, and the realisation of a run.
 
-A scenario is a plain mapping (read from YAML by :mod:`flock_swarm.scenarios`) describing a
+A scenario is a plain mapping (read from YAML by :mod:`flock_swarm.presets`) describing a
 whole run. :func:`parse_scenario` validates every value and returns a frozen
 :class:`Scenario`; the first invalid value raises :class:`ScenarioError` naming its dotted
 key. :func:`realize` turns a scenario and its seed into initial states, the informed set and

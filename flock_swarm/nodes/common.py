@@ -21,7 +21,7 @@ from flock_swarm.cli import EXIT_USAGE, accept_sigint
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.run import check_law_output
 from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.scenarios import load
+from flock_swarm.presets import load
 
 #: Lockstep state and commands: reliable, because a lost odometry or command stalls the step
 #: until its timeout; the depth covers a burst of one message per agent and step.

@@ -377,7 +377,7 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
         ``sim --allow-unstable``).
     :raises ScenarioError: naming the point and the key a scenario rejects.
     """
-    from flock_swarm.scenarios import load
+    from flock_swarm.presets import load
     resolved = []
     for point in points(spec):
         values = resolve_point(spec, point)

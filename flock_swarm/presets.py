@@ -1,4 +1,4 @@
-"""Finding and reading scenario files: preset names or paths, YAML, ``--set`` overrides."""
+"""Presets (the scenario files of config/) and scenario files: lookup, YAML, ``--set``."""
 
 import os
 from pathlib import Path
