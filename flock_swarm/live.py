@@ -299,7 +299,6 @@ def _bridge_class() -> type:
 
         def __init__(self, live: 'LiveServer | None', **kwargs) -> None:
             """Create the node, its server if needed, and its subscriptions."""
-            kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
             super().__init__(kwargs.pop('node_name', 'foxglove_server'), **kwargs)
             declare_common(self)
             host = declare(self, 'host', DEFAULT_HOST, 'address the server binds '

@@ -27,13 +27,14 @@ from rclpy.node import Node
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                       StepClock, claimants, cmd_topic, declare, declare_common,
-                                      load_scenario, odom_topic, run_node, timer_period)
+                                      follow_world, load_scenario, odom_topic, run_node,
+                                      timer_period)
 from flock_swarm.nodes.controller import AgentController, parse_agent_ids
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
 
 AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout',
-                                               'leader_start_timeout'}
+                                               'leader_start_timeout', 'keep_running'}
 #: The agents' timeouts [s] (each must be > 0): default and description.
 TIMEOUTS = {
     'leader_timeout': (1.0, 'seconds without the leader state (lockstep: for a step whose '
@@ -55,7 +56,6 @@ class AgentNode(Node):
         :param default_agent_ids: the ``agent_ids`` default (``'all'`` for the container).
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
-        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         name = kwargs.pop('node_name', None)
         super().__init__(name or 'agent', **kwargs)
         declare_common(self)
@@ -96,6 +96,7 @@ class AgentNode(Node):
         self.repeated = -1
         self.duplicates: set[int] = set()
         self.create_timer(1.0, self.check_claims)
+        self.world_finished = follow_world(self)
         if self.lockstep:
             self.create_timer(0.01, self.on_lockstep_timer)
         else:
@@ -261,7 +262,8 @@ def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     found = [m.group(1) for a in argv for m in [re.search(r'^agent_id:=(\d+)$', a)] if m]
     name = f'agent_{found[-1]}' if found else 'agent'
-    return run_node('agent', lambda: AgentNode(node_name=name), args)
+    return run_node('agent', lambda: AgentNode(node_name=name), args,
+                    until=lambda node: node.world_finished())
 
 
 def container_main(args: list[str] | None = None) -> int:
@@ -271,7 +273,7 @@ def container_main(args: list[str] | None = None) -> int:
     node is named ``agents``.
     """
     return run_node('agents', lambda: AgentNode(default_agent_ids='all', node_name='agents'),
-                    args)
+                    args, until=lambda node: node.world_finished())
 
 
 if __name__ == '__main__':

@@ -5,23 +5,28 @@ other parameter whose name is a dotted scenario key overrides that single value,
 ``ros2 run flock_swarm agent --ros-args -p agent_id:=3 -p scenario:=demo -p protocol.c1:=0.8``.
 """
 
+import array
+import copy
+import dataclasses
 import math
 import re
+import signal
 import sys
 from typing import Any, Callable
 
 import numpy as np
+import yaml
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from flock_swarm.cli import EXIT_USAGE, accept_sigint
+from flock_swarm.cli import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.run import check_law_output
-from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.presets import load
+from flock_swarm.core.scenario import Scenario, parse_yaml, realize
+from flock_swarm.presets import load, load_mapping
 
 #: Lockstep state and commands: reliable, because a lost odometry or command stalls the step
 #: until its timeout; the depth covers a burst of one message per agent and step.
@@ -37,6 +42,11 @@ CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
 TELEMETRY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
                            reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE)
+#: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
+#: world announced the end of the run still learns it.
+STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: Parameters every rclpy node has; they are not scenario overrides.
 ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
@@ -59,6 +69,9 @@ LEADER_ACCEL = 'leader/accel'
 CLOCK = '/clock'
 MARKERS = 'swarm/markers'
 METRICS = 'swarm/metrics'
+STATUS = 'swarm/status'
+#: The world's status while it runs; any other is the end of the run (``summary.json``).
+RUNNING = 'running'
 
 
 class StepClock:
@@ -92,24 +105,50 @@ class StepClock:
 FREE_TYPED = {'agent_ids'}
 
 
-def declare(node: Node, name: str, default: Any, description: str) -> Any:
-    """Declare a node parameter (unless an override already declared it) and return its value.
+def plain(value: Any) -> Any:
+    """Return a parameter value with its arrays as lists (rclpy gives ``array.array``)."""
+    return list(value) if isinstance(value, (list, tuple, array.array, np.ndarray)) else value
 
-    An override is automatically declared with its own type, so the value is checked against
-    the default's: a boolean, an integer, a number (an integer is taken for a float, NaN is
-    not) or a string, as the default is.
+
+def given(node: Node, name: str, default: Any) -> Any:
+    """Return the value given for a node parameter (``-p``, a params file,
+    ``parameter_overrides``), or ``default``; checked against the default's type.
+
+    The value is checked as :func:`typed_value` says (not for :data:`FREE_TYPED` names).
+
+    :raises ScenarioError: when the value is not of the default's type.
+    """
+    param = node._parameter_overrides.get(name)
+    if param is None or param.type_ == Parameter.Type.NOT_SET:
+        return default
+    value = plain(param.value)
+    return value if name in FREE_TYPED else typed_value(name, value, default)
+
+
+def declare_value(node: Node, name: str, value: Any, description: str) -> None:
+    """Declare a read-only parameter holding ``value``, the value the node works with.
+
+    Every parameter is read once, at the start, so it is read-only: ``ros2 param set`` is
+    refused with a reason instead of succeeding and being ignored (docs/ros.md).
+    """
+    node.declare_parameter(name, value, ParameterDescriptor(
+        description=description, read_only=True, dynamic_typing=name in FREE_TYPED),
+        ignore_override=True)
+
+
+def declare(node: Node, name: str, default: Any, description: str) -> Any:
+    """Declare a read-only node parameter with its given value (or ``default``); return it.
 
     :param node: the node.
     :param name: parameter name.
     :param default: default value (its type is the parameter's type).
     :param description: what it is, shown by ``ros2 param describe``.
     :return: the value.
-    :raises ScenarioError: when the value is not of the default's type.
+    :raises ScenarioError: when the value is not of the default's type (see :func:`given`).
     """
-    if not node.has_parameter(name):
-        node.declare_parameter(name, default, ParameterDescriptor(description=description))
-    value = node.get_parameter(name).value
-    return value if name in FREE_TYPED else typed_value(name, value, default)
+    value = given(node, name, default)
+    declare_value(node, name, value, description)
+    return value
 
 
 def typed_value(name: str, value: Any, default: Any) -> Any:
@@ -135,45 +174,132 @@ def typed_value(name: str, value: Any, default: Any) -> Any:
     return value
 
 
-def scenario_overrides(node: Node, own: set[str]) -> dict[str, Any]:
-    """Return the node's parameters that override scenario keys (all but its own ones).
+def scenario_overrides(node: Node, own: set[str], base: dict) -> dict[str, Any]:
+    """Return the node's given parameters that override scenario keys (all but its own ones).
 
-    :param node: a node created with ``automatically_declare_parameters_from_overrides``.
+    A value a ROS parameter cannot hold (a nested list, an empty list or mapping, null) is
+    given as a string of its YAML text (as :func:`scenario_parameters` declares it): a string
+    for a key whose value in ``base`` is not a string is read as YAML when that gives such a
+    value.
+
+    :param node: the node.
     :param own: names of the node's own parameters.
+    :param base: the scenario file's mapping.
     :return: ``{dotted.key: value}``.
     """
     out = {}
-    for name, param in node._parameters.items():
+    for name, param in node._parameter_overrides.items():
         if name in own or name in ROS_PARAMS or name.startswith('qos_overrides.'):
             continue
-        value = param.value
-        out[name] = list(value) if isinstance(value, (list, tuple, np.ndarray)) else value
+        value = plain(param.value)
+        if isinstance(value, str) and not isinstance(lookup(base, name), str):
+            try:
+                parsed = parse_yaml(value)
+            except yaml.YAMLError:
+                parsed = value
+            if parsed is None or isinstance(parsed, (list, dict)):
+                value = parsed
+        out[name] = value
+    return out
+
+
+def lookup(data: dict, dotted: str) -> Any:
+    """Return the value of a dotted key in a nested mapping (``None`` when absent)."""
+    for part in dotted.split('.'):
+        if not isinstance(data, dict):
+            return None
+        data = data.get(part)
+    return data
+
+
+#: The largest integer a ROS parameter holds (int64).
+INT64_MAX = 2 ** 63 - 1
+
+
+def parameter_value(value: Any) -> Any:
+    """Return a scenario value as a ROS parameter value: scalars and flat arrays as they are
+    (numbers of mixed types as floats), anything else as a string of its YAML flow text."""
+    def fits(v: Any) -> bool:
+        return (isinstance(v, (bool, float)) or (isinstance(v, str) and '\0' not in v)
+                or (isinstance(v, int) and -INT64_MAX - 1 <= v <= INT64_MAX))
+    if fits(value):
+        return value
+    if isinstance(value, list) and value and all(fits(v) for v in value):
+        kinds = {bool if isinstance(v, bool) else str if isinstance(v, str) else 'number'
+                 for v in value}
+        if kinds == {'number'} and not all(isinstance(v, int) for v in value):
+            return [float(v) for v in value]
+        if len(kinds) == 1:
+            return value
+    text = yaml.safe_dump(value, default_flow_style=True, width=float('inf'))
+    return text.removesuffix('\n...\n').strip()
+
+
+def scenario_parameters(sc: Scenario) -> dict[str, Any]:
+    """Return every scenario key a run uses as ``{dotted.key: parameter value}``.
+
+    The keys of the scenario (its file and overrides) and the defaults it was given for the
+    ones it left out: protocol gains, ``record_every``, metrics...; nested mappings become
+    dotted names (``protocol.c1``). Given back as overrides, they reproduce the scenario.
+    """
+    data = copy.deepcopy(sc.raw)
+    for key, value in (('name', sc.name), ('description', sc.description),
+                       ('reference', sc.reference), ('seed', sc.seed),
+                       ('record_every', sc.record_every)):
+        data.setdefault(key, value)
+    for section, defaults in (
+            ('graph', {'type': sc.graph_type}),
+            ('metrics', {'eta_tolerance': sc.eta_tolerance,
+                         'collision_distance': sc.collision_distance}),
+            ('protocol', {f.name: getattr(sc.law, f.name) for f in dataclasses.fields(sc.law)
+                          if f.init and isinstance(getattr(sc.law, f.name),
+                                                   (bool, int, float, str))})):
+        if isinstance(data.get(section) or {}, dict):
+            data[section] = dict(defaults, **(data.get(section) or {}))
+    out: dict[str, Any] = {}
+
+    def flatten(section: dict, prefix: str) -> None:
+        for key, value in section.items():
+            if isinstance(value, dict) and value:
+                flatten(value, f'{prefix}{key}.')
+            else:
+                out[f'{prefix}{key}'] = parameter_value(value)
+    flatten(data, '')
     return out
 
 
 def load_scenario(node: Node, own: set[str]) -> Scenario:
     """Load the scenario named by the node's ``scenario`` parameter, with overrides.
 
-    :param node: the node (``scenario`` and ``seed`` parameters already declared).
+    Declares the ``seed`` parameter with the seed of the run and every scenario key the run
+    uses (:func:`scenario_parameters`) as read-only parameters, so that ``ros2 param dump``
+    writes a file that reproduces the run.
+
+    :param node: the node (``scenario`` already declared).
     :param own: names of the node's own parameters.
     :return: the validated scenario.
     :raises ScenarioError: on any invalid value.
     """
     name = node.get_parameter('scenario').value
-    seed = node.get_parameter('seed').value
-    if not isinstance(seed, int) or seed < -1:
+    seed = given(node, 'seed', -1)
+    if seed < -1:
         raise ScenarioError('seed', f'must be -1 (the scenario seed) or >= 0, got {seed!r}')
-    sc = load(name, seed=None if seed == -1 else seed, extra=scenario_overrides(node, own))
+    extra = scenario_overrides(node, own, load_mapping(name))
+    sc = load(name, seed=None if seed == -1 else seed, extra=extra)
     # A plugin law that raises or returns unusable commands fails here, in one line, not in
     # a callback of the running node.
     check_law_output(sc, realize(sc))
+    declare_value(node, 'seed', sc.seed, 'random seed of the run (given as -1: the '
+                  'scenario seed, and it reads back as that seed)')
+    for key, value in scenario_parameters(sc).items():
+        if key not in own and key != 'seed':
+            declare_value(node, key, value, f'scenario key {key} (read at start)')
     return sc
 
 
 def declare_common(node: Node) -> None:
-    """Declare the parameters every node has: ``scenario``, ``seed`` and ``mode``."""
+    """Declare ``scenario``, ``mode`` and ``realtime_factor`` (``seed``: :func:`load_scenario`)."""
     declare(node, 'scenario', 'demo', 'scenario preset name or path to a YAML file')
-    declare(node, 'seed', -1, 'random seed; -1 keeps the scenario seed')
     mode = declare(node, 'mode', 'lockstep',
                    'lockstep (deterministic, world waits for every agent) or realtime')
     if mode not in ('lockstep', 'realtime'):
@@ -228,12 +354,38 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
+def follow_world(node: Node) -> Callable[[], bool]:
+    """Subscribe ``node`` to the world's ``swarm/status``; return whether it should stop.
+
+    Declares ``keep_running`` (default false): when the world announces the end of its run,
+    the node logs it and, unless ``keep_running`` is true, its ``run_node`` loop ends with
+    exit status 0.
+
+    :param node: a leader or agent node.
+    :return: a predicate, true once the world finished and the node is not to keep running.
+    """
+    from std_msgs.msg import String
+    keep = declare(node, 'keep_running', False,
+                   'keep running after the world announced the end of its run on swarm/status')
+    ended: list[str] = []
+
+    def on_status(msg: String) -> None:
+        if msg.data != RUNNING and not ended:
+            ended.append(msg.data)
+            node.get_logger().info(f'the world finished its run ({msg.data})' +
+                                   ('' if keep else '; exiting'))
+    node.create_subscription(String, STATUS, on_status, STATUS_QOS)
+    return lambda: bool(ended) and not keep
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None,
              until: Callable[[Node], bool] | None = None) -> int:
     """Run one node as in ros2/demos: init, spin, clean shutdown; return the exit status.
 
     Invalid configuration is reported as one line on stderr with exit status 2. The node
-    spins on :func:`make_executor`'s executor.
+    spins on :func:`make_executor`'s executor. SIGINT and SIGTERM only end the spin: the
+    context stays valid until the node is closed and destroyed, so no callback meets an
+    invalid context (rclpy's own handlers shut it down under a running callback).
 
     :param name: executable name (prefix of error lines).
     :param factory: builds the node (after ``rclpy.init``).
@@ -241,15 +393,28 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     :param until: optional condition ending the spin (the world ends after its last step).
     :return: the exit status.
     """
-    accept_sigint()
+    signalled: list[int] = []
+    previous_handlers = {sig: signal.signal(sig, lambda number, frame: signalled.append(number))
+                         for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _spin(name, factory, args, until, signalled)
+    finally:
+        for sig, handler in previous_handlers.items():
+            signal.signal(sig, handler)
+
+
+def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
+          until: Callable[[Node], bool] | None, signalled: list[int]) -> int:
+    """:func:`run_node` with its signal handlers installed (``signalled`` lists the signals)."""
     import rclpy
     from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.logging import LoggingSeverity, get_logger_level, set_logger_level
+    from rclpy.signals import SignalHandlerOptions
     # rcl logs a line of its own for malformed arguments; the reason is in the error below.
     previous = get_logger_level('rcl')
     set_logger_level('rcl', LoggingSeverity.FATAL)
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except rclpy_implementation.RCLError as exc:
         set_logger_level('rcl', previous)
         reason = str(exc).removeprefix('failed to initialize rcl: ')
@@ -270,18 +435,11 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
         node = factory()
         executor = make_executor()
         executor.add_node(node)
-        while rclpy.ok() and (until is None or not until(node)):
+        while not signalled and rclpy.ok() and (until is None or not until(node)):
             executor.spin_once(timeout_sec=0.1)
     except ScenarioError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
         status = EXIT_USAGE
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        # A signal shuts the context down asynchronously: a callback that was publishing at
-        # that moment fails with "context is invalid". That is the shutdown, not a fault.
-        if rclpy.ok():
-            raise
     finally:
         if node is not None:
             close = getattr(node, 'close', None)

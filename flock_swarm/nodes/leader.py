@@ -17,12 +17,12 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
-                                      declare, declare_common, load_scenario, run_node,
-                                      timer_period)
+                                      declare, declare_common, follow_world, load_scenario,
+                                      run_node, timer_period)
 from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 
-LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout'}
+LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout', 'keep_running'}
 
 
 class LeaderNode(Node):
@@ -30,7 +30,6 @@ class LeaderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         """Create the node; ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace...)."""
-        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         super().__init__('leader', **kwargs)
         declare_common(self)
         self.scenario = sc = load_scenario(self, LEADER_PARAMS)
@@ -47,6 +46,7 @@ class LeaderNode(Node):
                                      'seconds to wait for expect_subscribers')
         self.matched = False
         self.t0 = time.monotonic()
+        self.world_finished = follow_world(self)
         self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
         self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
         self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
@@ -103,7 +103,8 @@ class LeaderNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Run the leader node (``ros2 run flock_swarm leader``)."""
-    return run_node('leader', lambda: LeaderNode(), args)
+    return run_node('leader', lambda: LeaderNode(), args,
+                    until=lambda node: node.world_finished())
 
 
 if __name__ == '__main__':

@@ -22,13 +22,16 @@ from typing import Callable
 import numpy as np
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
-                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
-                                      claimants, cmd_topic, declare, declare_common,
-                                      load_scenario, odom_topic, run_node, timer_period)
+                                      LEADER_ODOM, LOCKSTEP_QOS, RUNNING, STATUS, STATUS_QOS,
+                                      StepClock, agent_hosts, claimants, cmd_topic, declare,
+                                      declare_common, declare_value, given, load_scenario,
+                                      odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.recording import BagSink, RecordedNode
@@ -51,11 +54,9 @@ class WorldNode(RecordedNode):
             it); ``None`` logs it instead.
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
-        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         super().__init__('world', **kwargs)
         declare_common(self)
-        out_dir = declare(self, 'out_dir', '', 'directory for bag/, summary.json and '
-                          'timeseries.npz (empty: out/<scenario>_ros)')
+        out_dir = given(self, 'out_dir', '')
         self.record = declare(self, 'record', True, 'write the MCAP bag')
         split = {
             'max_bagfile_size': declare(
@@ -78,6 +79,9 @@ class WorldNode(RecordedNode):
         self.mode = self.get_parameter('mode').value
         self.lockstep = settings.lockstep
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
+        declare_value(self, 'out_dir', str(self.out), 'directory for bag/, summary.json and '
+                      'timeseries.npz (given empty: out/<scenario>_ros; reads back as the '
+                      'directory written)')
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
         self.spool = SpooledRecorder(self.out, self.get_logger().warning)
         self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
@@ -92,6 +96,9 @@ class WorldNode(RecordedNode):
             raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
                 from None
         self.sinks = [] if self.bag is None else [self.bag]
+        # Not recorded: the bag's own end (and summary.json) tell a replay how the run ended.
+        self.status_pub = self.create_publisher(String, STATUS, STATUS_QOS)
+        self.status_pub.publish(String(data=RUNNING))
         self.clock_pub = self.recorded_publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(sc.n_agents)]
@@ -266,7 +273,9 @@ class WorldNode(RecordedNode):
         self.finish('recording_failed')
 
     def write_results(self) -> None:
-        """Write what was recorded so far (also on an interrupted run), close the sinks."""
+        """Announce the end on ``swarm/status``; write what was recorded so far (also on an
+        interrupted run), close the sinks."""
+        self.status_pub.publish(String(data=self.stepper.status))
         result = self.stepper.result(time.monotonic(), self.guard.counts(),
                                      sorted(self.duplicates), self.bag_error,
                                      str(self.out / 'bag') if self.record else None)
@@ -291,9 +300,11 @@ class WorldNode(RecordedNode):
             self.spool.discard()
 
     def close(self) -> None:
-        """Called on shutdown: keep what was recorded (status ``interrupted``)."""
+        """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
+        announcement of the end reach the leader and agents before the node goes."""
         if self.stepper.end('interrupted'):
             self.write_results()
+        self.status_pub.wait_for_all_acked(Duration(seconds=2))
 
 
 def main(args: list[str] | None = None) -> int:
