@@ -13,7 +13,6 @@ import yaml
 from numpy.testing import assert_array_equal
 
 from flock_swarm.runner import executable
-from flock_swarm.testing import wait_for
 
 RUN_TIMEOUT = 240.0
 SERVICE_TIMEOUT = 30.0
@@ -172,9 +171,9 @@ def test_dumped_parameters_reproduce_the_run(tmp_path, ros_domain, ros_context, 
                 proc.send_signal(signal.SIGINT)
                 assert proc.wait(timeout=60) == 0
             # The file changes; the dumps hold every key, so they do not depend on it.
-            path.write_text(yaml.safe_dump(dict(
-                SCENARIO, seed=11, dt=0.1, n_agents=5, protocol=dict(SCENARIO['protocol'],
-                                                                      c1=0.3))))
+            changed = dict(SCENARIO, seed=11, dt=0.1, n_agents=5,
+                           protocol=dict(SCENARIO['protocol'], c1=0.3))
+            path.write_text(yaml.safe_dump(changed))
             files = {}
             for target, values in dumps.items():
                 files[target] = tmp_path / f'{target[1:]}.yaml'
