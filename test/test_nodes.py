@@ -170,7 +170,10 @@ def test_separate_processes(tmp_path, ros_domain, container):
     with open(tmp_path / 'nodes.log', 'w') as log:
         summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
                                 log=log, container=container)
-    assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
+    logged = (tmp_path / 'nodes.log').read_text()
+    assert summary['status'] == 'completed', logged[-2000:]
+    # The leader and agents end with the run (swarm/status): no FATAL, no traceback.
+    assert 'FATAL' not in logged and 'Traceback' not in logged, logged[-2000:]
     assert summary['missed_commands'] == 0
     assert summary['velocity_mismatch_max'] < 0.2 and summary['collisions'] == 0
     reader = BagReader(out / 'bag')
