@@ -13,7 +13,7 @@ import sys
 from xml.sax.saxutils import escape
 
 from flock_swarm.nodes.common import (CLOCK, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
-                                      cmd_topic, odom_topic)
+                                      STATUS, cmd_topic, odom_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -33,12 +33,12 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     """
     odom = [odom_topic(i) for i in range(n_agents)]
     out = {
-        'world': ([CLOCK, *odom, MARKERS, METRICS],
+        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS],
                   [*(cmd_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL]),
-        'leader': ([LEADER_ODOM, LEADER_ACCEL], [CLOCK]),
+        'leader': ([LEADER_ODOM, LEADER_ACCEL], [CLOCK, STATUS]),
     }
     for i in range(n_agents):
-        out[f'agent_{i}'] = ([cmd_topic(i)], [*odom, LEADER_ODOM, LEADER_ACCEL])
+        out[f'agent_{i}'] = ([cmd_topic(i)], [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 
 
