@@ -35,10 +35,12 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     odom = {common.odom_topic(i) for i in range(n)}
     cmds = {common.cmd_topic(i) for i in range(n)}
     leader = {common.LEADER_ODOM, common.LEADER_ACCEL}
-    nodes = {'world': ({common.CLOCK, common.MARKERS, common.METRICS} | odom, cmds | leader),
-             'leader': (leader, {common.CLOCK})}
+    status = {common.STATUS}  # the world announces the end of its run to the others
+    nodes = {'world': ({common.CLOCK, common.MARKERS, common.METRICS} | odom | status,
+                       cmds | leader),
+             'leader': (leader, {common.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({common.cmd_topic(i)}, odom | leader)
+        nodes[f'agent_{i}'] = ({common.cmd_topic(i)}, odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
 
