@@ -253,7 +253,8 @@ def start_live(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, option: str =
     :param option: the option or parameter the port came from, for the error message.
     :param backlog: messages queued per client (:class:`LiveServer`).
     :return: the running server.
-    :raises ServeError: for a port out of range or an address that cannot be bound.
+    :raises ServeError: for a port out of range, an address that cannot be bound, or
+        ``foxglove-sdk`` not installed.
     """
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
         raise ServeError(option, f'the port must be an integer in [0, 65535], got {port!r}')
@@ -261,6 +262,10 @@ def start_live(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, option: str =
         return LiveServer(host, port, backlog)
     except OSError as exc:
         raise ServeError(option, str(exc)) from None
+    except ImportError:
+        # A system ROS install has the rest from rosdep, but not this PyPI package.
+        raise ServeError(option, 'the live view needs the foxglove-sdk package '
+                         '(pip install -r requirements/run.txt)') from None
 
 
 def make_bridge(live: 'LiveServer | None' = None, **kwargs):
