@@ -38,7 +38,7 @@ setup(
             'world = flock_swarm.nodes.world:main',
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
-            'foxglove_server = flock_swarm.live:main',
+            'foxglove_server = flock_swarm.nodes.foxglove_server:main',
         ],
     },
 )
