@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: Top-level entries of a working tree that are not package sources (virtualenv, run outputs,
 #: colcon's own directories), left out even if a global gitignore does not list them.
 NOT_SOURCES = {'.venv', 'out', 'build', 'install', 'log'}
-EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm')
+EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm', 'foxglove_server')
 #: Wall-clock bounds: a build or a run that hangs fails the test instead of blocking CI.
 BUILD_TIMEOUT = 300.0
 RUN_TIMEOUT = 120.0
