@@ -40,7 +40,7 @@ setup(
             'replay = flock_swarm.replay:main',
             'analyze = flock_swarm.analyze:main',
             'sweep = flock_swarm.sweep:main',
-            'foxglove_server = flock_swarm.live:main',
+            'foxglove_server = flock_swarm.nodes.foxglove_server:main',
         ],
         # The built-in laws and leader models, registered exactly as a user's package
         # registers its own (docs/extending.md): one registry, one code path.

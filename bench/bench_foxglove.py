@@ -13,8 +13,9 @@ after the other and interleaved over ``--repeat`` rounds; the best run of each c
 ``client``   the same with one client subscribed to every topic and reading;
 ``stalled``  the same with one client subscribed to every topic that never reads (its TCP
              receive buffer 4 KiB): the server must drop, the world must not wait;
-``bridge``   the alternative: a :class:`flock_swarm.live.LiveBridge` node in the same
-             process subscribing to every topic, one client reading.
+``bridge``   the alternative: a bridge node
+             (:class:`flock_swarm.nodes.foxglove_server.LiveBridge`) in the same process
+             subscribing to every topic, one client reading.
 
 The client is the tests' (test/foxglove_client.py) in a process of its own, as the Foxglove
 app would be; it reports the messages it received. Steps/s come from the world's own clock
@@ -88,7 +89,8 @@ def start_client(live, stalled: bool) -> subprocess.Popen:
 
 def run_role(variant: str, n: int, steps: int) -> dict:
     """Fly one run of ``variant`` in this process; return its numbers."""
-    from flock_swarm.live import make_bridge, start_live
+    from flock_swarm.live import start_live
+    from flock_swarm.nodes.foxglove_server import LiveBridge
     from flock_swarm.runner import InProcessSwarm, resolve_scenario
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
@@ -99,8 +101,8 @@ def run_role(variant: str, n: int, steps: int) -> dict:
         try:
             with InProcessSwarm(scenario, out, domain_id=DOMAIN) as swarm:
                 if variant == 'bridge':
-                    swarm.add(make_bridge(live, context=swarm.context,
-                                          parameter_overrides=swarm.parameters()))
+                    swarm.add(LiveBridge(live, context=swarm.context,
+                                         parameter_overrides=swarm.parameters()))
                 elif live is not None:
                     swarm.serve(live)
                 if variant in ('client', 'stalled', 'bridge'):

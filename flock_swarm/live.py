@@ -13,10 +13,9 @@ Three ways in, one :class:`LiveServer` under each:
   sinks, hands the server every message the world publishes or receives, without another
   DDS subscriber (the cheapest, docs/performance.md);
 - ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
-- ``foxglove_server`` (:func:`main`) for runs started node by node, ``swarm --processes
-  --foxglove`` (:class:`BackgroundBridge`, in the runner's process):
-  :class:`LiveBridge`, a node subscribing to the contract topics with
-  ``raw=True`` and forwarding the bytes.
+- ``foxglove_server`` for runs started node by node and ``swarm --processes --foxglove`` (in
+  the runner's process): a bridge node subscribing to the contract topics with ``raw=True``
+  and forwarding the bytes (:mod:`flock_swarm.nodes.foxglove_server`).
 
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
 bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
@@ -24,9 +23,8 @@ when it is full, and the bridge subscribes best-effort, so it never holds a writ
 """
 
 import struct
-import sys
 import threading
-from typing import Callable, Iterable
+from typing import Iterable
 
 from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
 
@@ -251,7 +249,8 @@ def start_live(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, option: str =
     :param option: the option or parameter the port came from, for the error message.
     :param backlog: messages queued per client (:class:`LiveServer`).
     :return: the running server.
-    :raises ServeError: for a port out of range or an address that cannot be bound.
+    :raises ServeError: for a port out of range, an address that cannot be bound, or
+        ``foxglove-sdk`` not installed.
     """
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
         raise ServeError(option, f'the port must be an integer in [0, 65535], got {port!r}')
@@ -259,163 +258,7 @@ def start_live(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, option: str =
         return LiveServer(host, port, backlog)
     except OSError as exc:
         raise ServeError(option, str(exc)) from None
-
-
-def make_bridge(live: 'LiveServer | None' = None, **kwargs):
-    """Return a :class:`LiveBridge` node (imported here: this module loads without rclpy).
-
-    :param live: the server to forward to; None: the node starts its own from its ``host``
-        and ``port`` parameters, and closes it in its ``close()``.
-    :param kwargs: forwarded to the node.
-    """
-    return _bridge_class()(live, **kwargs)
-
-
-def _bridge_class() -> type:
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    from flock_swarm.bag.msgdefs import message_class
-    from flock_swarm.core.errors import ScenarioError
-    from flock_swarm.nodes.common import COMMON_PARAMS, declare, declare_common, load_scenario
-
-    #: Best effort: a viewer never makes a writer wait for its acknowledgements (it matches
-    #: the reliable writers of the contract); the depth covers a step's burst.
-    bridge_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                            reliability=ReliabilityPolicy.BEST_EFFORT,
-                            durability=DurabilityPolicy.VOLATILE)
-    own_params = COMMON_PARAMS | {'host', 'port'}
-
-    class LiveBridge(Node):
-        """Subscribes to the contract topics (raw bytes) and forwards them to a server.
-
-        Parameters: ``scenario`` (and its overrides, as every node: the number of agents),
-        ``host`` and ``port`` (of the server it starts when given none).
-
-        :param live: the server, or None to start one.
-        :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
-        :raises ScenarioError: for an invalid parameter, or an address that cannot be bound.
-        """
-
-        def __init__(self, live: 'LiveServer | None', **kwargs) -> None:
-            """Create the node, its server if needed, and its subscriptions."""
-            super().__init__(kwargs.pop('node_name', 'foxglove_server'), **kwargs)
-            declare_common(self)
-            host = declare(self, 'host', DEFAULT_HOST, 'address the server binds '
-                           '(127.0.0.1: this machine only)')
-            port = declare(self, 'port', DEFAULT_PORT, 'TCP port of the server (0: any)')
-            sc = load_scenario(self, own_params)
-            self.owned = live is None
-            if live is None:
-                try:
-                    live = start_live(host, port, 'port')
-                except ServeError as exc:
-                    raise ScenarioError(exc.option, exc.reason) from None
-            self.live = live
-            self.received = 0
-            self.time_ns = 0
-            for topic, type_name in contract_topics(sc.n_agents, self.get_namespace()):
-                name = self.create_subscription(
-                    message_class(type_name), topic, self._forward(topic, type_name),
-                    bridge_qos, raw=True).topic_name
-                live.add_topic(name, type_name)
-
-        def _forward(self, topic: str, type_name: str) -> Callable[[bytes], None]:
-            clock = type_name == CLOCK_TYPE
-
-            def on_data(data: bytes) -> None:
-                stamp = message_stamp_ns(type_name, data)
-                t_ns = self.time_ns if stamp is None else stamp
-                if clock and t_ns > self.time_ns:
-                    # A step offered again (the world's resend) does not turn time back.
-                    self.time_ns = t_ns
-                    self.live.set_time(t_ns)
-                self.live.write(topic, data, t_ns)
-                self.received += 1
-            return on_data
-
-        def close(self) -> None:
-            """Stop the server if this node started it."""
-            if self.owned:
-                self.live.close()
-
-    return LiveBridge
-
-
-class BackgroundBridge:
-    """A :class:`LiveBridge` on its own context and domain, spun by a thread of this process.
-
-    ``swarm --processes --foxglove`` serves this way: the runner's process keeps the server
-    it bound (no second process racing for the port), while the nodes run elsewhere. Use it
-    as a context manager.
-
-    :param live: the server.
-    :param domain_id: the run's ROS domain id.
-    :param parameters: the bridge's parameters (``scenario`` and the like).
-    """
-
-    def __init__(self, live: LiveServer, domain_id: int, parameters: dict) -> None:
-        """Create the context and the node, and start spinning."""
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.parameter import Parameter
-
-        from flock_swarm.nodes.common import make_executor
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        try:
-            self.node = make_bridge(live, context=self.context, parameter_overrides=[
-                Parameter(name, value=value) for name, value in parameters.items()])
-        except BaseException:
-            rclpy.try_shutdown(context=self.context)
-            raise
-        self.executor = make_executor(self.context)
-        self.executor.add_node(self.node)
-        self._stop = threading.Event()
-        self.thread = threading.Thread(target=self._spin, name='foxglove-bridge', daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while not self._stop.is_set() and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.1)
-
-    def close(self) -> None:
-        """Stop spinning; destroy the node and the context (the server stays open)."""
-        import rclpy
-        self._stop.set()
-        self.thread.join()
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self) -> 'BackgroundBridge':
-        """Return the bridge."""
-        return self
-
-    def __exit__(self, *exc_info) -> None:
-        """Close the bridge."""
-        self.close()
-
-
-def main(args: list[str] | None = None) -> int:
-    """Run ``foxglove_server``: serve the contract topics of a running swarm (a bridge node).
-
-    ``foxglove_server --ros-args -p scenario:=demo [-p port:=8765] [-p host:=127.0.0.1]``;
-    the scenario gives the number of agents. Invalid input: one line, exit status 2.
-
-    :param args: command-line arguments (``None``: ``sys.argv``).
-    :return: the exit status.
-    """
-    from flock_swarm.nodes.common import run_node
-
-    def factory():
-        bridge = make_bridge()
-        print(f'[foxglove_server] serving {len(bridge.live.channels)} topics on '
-              f'{bridge.live.url}', file=sys.stderr, flush=True)
-        return bridge
-
-    return run_node('foxglove_server', factory, args)
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+    except ImportError:
+        # A system ROS install has the rest from rosdep, but not this PyPI package.
+        raise ServeError(option, 'the live view needs the foxglove-sdk package '
+                         '(pip install -r requirements/run.txt)') from None

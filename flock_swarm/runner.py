@@ -220,8 +220,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
 
 
 #: Modules of the executables that are not ``flock_swarm.nodes.<name>``, for ``python -m``.
-MODULES = {'foxglove_server': 'flock_swarm.live', 'replay': 'flock_swarm.replay',
-           'swarm': 'flock_swarm.runner'}
+MODULES = {'replay': 'flock_swarm.replay', 'swarm': 'flock_swarm.runner'}
 
 
 def executable(name: str) -> list[str]:
@@ -274,7 +273,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param world_params: further parameters of the world node.
     :param live: a :class:`~flock_swarm.live.LiveServer` to serve the run on, through a
         bridge node spun by a thread of this process
-        (:class:`~flock_swarm.live.BackgroundBridge`), or None.
+        (:class:`~flock_swarm.nodes.foxglove_server.BackgroundBridge`), or None.
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
@@ -297,7 +296,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
     bridge = None
     if live is not None:
-        from flock_swarm.live import BackgroundBridge
+        from flock_swarm.nodes.foxglove_server import BackgroundBridge
         bridge = BackgroundBridge(live, domain_id, base)
     world = subprocess.Popen(executable('world') + ros_args(
         dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),

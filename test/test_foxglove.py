@@ -22,7 +22,8 @@ import pytest
 from flock_swarm.testing import wait_for
 from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
-from flock_swarm.live import CLOSE_TIMEOUT, LiveServer, start_live
+from flock_swarm.live import (CLOSE_TIMEOUT, LiveServer, contract_topics, message_stamp_ns,
+                              start_live)
 from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
 
 pytestmark = pytest.mark.ros
@@ -355,3 +356,30 @@ def test_a_port_in_use_is_one_line_and_status_2(tmp_path):
             assert res.returncode == 2, argv
             assert res.stderr.startswith(prefix) and res.stderr.count('\n') == 1, res.stderr
             assert 'in use' in res.stderr
+
+
+def test_contract_topics_follow_the_namespace_but_clock_stays_global():
+    assert dict(contract_topics(N)) == CONTRACT
+    topics = [topic for topic, _ in contract_topics(2, '/team_a')]
+    assert topics[0] == '/clock'
+    assert all(t.startswith('/team_a/') for t in topics[1:]) and len(topics) == 9
+
+
+def test_message_stamp_of_every_contract_type():
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import serialize_message
+    from flock_swarm.bag.msgdefs import message_class
+    stamp = Time(sec=12, nanosec=340_000_000)
+    for type_name in set(CONTRACT.values()):
+        msg = message_class(type_name)()
+        if type_name == 'rosgraph_msgs/msg/Clock':
+            msg.clock = stamp
+        elif type_name == 'visualization_msgs/msg/MarkerArray':
+            assert message_stamp_ns(type_name, serialize_message(msg)) is None
+            marker = message_class('visualization_msgs/msg/Marker')()
+            marker.header.stamp = stamp
+            msg.markers = [marker]
+        else:
+            msg.header.stamp = stamp
+        assert message_stamp_ns(type_name, serialize_message(msg)) == 12_340_000_000, type_name
+    assert message_stamp_ns('nav_msgs/msg/Odometry', b'\x00\x01') is None
