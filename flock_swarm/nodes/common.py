@@ -3,6 +3,8 @@
 Every node reads the same scenario (parameter ``scenario``: a preset name or a path); any
 other parameter whose name is a dotted scenario key overrides that single value, e.g.
 ``ros2 run flock_swarm agent --ros-args -p agent_id:=3 -p scenario:=demo -p protocol.c1:=0.8``.
+Every parameter is then declared read-only with the value the node uses, every scenario key
+included (:func:`load_scenario`), so the parameter services tell the truth about a run.
 """
 
 import array
