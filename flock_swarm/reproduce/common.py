@@ -8,6 +8,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from flock_swarm import plots
 from flock_swarm.core.graphs import components, disk_graph
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.presets import resolve
@@ -108,52 +109,39 @@ def plural(count: int, noun: str) -> str:
 
 
 def pyplot():
-    """Return ``matplotlib.pyplot`` on the headless Agg backend."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    """Return ``matplotlib.pyplot`` as :mod:`flock_swarm.plots` sets it up, with the report's
+    small fonts."""
+    plt = plots.pyplot()
     plt.rcParams.update({'font.size': 8, 'axes.titlesize': 9, 'legend.fontsize': 7})
     return plt
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Save a figure as a small PNG and close it."""
+    """Save a figure as a small PNG (:data:`FIG_DPI`) and close it."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=FIG_DPI)
-    import matplotlib.pyplot as plt
-    plt.close(fig)
-    return path
+    return plots.save_figure(fig, path, FIG_DPI)
 
 
 def draw_configuration(ax, sc: Scenario, series: dict, k: int, title: str) -> None:
-    """Draw the 2-D configuration at recorded instant ``k``: edges, velocities, informed."""
+    """Draw the 2-D configuration at recorded instant ``k`` (:func:`flock_swarm.plots.draw_flock`:
+    edges, velocities, informed agents circled, the leader) around the leader's flock."""
     q, p = series['q'][k], series['p'][k]
     informed = series['informed'][k].astype(bool)
-    edges = disk_graph(q, sc.law.radius, sc.law.strict_radius)
-    from matplotlib.collections import LineCollection
-    ax.add_collection(LineCollection(np.stack((q[edges.i], q[edges.j]), axis=1),
-                                     colors='0.6', linewidths=0.5))
-    ax.quiver(q[:, 0], q[:, 1], p[:, 0], p[:, 1], color='0.3', width=0.003, alpha=0.7)
-    ax.scatter(q[~informed, 0], q[~informed, 1], s=8, c='tab:blue', label='uninformed')
-    ax.scatter(q[informed, 0], q[informed, 1], s=14, c='tab:red', label='informed')
     lq = series['leader_q'][k]
-    ax.plot(lq[0], lq[1], '*', color='k', ms=11, label='virtual leader')
     # The view follows the leader's flock (the paper's plot (f)); groups that split off far
     # away would otherwise shrink it to a dot, so they are counted in the title instead.
     gap = np.abs(q - lq).max(axis=1)
     near = gap[gap <= VIEW_MAX]
     half = float(np.clip(near.max() + 3.0 if near.size else VIEW_MIN, VIEW_MIN, VIEW_MAX))
-    ax.set_xlim(lq[0] - half, lq[0] + half)
-    ax.set_ylim(lq[1] - half, lq[1] + half)
-    ax.set_aspect('equal')
+    plots.draw_flock(ax, q, p, lq, informed, sc.law.radius, strict=sc.law.strict_radius,
+                     center=lq, half=half, size=8.0)
     outside = int((gap > half).sum())
     if outside:
         title += f'\n{outside} agents outside this view (split off)'
     ax.set_title(title)
-    ax.set_xlabel('x [m]')
-    ax.set_ylabel('y [m]')
-    ax.legend(loc='best')
+    ax.legend(handles=plots.legend_handles(bool(informed.any()), bool(informed.all())),
+              loc='best')
 
 
 def draw_last_net(ax, sc: Scenario, q: np.ndarray) -> None:
