@@ -16,7 +16,9 @@ from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, experiment_result,
                                              run_ros, run_simulations)
 from flock_swarm.reproduce.report import git_revision, machine, record_invocation, write_report
 from flock_swarm.reproduce.su2009 import Plan, fig3_result
-from flock_swarm.study.execute import DaskBackend, SweepError, terminal_line
+from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
+from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
+                                       terminal_line)
 from flock_swarm.study.spec import plain
 
 
@@ -42,6 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help='run the simulations on the Dask scheduler at ADDRESS, or "local" '
                         '(see docs/sweeps.md)')
     parser.add_argument('--fresh', action='store_true', help='ignore cached runs')
+    parser.add_argument('--seeds-cache', type=Path, metavar='DIR',
+                        help='the caches of the experiments over seeds (default: '
+                        f'{SEEDS_CACHE}, the committed ones; OUT/seeds with --quick)')
+    parser.add_argument('--cached-seeds', action='store_true',
+                        help='run nothing new over seeds: the distributions use what the '
+                        'caches hold (the report states the counts)')
     return parser
 
 
@@ -88,10 +96,14 @@ def main(argv: list[str] | None = None) -> int:
         except SweepError as exc:
             print(f'reproduce: error: {exc}', file=sys.stderr)
             return 2
+    live = terminal_line if sys.stderr.isatty() else None
     try:
-        sims = run_simulations(plan, args.out, args.jobs, args.fresh, say,
-                               live=terminal_line if sys.stderr.isatty() else None,
+        sims = run_simulations(plan, args.out, args.jobs, args.fresh, say, live=live,
                                backend=backend)
+        seeds_dir = args.seeds_cache or (args.out / 'seeds' if plan.quick else SEEDS_CACHE)
+        pool = backend or (SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say))
+        meta['seeds_cache'] = str(seeds_dir)
+        studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live)
     finally:
         if backend is not None:
             backend.close()
@@ -108,6 +120,8 @@ def main(argv: list[str] | None = None) -> int:
                                     args.figures)
         if exp.key in ros:
             res['ros'] = ros[exp.key]
+        if exp.key in studies:
+            res['seeds'] = studies[exp.key]
         results[exp.key] = res
         (results_dir / f'{exp.key}.json').write_text(json.dumps(plain(res), indent=2) + '\n')
     meta['wall_min'] = (time.monotonic() - started) / 60.0
