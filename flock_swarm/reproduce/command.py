@@ -15,7 +15,7 @@ from flock_swarm.reproduce.common import FIG_MAX_BYTES
 from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, experiment_result, ros_experiments,
                                              run_ros, run_simulations)
 from flock_swarm.reproduce.report import git_revision, machine, record_invocation, write_report
-from flock_swarm.reproduce.su2009 import Plan, fig3_result
+from flock_swarm.reproduce.su2009 import Plan, fig3_curves, fig3_result
 from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
 from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
                                        terminal_line)
@@ -47,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--seeds-cache', type=Path, metavar='DIR',
                         help='the caches of the experiments over seeds (default: '
                         f'{SEEDS_CACHE}, the committed ones; OUT/seeds with --quick)')
+    parser.add_argument('--fig3-curves', action='store_true',
+                        help='run (or resume) the four Su 2009 Fig. 3 curves (hours); '
+                        'without it the report draws what their caches hold')
     parser.add_argument('--cached-seeds', action='store_true',
                         help='run nothing new over seeds: the distributions use what the '
                         'caches hold (the report states the counts)')
@@ -104,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         pool = backend or (SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say))
         meta['seeds_cache'] = str(seeds_dir)
         studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live)
+        curves = fig3_curves(seeds_dir, pool, say, args.fig3_curves and not plan.quick,
+                             args.figures, live)
     finally:
         if backend is not None:
             backend.close()
@@ -115,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     for exp in EXPERIMENTS:
         if exp.key == 'su2009_fig3':
             res = fig3_result(plan, sims['fig3'], args.figures)
+            res['curves'] = curves
         else:
             res = experiment_result(exp, plan, sims['summaries'][exp.key], args.out,
                                     args.figures)

@@ -13,7 +13,8 @@ from flock_swarm.reproduce.common import cell, fmt, preset_notes, set_args
 from flock_swarm.reproduce.execution import COMPARED
 from flock_swarm.reproduce.seeds import MAJORITY, STUDY_OF
 from flock_swarm.reproduce.seeds import section as seeds_section
-from flock_swarm.reproduce.su2009 import FIG3_PAPER_DELTA, Plan, fig3_section
+from flock_swarm.reproduce.su2009 import (FIG3_PAPER_DELTA, Plan, fig3_curves_section,
+                                          fig3_section)
 from flock_swarm.study.spec import plain
 
 
@@ -328,6 +329,8 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
                       f'{", ".join(f"{d:g}" for d in res["fractions"])}. Preset notes: '
                       f'{preset_notes(exp.key)}', '']
             lines += fig3_section(res, plan)
+            if 'curves' in res:
+                lines += fig3_curves_section(res['curves'], rel)
         else:
             lines += [f'**Run.** `{res["command"]}` (seed {res["seed"]}, {res["n_agents"]} '
                       f'agents, dt = {fmt(res["dt"])} s, {fmt(res["duration"])} s, '

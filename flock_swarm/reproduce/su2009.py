@@ -739,3 +739,118 @@ FIGURES = {
     'su2009_fig5': figure_su_lorenz,
     'su2009_fig6': figure_su_lorenz,
 }
+
+
+#: Issue 15, section 3: the four Fig. 3 curves, ``(spec, label)`` (config/sweeps/).
+FIG3_CURVES = (('reproduce_su2009_fig3_linear_100s', 'linear navigation, 100 s'),
+               ('reproduce_su2009_fig3_bounded_100s', 'bounded navigation, 100 s'),
+               ('reproduce_su2009_fig3_linear_300s', 'linear navigation, 300 s'),
+               ('reproduce_su2009_fig3_bounded_300s', 'bounded navigation, 300 s'))
+
+
+def fig3_curves(cache_dir: Path, backend, say: Callable[[str], None], run: bool,
+                figures: Path, live: Callable[[str], None] | None = None) -> dict:
+    """Read (``run``: run or resume) the four Fig. 3 curves; aggregate and draw them.
+
+    :param cache_dir: where the caches ``SPEC.jsonl`` live.
+    :param backend: where missing runs go when ``run``.
+    :param say: progress lines.
+    :param run: run the missing runs (hours for the full curves) instead of only reading.
+    :param figures: where ``su2009_fig3_curves.png`` goes.
+    :param live: rewrites the terminal's progress line, or ``None``.
+    :return: ``{'curves': [{label, spec, runs_planned, runs_cached, realisations_min,
+        realisations_max, complete, rows, delta_for_eta80_N<n>}], 'figure': name}``
+        (no figure while every cache is empty).
+    """
+    from flock_swarm.presets import resolve
+    from flock_swarm.study.cache import read_cache
+    from flock_swarm.study.execute import execute
+    from flock_swarm.study.spec import read_spec
+    curves = []
+    for name, label in FIG3_CURVES:
+        spec = read_spec(resolve(name, 'sweeps', 'spec'))
+        runs = plan_runs(spec)
+        path = cache_dir / f'{name}.jsonl'
+        if run:
+            records = execute(runs, path, fig3_record, backend, spec.stack_agents, say, live,
+                              prefix=name, describe=describe_fig3)['records']
+        else:
+            cache = read_cache(path, ('digest', 'status'), say)
+            records = [cache[r.digest] for r in runs if r.digest in cache]
+        records = [r for r in records if r['status'] == 'completed']
+        rows = aggregate_fig3(records)
+        points = len(runs) // len(spec.seeds)
+        counts = [r['count'] for r in rows]
+        curve: dict[str, Any] = {
+            'label': label, 'spec': name, 'runs_planned': len(runs),
+            'runs_cached': len(records), 'realisations_planned': len(spec.seeds),
+            'realisations_min': min(counts) if len(rows) == points else 0,
+            'realisations_max': max(counts, default=0),
+            'complete': len(records) == len(runs), 'rows': rows}
+        for n in FIG3_SIZES:
+            curve[f'delta_for_eta80_N{n}'] = delta_for_eta(rows, n, FIG3_PAPER_ETA)
+        curves.append(curve)
+    fig = None
+    if any(c['runs_cached'] for c in curves):
+        fig = figure_fig3_curves(curves, figures / 'su2009_fig3_curves.png').name
+    return {'curves': plain(curves), 'figure': fig}
+
+
+def figure_fig3_curves(curves: list[dict], path: Path) -> Path:
+    """Draw the four Fig. 3 curves (one panel each) against the paper's two anchors."""
+    plt = pyplot()
+    fig, axes = plt.subplots(2, 2, figsize=(8.0, 5.6), sharex=True, sharey=True)
+    for ax, curve in zip(axes.flat, curves):
+        for k, n in enumerate(FIG3_SIZES):
+            pts = sorted((r for r in curve['rows'] if r['n_agents'] == n),
+                         key=lambda r: r['delta'])
+            if pts:
+                ax.errorbar([r['delta'] for r in pts], [r['mean'] for r in pts],
+                            yerr=[r['sem'] for r in pts], marker='o', ms=2.5, capsize=2,
+                            lw=1, color=f'C{k}', label=f'N = {n}')
+        for n, delta in FIG3_PAPER_DELTA.items():
+            ax.plot(delta, FIG3_PAPER_ETA, 'kx', ms=7)
+        ax.axhline(FIG3_PAPER_ETA, color='0.5', ls=':', lw=1)
+        done = 'complete' if curve['complete'] else \
+            f'{curve["runs_cached"]} of {curve["runs_planned"]} runs'
+        ax.set_title(f'{curve["label"]} ({done})')
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlim(0.0, 1.02)
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc='lower right')
+    for ax in axes[1]:
+        ax.set_xlabel('delta (x: the paper\'s anchors)')
+    for ax in axes[:, 0]:
+        ax.set_ylabel('mean eta')
+    return save_figure(fig, path)
+
+
+def fig3_curves_section(res: dict, figures: Path) -> list[str]:
+    """Return the report lines of the four Fig. 3 curves (from whatever the caches hold).
+
+    :param res: :func:`fig3_curves`' result.
+    :param figures: the figures' directory relative to the report.
+    """
+    lines = ['', '### The four curves: linear and bounded navigation, 100 s and 300 s', '',
+             'Sweep specs `config/sweeps/reproduce_su2009_fig3_*.yaml` (the grid above; the '
+             'density 0.05 kept), run by `python -m flock_swarm.reproduce --fig3-curves` (hours '
+             'on two cores, resumable) into the caches beside the other studies; every '
+             'invocation draws whatever they hold. The paper\'s anchors: delta = 0.27 at '
+             'N = 100 and 0.10 at N = 1000 for eta = 0.8, and "the larger the group, the '
+             'smaller the fraction needed".', '',
+             '| curve | runs (planned) | realisations per point | delta at eta = 0.8, N = 100 '
+             '(paper 0.27) | N = 300 | N = 500 | N = 1000 (paper 0.10) | status |',
+             '|---|---|---|---|---|---|---|---|']
+    for c in res['curves']:
+        real = (f'{c["realisations_min"]}' if c['realisations_min'] == c['realisations_max']
+                else f'{c["realisations_min"]} - {c["realisations_max"]}')
+        status = 'complete' if c['complete'] else ('not run yet' if not c['runs_cached']
+                                                   else 'incomplete')
+        lines.append(f'| {c["label"]} | {c["runs_cached"]} ({c["runs_planned"]}) | '
+                     f'{real} (of {c["realisations_planned"]}) | '
+                     + ' | '.join(fmt(c[f'delta_for_eta80_N{n}']) for n in FIG3_SIZES)
+                     + f' | {status} |')
+    if res['figure'] is not None:
+        lines += ['', f'![su2009_fig3_curves]({(figures / res["figure"]).as_posix()})']
+    return lines
