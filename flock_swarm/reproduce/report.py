@@ -64,6 +64,11 @@ MISPRINTS = (
     'Su, Wang, Lin 2009, eq. (45) writes p̄_γ (an overbar) in the COM velocity equation, '
     'where ṗ_γ = f_γ is meant (the line above derives ū = f_γ - c1 (q̄ - q_γ) - '
     'c2 (p̄ - p_γ)).',
+    'Su, Wang, Lin 2009, the sentence closing the proof of Theorem 2 (iii) gives the rate of '
+    'the case c2^2 > 4 c1 as (c2 - sqrt(4 c1 - c2^2)) / 2, the square root of a negative '
+    'number in that case; the theorem\'s statement (tau) and the exponents of (46) have '
+    '(c2 - sqrt(c2^2 - 4 c1)) / 2. (The same sentence calls the rates "time constants"; they '
+    'are in 1/s.)',
     'Yu, Chen, Cao 2010, Section 4.1 prints d = sqrt(c ln(b/a)) = 0.7740; with c = 5 that '
     'would be 3.87. The value 0.7740 is sqrt(c_bar ln(b/a)) with c_bar = 0.2 (noticed while '
     'writing this report; the preset uses the paper\'s a, b, c_bar, which fix d).',
