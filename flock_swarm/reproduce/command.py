@@ -8,13 +8,14 @@ import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from flock_swarm.reproduce.catalogue import EXPERIMENTS
 from flock_swarm.reproduce.common import FIG_MAX_BYTES
 from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, experiment_result, ros_experiments,
                                              run_ros, run_simulations)
-from flock_swarm.reproduce.report import git_revision, machine, record_invocation, write_report
+from flock_swarm.reproduce.report import (git_revision, machine, record_invocation, write_report,
+                                          write_seeds_report)
 from flock_swarm.reproduce.su2009 import Plan, fig3_curves, fig3_result
 from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
 from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
@@ -50,6 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--fig3-curves', action='store_true',
                         help='run (or resume) the four Su 2009 Fig. 3 curves (hours); '
                         'without it the report draws what their caches hold')
+    parser.add_argument('--seeds-only', action='store_true',
+                        help='only the experiments over seeds and the Fig. 3 curves: no '
+                        'presets, no ROS runs; the report holds their sections alone')
     parser.add_argument('--cached-seeds', action='store_true',
                         help='run nothing new over seeds: the distributions use what the '
                         'caches hold (the report states the counts)')
@@ -80,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     plan = Plan.make(args.quick, args.realisations)
     args.out.mkdir(parents=True, exist_ok=True)
 
+    if args.seeds_only:
+        return seeds_only(args, plan, meta, say)
     ros: dict[str, dict] = {}
     ros_started = time.monotonic()
     if args.skip_ros:
@@ -143,4 +149,21 @@ def main(argv: list[str] | None = None) -> int:
     say(f'[reproduce] wrote {args.report} and {len(sizes)} figures in {args.figures} '
         f'({sum(sizes.values()) / 1e6:.2f} MB); results in {results_dir}; '
         f'{meta["wall_min"]:.1f} min')
+    return 0
+
+
+def seeds_only(args: argparse.Namespace, plan: Plan, meta: dict,
+               say: Callable[[str], None]) -> int:
+    """Run (or read) the studies over seeds and the Fig. 3 curves; write their report alone."""
+    started = time.monotonic()
+    seeds_dir = args.seeds_cache or (args.out / 'seeds' if plan.quick else SEEDS_CACHE)
+    meta['seeds_cache'] = str(seeds_dir)
+    live = terminal_line if sys.stderr.isatty() else None
+    pool = SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say)
+    studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live)
+    curves = fig3_curves(seeds_dir, pool, say, args.fig3_curves and not plan.quick,
+                         args.figures, live)
+    meta['wall_min'] = (time.monotonic() - started) / 60.0
+    write_seeds_report(studies, curves, meta, args.report, args.figures)
+    say(f'[reproduce] wrote {args.report}; {meta["wall_min"]:.1f} min')
     return 0

@@ -360,3 +360,49 @@ def anchor(title: str) -> str:
     """Return the GitHub-style anchor of a Markdown heading."""
     keep = ''.join(c for c in title.lower() if c.isalnum() or c in ' -_')
     return keep.replace(' ', '-')
+
+
+def write_seeds_report(studies: dict[str, dict], curves: dict, meta: dict, report: Path,
+                       figures: Path) -> Path:
+    """Write the report of the experiments over seeds and the Fig. 3 curves alone
+    (``--seeds-only``): a summary of the verdicts, then one section per experiment.
+
+    :param studies: :func:`~flock_swarm.reproduce.seeds.run_studies`' result.
+    :param curves: :func:`~flock_swarm.reproduce.su2009.fig3_curves`' result.
+    :param meta: provenance: command, date, commit, machine, cache.
+    :param report: the report's path.
+    :param figures: the figures' directory.
+    :return: the report's path.
+    """
+    rel = Path(os.path.relpath(figures, report.parent))
+    mach = meta['machine']
+    titles = {e.key: e.title for e in EXPERIMENTS}
+    lines = [
+        '# Reproduction over seeds', '',
+        f'Written by `{meta["command"]}` on {meta["date"]} (UTC), commit {meta["git"]}, '
+        f'flock_swarm {__version__}, from the caches in `{meta["seeds_cache"]}/` (one JSON '
+        f'line per run; {meta["wall_min"]:.1f} min; load average '
+        f'{", ".join(f"{x:.2f}" for x in mach["load_average"])} at the start on '
+        f'{mach["nproc"]} CPUs). Every number is written by the run. A claim counts as '
+        f'reproduced when at least {MAJORITY:.0%} of the seeds of a set-up meet it; the '
+        'first set-up of each table is the paper\'s (or, for Jadbabaie, the one where the '
+        'premise of Theorem 4 holds).', '',
+        '| experiment | claim per seed | paper\'s set-up over seeds | verdict |',
+        '|---|---|---|---|']
+    for key, res in studies.items():
+        first = res['setups'][0]
+        metric = STUDY_OF[key].shown[0][1]
+        stat = first['stats'][metric]
+        over = (f'{first["met"]} of {first["seeds"]} seeds; {metric} {fmt(stat.get("mean"))} '
+                f'[{fmt(stat.get("min"))}, {fmt(stat.get("max"))}]'
+                if first['seeds'] else 'no seeds cached yet')
+        lines.append(f'| {cell(titles[key])} | {cell(res["claim"])} | {cell(over)} | '
+                     f'{res["verdict"]} |')
+    for key, res in studies.items():
+        lines += ['', f'## {titles[key]}']
+        lines += seeds_section(STUDY_OF[key], res)
+    lines += ['', '## Su 2009, Fig. 3 under the variants']
+    lines += fig3_curves_section(curves, rel)
+    report.parent.mkdir(parents=True, exist_ok=True)
+    report.write_text('\n'.join(lines) + '\n')
+    return report
