@@ -139,7 +139,8 @@ STUDIES = (
            ('max change of pair distances over the last 5 s [m]',
             'pair_distance_drift_last_5s', '-> 0'),
            ('largest adaptive gain h_i at t_final', 'adaptive_gain_max', '-'))),
-    Study('zhou2012_sec52', (('reproduce_zhou2012_sec52', 'the 6 highest-degree agents'),),
+    Study('zhou2012_sec52', (('reproduce_zhou2012_sec52', 'the 6 highest-degree agents'),
+                             ('reproduce_zhou2012_sec52_greedy', 'greedy Theorem 1 set')),
           'converged within the run: max ‖v_i - v_l‖ <= 0.1 m/s from some time on (a settling '
           'time exists)',
           lambda m: m['settling_time'] is not None,
