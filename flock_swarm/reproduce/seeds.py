@@ -122,7 +122,8 @@ STUDIES = (
                   ('all', 'linear'): 'f_gamma to all',
                   ('informed', 'bounded'): 'bounded navigation (Olfati-Saber 2006)',
                   ('all', 'bounded'): 'f_gamma to all, bounded navigation'}),
-    Study('os2003_sink', (('reproduce_os2003_sink', '300 s'),),
+    Study('os2003_sink', (('reproduce_os2003_sink', '300 s'),
+                          ('reproduce_os2003_sink_600s', '600 s')),
           'one flock whose topology no longer switches (1 component, no switch over the last '
           'quarter of the run)',
           lambda m: m['components_final'] == 1 and m['topology_changes_last_quarter'] == 0,
