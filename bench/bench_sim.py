@@ -32,7 +32,7 @@ from flock_swarm.core.laws.base import swarm_control
 from flock_swarm.core.laws.su2009 import SuParams
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.reproduce import machine
+from flock_swarm.reproduce.report import machine
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 

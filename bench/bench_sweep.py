@@ -35,8 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from flock_swarm.reproduce import (FIG3_FRACTIONS, FIG3_PAPER_REALISATIONS, FIG3_SIZES, Plan,
-                                   append_invocation, git_revision, machine, run_simulations)
+from flock_swarm.reproduce.execution import run_simulations
+from flock_swarm.reproduce.report import append_invocation, git_revision, machine
+from flock_swarm.reproduce.su2009 import (FIG3_FRACTIONS, FIG3_PAPER_REALISATIONS, FIG3_SIZES,
+                                          Plan)
 from flock_swarm.study.execute import DaskBackend, SweepError, terminal_line
 
 #: The issue's target for the full sweep on a 2-core machine [min].

@@ -98,7 +98,7 @@ ANIMATION_DPI = 70
 ANIMATION_FPS = 15
 
 
-def _pyplot():
+def pyplot():
     """Return ``matplotlib.pyplot`` on the headless Agg backend, imported on first use."""
     import matplotlib
     matplotlib.use('Agg')
@@ -189,7 +189,9 @@ def _arrow_scale(p: np.ndarray, half: float) -> float:
     return ARROW_FRACTION * 2 * half / top if top > 0 else 0.0
 
 
-def _legend_handles(any_informed: bool, all_informed: bool) -> list:
+def legend_handles(any_informed: bool, all_informed: bool) -> list:
+    """Return the legend entries of :func:`draw_flock`: agents (those present), leader, edges,
+    velocities."""
     from matplotlib.lines import Line2D
     handles = []
     if not all_informed:
@@ -281,8 +283,9 @@ def draw_flock(ax, q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed:
     return artists
 
 
-def _save(fig, path: Path, dpi: int = FIGURE_DPI) -> Path:
-    plt = _pyplot()
+def save_figure(fig, path: Path, dpi: int = FIGURE_DPI) -> Path:
+    """Save a figure as PNG at ``dpi`` and close it; return ``path``."""
+    plt = pyplot()
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
@@ -303,7 +306,7 @@ def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = 
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     q, lq = series['q'], series['leader_q']
     mask = informed_mask(series, informed)
     dim = q.shape[2]
@@ -344,7 +347,7 @@ def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = 
     if dim == 2:
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
@@ -363,7 +366,7 @@ def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     t, q, p, lq = series['t'], series['q'], series['p'], series['leader_q']
     mask = informed_mask(series, informed)
     dim = q.shape[2]
@@ -376,11 +379,11 @@ def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
         ax.set_title(f't = {t[k]:.4g} s', fontsize=10)
         if dim == 2:
             ax.tick_params(labelsize=8)
-    fig.legend(handles=_legend_handles(bool(mask.any()), bool(mask.all())),
+    fig.legend(handles=legend_handles(bool(mask.any()), bool(mask.all())),
                loc='lower center', ncol=5, fontsize=8, frameon=False)
     fig.suptitle(f'{title}: configurations and velocities (r = {radius:g} m)'.lstrip(': '))
     fig.tight_layout(rect=(0, 0.09, 1, 1))
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def _time_axis(ax, t: np.ndarray) -> None:
@@ -400,7 +403,7 @@ def plot_velocity_mismatch(series: dict[str, np.ndarray], out: Path, *, title: s
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     t = series['t']
     mismatch = series['p'] - series['leader_p'][:, None, :]
     mask = informed_mask(series, informed)
@@ -420,7 +423,7 @@ def plot_velocity_mismatch(series: dict[str, np.ndarray], out: Path, *, title: s
     axes[-1].set_xlabel('t [s]')
     axes[0].set_title(f'{title}: velocity convergence to the leader'.lstrip(': '))
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def plot_com_error(series: dict[str, np.ndarray], out: Path, *, title: str = '',
@@ -433,7 +436,7 @@ def plot_com_error(series: dict[str, np.ndarray], out: Path, *, title: str = '',
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     t = series['t']
     dq = series['q'].mean(axis=1) - series['leader_q']
     dp = series['p'].mean(axis=1) - series['leader_p']
@@ -449,7 +452,7 @@ def plot_com_error(series: dict[str, np.ndarray], out: Path, *, title: str = '',
     axes[0].set_title(f'{title}: centre of mass minus virtual leader'.lstrip(': '))
     axes[1].set_xlabel('t [s]')
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def plot_min_distance(series: dict[str, np.ndarray], out: Path, *, title: str = '',
@@ -464,7 +467,7 @@ def plot_min_distance(series: dict[str, np.ndarray], out: Path, *, title: str = 
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     t, d = series['t'], series['metric_min_pair_distance']
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
     ax.plot(t, d, lw=1.2, color=AGENT_COLOR, label=r'$\min_{i \neq j} \|q_i - q_j\|$')
@@ -483,7 +486,7 @@ def plot_min_distance(series: dict[str, np.ndarray], out: Path, *, title: str = 
     _time_axis(ax, t)
     ax.set_title(f'{title}: minimum inter-agent distance'.lstrip(': '))
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def plot_components(series: dict[str, np.ndarray], out: Path, *, title: str = '',
@@ -497,7 +500,7 @@ def plot_components(series: dict[str, np.ndarray], out: Path, *, title: str = ''
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.ticker import MaxNLocator
     t, count = series['t'], series['metric_components']
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
@@ -510,7 +513,7 @@ def plot_components(series: dict[str, np.ndarray], out: Path, *, title: str = ''
     graph = f'r-disk graph, r = {radius:g} m' if radius is not None else 'r-disk graph'
     ax.set_title(f'{title}: connected components ({graph})'.lstrip(': '))
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def plot_eta(series: dict[str, np.ndarray], out: Path, *, title: str = '',
@@ -524,7 +527,7 @@ def plot_eta(series: dict[str, np.ndarray], out: Path, *, title: str = '',
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     t, eta = series['t'], series['metric_eta']
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
     ax.plot(t, eta, lw=1.2, color=AGENT_COLOR)
@@ -536,7 +539,7 @@ def plot_eta(series: dict[str, np.ndarray], out: Path, *, title: str = '',
     _time_axis(ax, t)
     ax.set_title(f'{title}: fraction of agents with {rule}'.lstrip(': '))
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)
 
 
 def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
@@ -565,7 +568,7 @@ def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
     :param mp4: also write an MP4 when ffmpeg is on ``PATH`` (skipped silently otherwise).
     :return: the written paths (GIF first).
     """
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib import animation
     t, q, p, lq = series['t'], series['q'], series['p'], series['leader_q']
     mask = informed_mask(series, informed)
@@ -678,7 +681,7 @@ def plot_errorbars(lines: dict[str, tuple[list, list, list]], out: Path, *, xlab
     :param filename: the file name in ``out``.
     :return: the written path.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     numeric = all(isinstance(v, (int, float)) for x, _, _ in lines.values() for v in x)
     for k, (label, (x, mean, error)) in enumerate(lines.items()):
@@ -695,4 +698,4 @@ def plot_errorbars(lines: dict[str, tuple[list, list, list]], out: Path, *, xlab
     if any(lines):
         ax.legend(fontsize=8)
     fig.tight_layout()
-    return _save(fig, Path(out) / filename)
+    return save_figure(fig, Path(out) / filename)

@@ -15,8 +15,11 @@ from numpy.testing import assert_allclose
 import pytest
 
 from flock_swarm import reproduce
-from flock_swarm.reproduce import (EXPERIMENTS, FIG_MAX_BYTES, Plan, aggregate_fig3,
-                                   delta_for_eta, fig3_tasks, fmt, run_simulations)
+from flock_swarm.reproduce import execution, su2009
+from flock_swarm.reproduce.catalogue import EXPERIMENTS
+from flock_swarm.reproduce.common import FIG_MAX_BYTES, fmt
+from flock_swarm.reproduce.execution import run_simulations
+from flock_swarm.reproduce.su2009 import Plan, aggregate_fig3, delta_for_eta, fig3_tasks
 from flock_swarm.study import execute
 from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.study.execute import make_jobs, run_job
@@ -122,7 +125,7 @@ def test_read_cache_skips_a_truncated_line(tmp_path):
 
 def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
     ran = []
-    real_run_task, real_record = reproduce.run_task, reproduce.fig3_record
+    real_run_task, real_record = execution.run_task, su2009.fig3_record
 
     def counting(task):
         ran.append((task['kind'], None, None, None))
@@ -132,8 +135,8 @@ def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
         ran.append(('fig3', run.n_agents, run.point['informed.fraction'], run.seed))
         return real_record(run, sc, result)
 
-    monkeypatch.setattr(reproduce, 'run_task', counting)
-    monkeypatch.setattr(reproduce, 'fig3_record', counting_record)
+    monkeypatch.setattr(execution, 'run_task', counting)
+    monkeypatch.setattr(su2009, 'fig3_record', counting_record)
     plan = Plan(True, 2, (12,), (0.25, 0.5), ('duration=0.5',))
     quiet = (lambda line: None)
     first = run_simulations(plan, tmp_path, 1, False, quiet)
@@ -163,7 +166,7 @@ def test_fig3_sweep_alone_stacks_runs_and_resumes(tmp_path, monkeypatch):
         return real_run_job(job, recorder)
 
     monkeypatch.setattr(execute, 'run_job', counting)
-    monkeypatch.setattr(reproduce, 'FIG3_STACK_AGENTS', 24)
+    monkeypatch.setattr(su2009, 'FIG3_STACK_AGENTS', 24)
     plan = Plan(True, 2, (12, 30), (0.25, 0.5, 1.0), ('duration=0.5',))
     quiet = (lambda line: None)
     first = run_simulations(plan, tmp_path, 1, False, quiet, presets=False)
@@ -183,8 +186,8 @@ def test_a_stacked_fig3_run_equals_its_own_run():
     plan = Plan(True, 1, (15,), (0.2, 0.6, 1.0), ('duration=1',))
     runs = fig3_tasks(plan)
     [stack] = make_jobs(runs, stack_agents=45)
-    stacked = run_job(stack, reproduce.fig3_record)
-    alone = [run_job(job, reproduce.fig3_record)[0] for job in make_jobs(runs, stack_agents=1)]
+    stacked = run_job(stack, su2009.fig3_record)
+    alone = [run_job(job, su2009.fig3_record)[0] for job in make_jobs(runs, stack_agents=1)]
     for a, b in zip(stacked, alone):
         assert {k: v for k, v in a.items() if k != 'wall_time_s'} \
             == {k: v for k, v in b.items() if k != 'wall_time_s'}

@@ -1,0 +1,31 @@
+"""Reproduction report: every experiment of the five papers, run and set against their claims.
+
+``python -m flock_swarm.reproduce [--out out/reproduce] [--report docs/reproduction.md]
+[--figures docs/figures] [--realisations R] [--quick] [--skip-ros] [--jobs 2] [--fresh]``
+(or ``scripts/reproduce ...``) runs each experiment (the presets of ``docs/scenarios.md``)
+with the reference simulator on its preset (the papers' numbers), the sweep of Su, Wang, Lin 2009
+Fig. 3 over ``R`` realisations per point, and one shortened experiment per paper through the
+real ROS 2 nodes (lockstep, one process); it then writes one JSON result per experiment
+(``OUT/results/<experiment>.json``), one figure per experiment and the Markdown report.
+
+Every run is cached in ``OUT`` and reused when its scenario and the package version match:
+presets in ``OUT/runs/<experiment>/`` (``summary.json``, ``timeseries.npz``), the Fig. 3
+sweep as JSON lines in ``OUT/fig3_runs.jsonl`` (one line per run, appended as runs finish;
+the machinery of ``sweep``, :mod:`flock_swarm.study`),
+the ROS runs in ``OUT/ros/<experiment>/``. An interrupted reproduction therefore resumes
+where it stopped, and a larger ``--realisations`` only runs the missing realisations.
+``--fresh`` ignores the caches.
+
+The package: one module per paper (:mod:`~flock_swarm.reproduce.su2009`,
+:mod:`~flock_swarm.reproduce.os2003`, :mod:`~flock_swarm.reproduce.zhou2012`,
+:mod:`~flock_swarm.reproduce.yu2010`, :mod:`~flock_swarm.reproduce.jadbabaie2003`: its
+experiments, analysis, table rows, discussion and figures), gathered by
+:mod:`~flock_swarm.reproduce.catalogue`; the runs and caches in
+:mod:`~flock_swarm.reproduce.execution`, the Markdown in :mod:`~flock_swarm.reproduce.report`,
+the command line in :mod:`~flock_swarm.reproduce.command`.
+"""
+
+from flock_swarm.reproduce.catalogue import EXPERIMENTS
+from flock_swarm.reproduce.command import build_parser, main
+
+__all__ = ['EXPERIMENTS', 'build_parser', 'main']

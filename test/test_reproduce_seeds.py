@@ -1,0 +1,91 @@
+"""The experiments over seeds (:mod:`flock_swarm.reproduce.seeds`): distributions, fractions
+meeting a claim and verdicts on tiny synthetic records, the settling time on a synthetic series,
+and a ``--quick`` report rendered from partial caches."""
+
+import json
+
+import numpy as np
+import pytest
+
+from flock_swarm import reproduce
+from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, settling_time, summarise,
+                                         verdict)
+from flock_swarm.study.cache import cache_line, read_cache
+
+
+def test_distribution_of_a_few_values():
+    # 1, 2, 3: mean 2, sample variance ((1 + 0 + 1) / 2) = 1; None and nan are missing.
+    d = distribution([3, None, 1, float('nan'), 2])
+    assert d == {'count': 3, 'missing': 2, 'mean': 2.0, 'std': 1.0, 'min': 1.0, 'max': 3.0}
+    assert distribution([None]) == {'count': 0, 'missing': 1}
+    assert distribution([5]) == {'count': 1, 'missing': 0, 'mean': 5.0, 'std': 0.0,
+                                 'min': 5.0, 'max': 5.0}
+
+
+def setup(label, seeds, met):
+    """A summarised set-up with ``met`` of ``seeds`` seeds meeting the claim."""
+    return {'label': label, 'seeds': seeds, 'met': met,
+            'fraction': met / seeds if seeds else None}
+
+
+def test_verdicts():
+    assert verdict([setup('paper', 20, 10)]) == 'reproduced'
+    assert verdict([setup('paper', 20, 9), setup('A', 20, 3), setup('B', 10, 5)]) \
+        == 'reproduced under variant: B'
+    assert verdict([setup('paper', 20, 0), setup('A', 20, 9)]) == 'not reproduced'
+    assert verdict([setup('paper', 0, 0), setup('A', 20, 20)]) == 'not run yet'
+
+
+def test_summarise_counts_seeds_meeting_the_claim():
+    study = STUDY_OF['su2009_fig2']
+    # The claim is eta >= 0.86: 0.86 and 0.9 meet it, 0.85 does not.
+    records = [{'seed': s, 'metrics': {'eta': e, 'linked_to_informed': 80 + s,
+                                       'components_final': 3}}
+               for s, e in ((1, 0.9), (2, 0.85), (3, 0.86))]
+    res = summarise(study, [('as printed', records, 20)])
+    [s] = res['setups']
+    assert (s['seeds'], s['planned'], s['met'], s['seed_list']) == (3, 20, 2, [1, 2, 3])
+    assert s['fraction'] == pytest.approx(2 / 3)
+    assert s['stats']['eta']['mean'] == pytest.approx((0.9 + 0.85 + 0.86) / 3)
+    assert s['stats']['linked_to_informed']['min'] == 81.0
+    assert res['verdict'] == 'reproduced'
+
+
+def test_settling_time_is_the_last_entry_below_the_tolerance():
+    t = np.arange(6) * 0.5
+    leader = np.zeros((6, 2))
+    # max ||p_i - p_l|| per instant: 1, 0.05, 0.3, 0.05, 0.02, 0.01 (tolerance 0.1).
+    err = [1.0, 0.05, 0.3, 0.05, 0.02, 0.01]
+    p = np.zeros((6, 2, 2))
+    p[:, 1, 0] = err
+    series = {'t': t, 'p': p, 'leader_p': leader}
+    assert settling_time(series, 0.1) == 1.5
+    assert settling_time(series, 2.0) == 0.0
+    p[-1, 1, 0] = 0.5
+    assert settling_time(series, 0.1) is None
+
+
+def test_quick_report_renders_from_partial_caches(tmp_path):
+    out = tmp_path / 'out'
+    common = ['--quick', '--skip-ros', '--jobs', '1', '--out', str(out),
+              '--report', str(tmp_path / 'report.md'), '--figures', str(tmp_path / 'figures')]
+    assert reproduce.main(common) == 0
+    full = read_cache(out / 'seeds' / 'reproduce_su2009_fig2.jsonl')
+    assert len(full) == 2
+    # A partial cache: one of the two seeds of Fig. 2, nothing else.
+    partial = tmp_path / 'partial'
+    partial.mkdir()
+    kept = min(full.values(), key=lambda r: r['seed'])
+    (partial / 'reproduce_su2009_fig2.jsonl').write_text(cache_line(kept))
+    assert reproduce.main(common + ['--cached-seeds', '--seeds-cache', str(partial)]) == 0
+    text = (tmp_path / 'report.md').read_text()
+    result = json.loads((out / 'results' / 'su2009_fig2.json').read_text())['seeds']
+    [s] = result['setups']
+    assert (s['seeds'], s['planned'], s['seed_list']) == (1, 2, [kept['seed']])
+    assert s['stats']['eta']['mean'] == kept['metrics']['eta']
+    assert '| as printed | 1 (2) |' in text
+    assert 'as printed: 1 of 2 seeds' in text
+    assert '**Incomplete:** as printed: 1 of 2 seeds' in text
+    # The other studies have no records: their verdicts say so, and nothing ran for them.
+    assert text.count('| not run yet |') >= 6
+    assert sorted(p.name for p in partial.iterdir()) == ['reproduce_su2009_fig2.jsonl']
