@@ -26,8 +26,9 @@ from rclpy.node import Node
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                      StepClock, claimants, cmd_topic, declare, declare_common,
-                                      load_scenario, odom_topic, run_node, timer_period)
+                                      StepClock, cmd_topic, command_claims, declare,
+                                      declare_common, load_scenario, odom_topic, run_node,
+                                      timer_period)
 from flock_swarm.nodes.controller import AgentController, parse_agent_ids
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
@@ -236,8 +237,9 @@ class AgentNode(Node):
     def check_claims(self) -> None:
         """Report another node publishing commands for one of our agents (a duplicate id)."""
         me = (self.get_namespace(), self.get_name())
+        claims = command_claims(self, self.scenario.n_agents)
         for i in self.controller.ids:
-            others = [f'{ns.rstrip("/")}/{name}' for ns, name in claimants(self, int(i))
+            others = [f'{ns.rstrip("/")}/{name}' for ns, name in claims.get(int(i), ())
                       if (ns, name) != me]
             if others and i not in self.duplicates:
                 self.duplicates.add(int(i))

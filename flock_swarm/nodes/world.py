@@ -27,7 +27,7 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
-                                      claimants, cmd_topic, declare, declare_common,
+                                      cmd_topic, command_claims, declare, declare_common,
                                       load_scenario, odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import Telemetry
@@ -159,8 +159,7 @@ class WorldNode(RecordedNode):
 
     def check_claims(self) -> None:
         """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
-        for i in range(self.scenario.n_agents):
-            nodes = claimants(self, i)
+        for i, nodes in sorted(command_claims(self, self.scenario.n_agents).items()):
             if len(nodes) > 1 and i not in self.duplicates:
                 self.duplicates.add(i)
                 names = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
