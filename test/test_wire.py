@@ -3,6 +3,7 @@
 import math
 import struct
 
+import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import AccelStamped
@@ -12,8 +13,9 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryEncoder,
-                                    decode_accel, decode_clock, decode_odometry, encode_clock)
+from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryBatch,
+                                    OdometryEncoder, decode_accel, decode_clock, decode_odometry,
+                                    encode_clock)
 
 floats = st.floats(allow_nan=False, width=64)
 vec3 = st.tuples(floats, floats, floats)
@@ -149,3 +151,53 @@ def test_markers_written_as_cdr_are_the_rclpy_markers(dim, n):
     # Compared after serialisation: colours are float32 on the wire.
     assert deserialize_message(ours, MarkerArray) == \
         deserialize_message(serialize_message(typed), MarkerArray)
+
+
+#: Agents 0..11: child ids of one and of two digits (the pose's offset differs).
+BATCH_N = 12
+
+
+def batch_messages(stamp=(3, 500)):
+    """Return a step's odometry of BATCH_N agents as rclpy serialises it, and the states."""
+    rng = np.random.default_rng(7)
+    states = rng.normal(scale=50.0, size=(BATCH_N, 2, 3))
+    data = [serialize_message(odometry(*stamp, 'world', f'agent_{j}', *states[j].tolist()))
+            for j in range(BATCH_N)]
+    return data, states
+
+
+def test_odometry_batch_reads_what_rclpy_writes():
+    data, states = batch_messages()
+    batch = OdometryBatch([f'agent_{j}' for j in range(BATCH_N)])
+    ns, got = batch.decode(data)
+    assert ns == 3_000_000_500
+    assert got.shape == (BATCH_N, 2, 3) and got.tobytes() == states.tobytes()
+    # ... and what the world's encoders write, read as decode_odometry reads it one by one.
+    sent = [OdometryEncoder(f'agent_{j}').encode(ns, *states[j, :, :2].tolist())
+            for j in range(BATCH_N)]
+    one_by_one = [decode_odometry(msg)[3:] for msg in sent]
+    assert batch.decode(sent)[1].tolist() == [list(map(list, s)) for s in one_by_one]
+
+
+def zero_odometry(nanosec, frame, child):
+    """Return a serialised odometry of stamp 3 s + ``nanosec`` at the origin, at rest."""
+    return serialize_message(odometry(3, nanosec, frame, child, (0, 0, 0), (0, 0, 0)))
+
+
+def _swap(data, j, msg):
+    return data[:j] + [msg] + data[j + 1:]
+
+
+@pytest.mark.parametrize('spoil', [
+    lambda d: _swap(d, 4, d[5]),                                 # agent 5 twice, 4 missing
+    lambda d: _swap(d, 4, None),                                 # agent 4 not in
+    lambda d: d[:-1],                                            # one agent short
+    lambda d: _swap(d, 11, zero_odometry(500, 'world', 'agent_12')),  # another child id
+    lambda d: _swap(d, 2, zero_odometry(500, 'map', 'agent_2')),       # another frame
+    lambda d: _swap(d, 3, zero_odometry(501, 'world', 'agent_3')),     # another stamp
+    lambda d: _swap(d, 6, d[6] + b'\0' * 8),                    # longer than the layout
+    lambda d: _swap(d, 0, b'\x00\x00' + d[0][2:]),               # big-endian header
+])
+def test_odometry_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
+    data, _ = batch_messages()
+    assert OdometryBatch([f'agent_{j}' for j in range(BATCH_N)]).decode(spoil(data)) is None
