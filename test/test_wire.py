@@ -14,8 +14,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 
 from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryBatch,
-                                    OdometryEncoder, decode_accel, decode_clock, decode_odometry,
-                                    encode_clock)
+                                    OdometryBatchEncoder, OdometryEncoder, decode_accel,
+                                    decode_clock, decode_odometry, encode_clock)
 
 floats = st.floats(allow_nan=False, width=64)
 vec3 = st.tuples(floats, floats, floats)
@@ -201,3 +201,25 @@ def _swap(data, j, msg):
 def test_odometry_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
     data, _ = batch_messages()
     assert OdometryBatch([f'agent_{j}' for j in range(BATCH_N)]).decode(spoil(data)) is None
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_odometry_batch_encoder_writes_the_encoders_bytes(dim):
+    """A step encoded at once is, message by message, what rclpy reads as the states (and
+    the one-message encoder's bytes); encoding again overwrites stamp and vectors."""
+    rng = np.random.default_rng(dim)
+    children = [f'agent_{j}' for j in range(BATCH_N)]
+    batch = OdometryBatchEncoder(children)
+    for ns in (1_020_000_000, 7):
+        q, p = rng.normal(size=(BATCH_N, dim)), rng.normal(size=(BATCH_N, dim))
+        sent = batch.encode(ns, q, p)
+        assert sent == [OdometryEncoder(c).encode(ns, q[j].tolist(), p[j].tolist())
+                        for j, c in enumerate(children)]
+        for j, data in enumerate(sent):
+            msg = deserialize_message(data, Odometry)
+            assert msg.child_frame_id == children[j] and msg.header.frame_id == 'world'
+            assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == ns
+            pos, vel = msg.pose.pose.position, msg.twist.twist.linear
+            assert [pos.x, pos.y, pos.z][:dim] == q[j].tolist()
+            assert [vel.x, vel.y, vel.z][:dim] == p[j].tolist()
+            assert dim == 3 or pos.z == vel.z == 0.0

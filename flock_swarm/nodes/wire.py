@@ -244,6 +244,41 @@ class OdometryBatch:
         return ns, raw[self.vectors].view('<f8').reshape(self.n, 2, 3)
 
 
+class OdometryBatchEncoder:
+    """Every agent's odometry of a step encoded at once: byte for byte the messages of an
+    :class:`OdometryEncoder` per child, from one template of the step's buffers joined, into
+    which the stamps and the vectors are written with one NumPy scatter each."""
+
+    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
+        """Prepare the template of the agents ``children`` (agent ``j``'s message at ``j``)."""
+        encoders = [OdometryEncoder(child, frame) for child in children]
+        joined = b''.join(bytes(enc.buf) for enc in encoders)
+        self.template = np.frombuffer(joined, dtype=np.uint8).copy()
+        starts = np.cumsum([0] + [len(enc.buf) for enc in encoders])
+        self.bounds = list(zip(starts[:-1].tolist(), starts[1:].tolist()))
+        self.stamps = starts[:-1, None] + np.arange(4, 12)
+        # Buffer offsets of each message's position and velocity vectors.
+        self.vectors = np.array([enc.vectors for enc in encoders], dtype=np.intp) \
+            + starts[:-1, None]
+        self._scatter: dict[int, np.ndarray] = {}
+
+    def encode(self, ns: int, q: np.ndarray, p: np.ndarray) -> list[bytes]:
+        """Return every agent's message stamped ``ns`` [ns] with positions ``q`` and
+        velocities ``p`` (``(N, dim)``, dim 2 or 3; 2-D: z stays 0)."""
+        dim = q.shape[1]
+        scatter = self._scatter.get(dim)
+        if scatter is None:
+            # Bytes of (position, velocity), dim doubles each, in the order of
+            # np.stack((q, p), axis=1).
+            scatter = self._scatter[dim] = (self.vectors[:, :, None]
+                                            + np.arange(8 * dim)).reshape(len(q), -1)
+        buf = self.template
+        buf[self.stamps] = np.frombuffer(_LE.time.pack(*divmod(ns, NS_PER_S)), dtype=np.uint8)
+        buf[scatter] = np.stack((q, p), axis=1).astype('<f8').view(np.uint8).reshape(len(q), -1)
+        blob = buf.tobytes()
+        return [blob[lo:hi] for lo, hi in self.bounds]
+
+
 #: ``builtin_interfaces/Time`` in little-endian CDR.
 _STAMP_LE = np.dtype([('sec', '<i4'), ('nanosec', '<u4')])
 
