@@ -396,7 +396,9 @@ def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> l
     for item in scenario_overrides(n, steps):
         cmd += ['--set', item]
     if layout == 'container':
-        cmd += ['--processes', '--container']
+        # Three processes matching 4 N endpoints: at N = 1000 on two shared cores that took
+        # longer than the default 30 s, and the world started without every agent.
+        cmd += ['--processes', '--container', '--start-timeout', str(PROCESS_START_TIMEOUT)]
     elif layout == 'processes':
         cmd += ['--processes', '--step-timeout', str(PROCESS_STEP_TIMEOUT),
                 '--start-timeout', str(PROCESS_START_TIMEOUT)]
