@@ -223,3 +223,23 @@ def test_odometry_batch_encoder_writes_the_encoders_bytes(dim):
             assert [pos.x, pos.y, pos.z][:dim] == q[j].tolist()
             assert [vel.x, vel.y, vel.z][:dim] == p[j].tolist()
             assert dim == 3 or pos.z == vel.z == 0.0
+
+
+def test_large_swarm_dds_profile_holds_a_step_of_1000_odometries():
+    """config/fastdds_large_swarm.xml (docs/ros.md): its shared-memory segment holds a
+    lockstep step of 1000 agents' odometry and commands, its port queue their number."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+    root = ET.parse(Path(__file__).resolve().parent.parent / 'config'
+                    / 'fastdds_large_swarm.xml').getroot()
+    ns = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    shm = [d for d in root.iterfind('f:transport_descriptors/f:transport_descriptor', ns)
+           if d.findtext('f:type', namespaces=ns) == 'SHM']
+    assert len(shm) == 1
+    step = 1000 * (len(OdometryEncoder('agent_999').encode(0, (0, 0), (0, 0)))
+                   + len(AccelEncoder().encode(0, (0, 0))))
+    assert int(shm[0].findtext('f:segment_size', namespaces=ns)) >= 2 * step
+    assert int(shm[0].findtext('f:port_queue_capacity', namespaces=ns)) >= 2 * 2000
+    used = [t.text for t in root.iterfind('f:participant/f:rtps/f:userTransports/'
+                                          'f:transport_id', ns)]
+    assert shm[0].findtext('f:transport_id', namespaces=ns) in used
