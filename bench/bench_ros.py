@@ -396,8 +396,8 @@ def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> l
     for item in scenario_overrides(n, steps):
         cmd += ['--set', item]
     if layout == 'container':
-        # Three processes matching 4 N endpoints: at N = 1000 on two shared cores that took
-        # longer than the default 30 s, and the world started without every agent.
+        # Three processes matching 4 N endpoints: at N = 1000 on two shared cores the run
+        # spent 22 s outside its steps (docs/performance.md), close to the default 30 s.
         cmd += ['--processes', '--container', '--start-timeout', str(PROCESS_START_TIMEOUT)]
     elif layout == 'processes':
         cmd += ['--processes', '--step-timeout', str(PROCESS_STEP_TIMEOUT),
