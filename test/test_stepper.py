@@ -17,7 +17,9 @@ from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.laws.base import swarm_control
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import realize
+from flock_swarm.nodes.common import StepClock
 from flock_swarm.nodes.controller import AgentController
+from flock_swarm.nodes.guard import InputGuard, Limits
 from flock_swarm.nodes.leader_watch import LeaderWatch
 from flock_swarm.nodes.stepper import WorldSettings, WorldStepper
 from flock_swarm.presets import load
@@ -267,6 +269,46 @@ def test_controller_answers_what_sim_computes():
     u = ctrl.answer(0)
     assert_array_equal(u, sim_commands(sc, real.q0, real.p0, leader)[[1, 3]])
     assert ctrl.answered == 0 and ctrl.inputs(0) is None
+
+
+def test_a_step_stored_at_once_answers_what_sim_computes():
+    """A step's odometry stored in one pass (``put_all``, the batched path) gives sim's
+    commands bit for bit; a later message of one agent (``put``) replaces its row."""
+    sc = small()
+    real = realize(sc)
+    ctrl = AgentController(sc, [0, 2], LOG, now=0.0)
+    leader = leader_at(sc, 0)
+    box = ctrl.inputs(0)
+    box.put(1, ((9.0, 9.0), (9.0, 9.0)))
+    box.put_all(np.stack((real.q0, real.p0), axis=1))
+    assert not box.odom and box.has_odometry(sc.n_agents)
+    box.leader_odom, box.leader_accel = (tuple(leader.q), tuple(leader.p)), tuple(leader.a)
+    assert ctrl.ready(0, 0.0)
+    assert_array_equal(ctrl.answer(0), sim_commands(sc, real.q0, real.p0, leader)[[0, 2]])
+    box = ctrl.inputs(1)
+    box.put_all(np.stack((real.q0, real.p0), axis=1))
+    box.put(3, ((1.0, 2.0), (3.0, 4.0)))
+    q, p, _ = box.swarm(sc.n_agents)
+    assert_array_equal(q[3], [1.0, 2.0]) and assert_array_equal(p[3], [3.0, 4.0])
+    assert_array_equal(q[:3], real.q0[:3])
+
+
+@pytest.mark.parametrize('bad, value', [('position', np.nan), ('position', np.inf),
+                                        ('position', 2e6), ('velocity', -2e4)])
+def test_a_batch_the_guard_might_reject_is_left_to_the_one_by_one_checks(bad, value):
+    """pass_batch accepts only what check would accept for every message, and counts
+    nothing: the caller checks a refused batch message by message."""
+    clock = StepClock(0.02)
+    guard = InputGuard(clock, Limits(), LOG.warning)
+    q, p = np.zeros((5, 3)), np.ones((5, 3))
+    topics = [f'/agent_{j}/odom' for j in range(5)]
+    values = lambda: ((q, 1e6), (p, 1e4))  # noqa: E731
+    assert guard.pass_batch(topics, 60_000_000, values()) == 3
+    assert guard.latest == dict.fromkeys(topics, 3)
+    assert guard.pass_batch(topics, 60_000_001, values()) is None      # off the grid
+    (q if bad == 'position' else p)[2, 1] = value
+    assert guard.pass_batch(topics, 80_000_000, values()) is None
+    assert not guard.rejected and guard.latest == dict.fromkeys(topics, 3)
 
 
 def test_controller_waits_for_the_leader_then_applies_the_uninformed_law(caplog):

@@ -3,6 +3,7 @@
 import math
 import struct
 
+import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import AccelStamped
@@ -12,8 +13,9 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryEncoder,
-                                    decode_accel, decode_clock, decode_odometry, encode_clock)
+from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryBatch,
+                                    OdometryBatchEncoder, OdometryEncoder, decode_accel,
+                                    decode_clock, decode_odometry, encode_clock)
 
 floats = st.floats(allow_nan=False, width=64)
 vec3 = st.tuples(floats, floats, floats)
@@ -149,3 +151,95 @@ def test_markers_written_as_cdr_are_the_rclpy_markers(dim, n):
     # Compared after serialisation: colours are float32 on the wire.
     assert deserialize_message(ours, MarkerArray) == \
         deserialize_message(serialize_message(typed), MarkerArray)
+
+
+#: Agents 0..11: child ids of one and of two digits (the pose's offset differs).
+BATCH_N = 12
+
+
+def batch_messages(stamp=(3, 500)):
+    """Return a step's odometry of BATCH_N agents as rclpy serialises it, and the states."""
+    rng = np.random.default_rng(7)
+    states = rng.normal(scale=50.0, size=(BATCH_N, 2, 3))
+    data = [serialize_message(odometry(*stamp, 'world', f'agent_{j}', *states[j].tolist()))
+            for j in range(BATCH_N)]
+    return data, states
+
+
+def test_odometry_batch_reads_what_rclpy_writes():
+    data, states = batch_messages()
+    batch = OdometryBatch([f'agent_{j}' for j in range(BATCH_N)])
+    ns, got = batch.decode(data)
+    assert ns == 3_000_000_500
+    assert got.shape == (BATCH_N, 2, 3) and got.tobytes() == states.tobytes()
+    # ... and what the world's encoders write, read as decode_odometry reads it one by one.
+    sent = [OdometryEncoder(f'agent_{j}').encode(ns, *states[j, :, :2].tolist())
+            for j in range(BATCH_N)]
+    one_by_one = [decode_odometry(msg)[3:] for msg in sent]
+    assert batch.decode(sent)[1].tolist() == [list(map(list, s)) for s in one_by_one]
+
+
+def zero_odometry(nanosec, frame, child):
+    """Return a serialised odometry of stamp 3 s + ``nanosec`` at the origin, at rest."""
+    return serialize_message(odometry(3, nanosec, frame, child, (0, 0, 0), (0, 0, 0)))
+
+
+def _swap(data, j, msg):
+    return data[:j] + [msg] + data[j + 1:]
+
+
+@pytest.mark.parametrize('spoil', [
+    lambda d: _swap(d, 4, d[5]),                                 # agent 5 twice, 4 missing
+    lambda d: _swap(d, 4, None),                                 # agent 4 not in
+    lambda d: d[:-1],                                            # one agent short
+    lambda d: _swap(d, 11, zero_odometry(500, 'world', 'agent_12')),  # another child id
+    lambda d: _swap(d, 2, zero_odometry(500, 'map', 'agent_2')),       # another frame
+    lambda d: _swap(d, 3, zero_odometry(501, 'world', 'agent_3')),     # another stamp
+    lambda d: _swap(d, 6, d[6] + b'\0' * 8),                    # longer than the layout
+    lambda d: _swap(d, 0, b'\x00\x00' + d[0][2:]),               # big-endian header
+])
+def test_odometry_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
+    data, _ = batch_messages()
+    assert OdometryBatch([f'agent_{j}' for j in range(BATCH_N)]).decode(spoil(data)) is None
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_odometry_batch_encoder_writes_the_encoders_bytes(dim):
+    """A step encoded at once is, message by message, what rclpy reads as the states (and
+    the one-message encoder's bytes); encoding again overwrites stamp and vectors."""
+    rng = np.random.default_rng(dim)
+    children = [f'agent_{j}' for j in range(BATCH_N)]
+    batch = OdometryBatchEncoder(children)
+    for ns in (1_020_000_000, 7):
+        q, p = rng.normal(size=(BATCH_N, dim)), rng.normal(size=(BATCH_N, dim))
+        sent = batch.encode(ns, q, p)
+        assert sent == [OdometryEncoder(c).encode(ns, q[j].tolist(), p[j].tolist())
+                        for j, c in enumerate(children)]
+        for j, data in enumerate(sent):
+            msg = deserialize_message(data, Odometry)
+            assert msg.child_frame_id == children[j] and msg.header.frame_id == 'world'
+            assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == ns
+            pos, vel = msg.pose.pose.position, msg.twist.twist.linear
+            assert [pos.x, pos.y, pos.z][:dim] == q[j].tolist()
+            assert [vel.x, vel.y, vel.z][:dim] == p[j].tolist()
+            assert dim == 3 or pos.z == vel.z == 0.0
+
+
+def test_large_swarm_dds_profile_holds_a_step_of_1000_odometries():
+    """config/fastdds_large_swarm.xml (docs/ros.md): its shared-memory segment holds a
+    lockstep step of 1000 agents' odometry and commands, its port queue their number."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+    root = ET.parse(Path(__file__).resolve().parent.parent / 'config'
+                    / 'fastdds_large_swarm.xml').getroot()
+    ns = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    shm = [d for d in root.iterfind('f:transport_descriptors/f:transport_descriptor', ns)
+           if d.findtext('f:type', namespaces=ns) == 'SHM']
+    assert len(shm) == 1
+    step = 1000 * (len(OdometryEncoder('agent_999').encode(0, (0, 0), (0, 0)))
+                   + len(AccelEncoder().encode(0, (0, 0))))
+    assert int(shm[0].findtext('f:segment_size', namespaces=ns)) >= 2 * step
+    assert int(shm[0].findtext('f:port_queue_capacity', namespaces=ns)) >= 2 * 2000
+    used = [t.text for t in root.iterfind('f:participant/f:rtps/f:userTransports/'
+                                          'f:transport_id', ns)]
+    assert shm[0].findtext('f:transport_id', namespaces=ns) in used

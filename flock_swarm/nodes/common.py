@@ -10,6 +10,7 @@ included (:func:`load_scenario`), so the parameter services tell the truth about
 import array
 import copy
 import dataclasses
+import functools
 import math
 import re
 import signal
@@ -20,7 +21,7 @@ import numpy as np
 import yaml
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
+from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -320,6 +321,40 @@ def timer_period(node: Node, dt: float) -> float:
 COMMON_PARAMS = {'scenario', 'seed', 'mode', 'realtime_factor'}
 
 
+def command_claims(node: Node, n_agents: int) -> dict[int, list[tuple[str, str]]]:
+    """Return, for each agent whose ``agent_<i>/cmd_accel`` has a publishing node, the
+    ``(namespace, name)`` of every such node (sorted).
+
+    One graph query per node of the graph, not one per agent topic: each query walks the
+    whole graph cache, so asking topic by topic cost O(N^2) per call (116 ms at N = 1000,
+    made every second by the world and by every agent host, and every 10 ms by the world
+    while it waits for the start; docs/performance.md). A node that left the graph between
+    the two queries is skipped.
+
+    :param node: the node asking (its namespace resolves the topics).
+    :param n_agents: the swarm's size.
+    """
+    index = _command_topics(node.resolve_topic_name(cmd_topic(0)), n_agents)
+    claims: dict[int, set[tuple[str, str]]] = {}
+    for name, namespace in set(node.get_node_names_and_namespaces()):
+        try:
+            topics = node.get_publisher_names_and_types_by_node(name, namespace)
+        except NodeNameNonExistentError:
+            continue
+        for topic, _ in topics:
+            i = index.get(topic)
+            if i is not None:
+                claims.setdefault(i, set()).add((namespace, name))
+    return {i: sorted(nodes) for i, nodes in claims.items()}
+
+
+@functools.lru_cache(maxsize=8)
+def _command_topics(first: str, n_agents: int) -> dict[str, int]:
+    """Return ``{resolved agent_<i>/cmd_accel: i}`` given the resolved topic of agent 0."""
+    head, _, tail = first.rpartition(cmd_topic(0))
+    return {f'{head}{cmd_topic(i)}{tail}': i for i in range(n_agents)}
+
+
 def agent_hosts(node: Node, n_agents: int) -> int | None:
     """Return how many nodes host the swarm's agents, or ``None`` while one is not there yet.
 
@@ -331,19 +366,10 @@ def agent_hosts(node: Node, n_agents: int) -> int | None:
     :param n_agents: the swarm's size.
     :return: the number of distinct hosting nodes, or ``None`` if some agent has none.
     """
-    hosts = set()
-    for i in range(n_agents):
-        infos = node.get_publishers_info_by_topic(node.resolve_topic_name(cmd_topic(i)))
-        if not infos:
-            return None
-        hosts.update((info.node_namespace, info.node_name) for info in infos)
-    return len(hosts)
-
-
-def claimants(node: Node, i: int) -> list[tuple[str, str]]:
-    """Return ``(namespace, name)`` of every node publishing agent ``i``'s commands."""
-    infos = node.get_publishers_info_by_topic(node.resolve_topic_name(cmd_topic(i)))
-    return sorted({(info.node_namespace, info.node_name) for info in infos})
+    claims = command_claims(node, n_agents)
+    if len(claims) < n_agents:
+        return None
+    return len(set().union(*claims.values()))
 
 
 def make_executor(context=None):

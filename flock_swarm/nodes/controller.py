@@ -30,15 +30,34 @@ MAX_PENDING = 8
 
 @dataclass
 class StepInputs:
-    """What the hosted agents have received for one step."""
+    """What the hosted agents have received for one step.
+
+    :ivar odom: agent ``j``'s ``(position, velocity)`` by ``j``, as messages came one by one.
+    :ivar qp: every agent's state at once, shape ``(N, 2, dim)`` (positions, velocities), when
+        a whole step's odometry came in one pass (:meth:`put_all`); ``None`` before.
+    """
 
     odom: dict = field(default_factory=dict)
     leader_odom: tuple | None = None
     leader_accel: np.ndarray | None = None
+    qp: np.ndarray | None = None
+
+    def put(self, j: int, state: tuple) -> None:
+        """Store agent ``j``'s ``(position, velocity)`` (the latest of a step counts)."""
+        if self.qp is not None:
+            self.qp[j] = state
+        else:
+            self.odom[j] = state
+
+    def put_all(self, qp: np.ndarray) -> None:
+        """Store every agent's state at once (``(N, 2, dim)``: it replaces what came before,
+        as a message of each agent would)."""
+        self.qp = qp
+        self.odom.clear()
 
     def has_odometry(self, n_agents: int) -> bool:
         """Return whether every agent's odometry is in."""
-        return len(self.odom) == n_agents
+        return self.qp is not None or len(self.odom) == n_agents
 
     @property
     def has_leader(self) -> bool:
@@ -47,8 +66,11 @@ class StepInputs:
 
     def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
         """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
-        odom = self.odom
-        qp = np.array([odom[j] for j in range(n_agents)])
+        if self.qp is not None:
+            qp = self.qp
+        else:
+            odom = self.odom
+            qp = np.array([odom[j] for j in range(n_agents)])
         leader = LeaderState(np.array(self.leader_odom[0]), np.array(self.leader_odom[1]),
                              np.array(self.leader_accel)) if self.has_leader else None
         return qp[:, 0], qp[:, 1], leader

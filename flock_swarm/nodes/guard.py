@@ -23,6 +23,8 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
+import numpy as np
+
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import FRAME, StepClock, declare
 
@@ -127,6 +129,27 @@ class InputGuard:
             self.reject(topic, *fault)
             return None
         self.latest[topic] = k
+        return k
+
+    def pass_batch(self, topics: Iterable[str], stamp_ns: int,
+                   values: Iterable[tuple[np.ndarray, float]]) -> int | None:
+        """Return the step of messages that :meth:`check` would each accept (unordered, no
+        window), or ``None`` when one of them might not: the caller then checks them one by
+        one, which counts and logs. Nothing is counted here.
+
+        :param topics: the topics they came on (each one's latest stamp becomes this one).
+        :param stamp_ns: their common stamp [ns].
+        :param values: ``(array, limit)`` pairs, every component of the array checked (NaN
+            and inf fail the comparison, as in :meth:`check`). The frame ids are the
+            caller's to have matched.
+        """
+        for array, limit in values:
+            if not (np.abs(array) <= limit).all():
+                return None
+        k = self.clock.step_at(stamp_ns)
+        if stamp_ns != self.clock.ns(k):
+            return None
+        self.latest.update(dict.fromkeys(topics, k))
         return k
 
     def reject(self, topic: str, kind: str, detail: str) -> None:

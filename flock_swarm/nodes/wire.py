@@ -22,6 +22,8 @@ reproducible. The tests check both directions against rclpy's own serialisation.
 import struct
 from typing import Sequence
 
+import numpy as np
+
 from flock_swarm.nodes.common import FRAME
 
 #: Encapsulation header of little-endian plain CDR.
@@ -185,6 +187,100 @@ class AccelEncoder(_Encoder):
     def __init__(self, frame: str = FRAME) -> None:
         """Create the encoder."""
         super().__init__((frame,), ACCEL_BYTES, (0,))
+
+
+class OdometryBatch:
+    """A step's odometry of every agent decoded at once, when it has the layout the world
+    writes (:class:`OdometryEncoder`: little-endian, frame ``world``, child ``agent_<j>``).
+
+    The buffers are joined and read with one gather of NumPy indices: the bytes that must be
+    those of the frame and child ids (and the header's byte order), the stamps, and the
+    position and velocity vectors. Anything else (another length or byte order, another id,
+    a duplicate or a missing agent) makes :meth:`decode` return ``None``, and the caller
+    takes the messages one by one (:func:`decode_odometry`), which judges them.
+    """
+
+    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
+        """Prepare the indices for the agents ``children`` (``agent_<j>`` at index ``j``)."""
+        fixed, stamps, vectors, lengths, start = [], [], [], [], 0
+        expected = []
+        for child in children:
+            buf = bytearray(OdometryEncoder(child, frame).buf)
+            strings = 12 + 4 + len(frame) + 1
+            child_at = _align(strings, 4)
+            pose = _align(child_at + 4 + len(child) + 1, 8)
+            # Header byte order and the two strings (their length fields included); the
+            # padding between them is not checked (rclpy leaves it uninitialised).
+            for lo, hi in ((0, 2), (12, strings), (child_at, child_at + 4 + len(child) + 1)):
+                fixed.extend(range(start + lo, start + hi))
+                expected.extend(buf[lo:hi])
+            stamps.extend(range(start + 4, start + 12))
+            for at in (pose, pose + POSE_BYTES):
+                vectors.extend(range(start + at, start + at + 24))
+            lengths.append(len(buf))
+            start += len(buf)
+        self.n = len(children)
+        self.lengths = lengths
+        self.total = start
+        self.fixed = np.array(fixed, dtype=np.intp)
+        self.expected = np.array(expected, dtype=np.uint8)
+        self.stamps = np.array(stamps, dtype=np.intp)
+        self.vectors = np.array(vectors, dtype=np.intp)
+
+    def decode(self, buffers: Sequence[bytes | None]) -> tuple[int, np.ndarray] | None:
+        """Return ``(stamp_ns, states)`` of ``buffers`` (agent ``j``'s message at index
+        ``j``), ``states`` of shape ``(N, 2, 3)`` (positions, velocities), or ``None`` when
+        they are not one stamp's messages of the expected layout."""
+        if len(buffers) != self.n or None in buffers \
+                or list(map(len, buffers)) != self.lengths:
+            return None
+        raw = np.frombuffer(b''.join(buffers), dtype=np.uint8)
+        if not np.array_equal(raw[self.fixed], self.expected):
+            return None
+        stamps = raw[self.stamps].view(_STAMP_LE)
+        if not (stamps == stamps[0]).all():
+            return None
+        ns = int(stamps[0]['sec']) * NS_PER_S + int(stamps[0]['nanosec'])
+        return ns, raw[self.vectors].view('<f8').reshape(self.n, 2, 3)
+
+
+class OdometryBatchEncoder:
+    """Every agent's odometry of a step encoded at once: byte for byte the messages of an
+    :class:`OdometryEncoder` per child, from one template of the step's buffers joined, into
+    which the stamps and the vectors are written with one NumPy scatter each."""
+
+    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
+        """Prepare the template of the agents ``children`` (agent ``j``'s message at ``j``)."""
+        encoders = [OdometryEncoder(child, frame) for child in children]
+        joined = b''.join(bytes(enc.buf) for enc in encoders)
+        self.template = np.frombuffer(joined, dtype=np.uint8).copy()
+        starts = np.cumsum([0] + [len(enc.buf) for enc in encoders])
+        self.bounds = list(zip(starts[:-1].tolist(), starts[1:].tolist()))
+        self.stamps = starts[:-1, None] + np.arange(4, 12)
+        # Buffer offsets of each message's position and velocity vectors.
+        self.vectors = np.array([enc.vectors for enc in encoders], dtype=np.intp) \
+            + starts[:-1, None]
+        self._scatter: dict[int, np.ndarray] = {}
+
+    def encode(self, ns: int, q: np.ndarray, p: np.ndarray) -> list[bytes]:
+        """Return every agent's message stamped ``ns`` [ns] with positions ``q`` and
+        velocities ``p`` (``(N, dim)``, dim 2 or 3; 2-D: z stays 0)."""
+        dim = q.shape[1]
+        scatter = self._scatter.get(dim)
+        if scatter is None:
+            # Bytes of (position, velocity), dim doubles each, in the order of
+            # np.stack((q, p), axis=1).
+            scatter = self._scatter[dim] = (self.vectors[:, :, None]
+                                            + np.arange(8 * dim)).reshape(len(q), -1)
+        buf = self.template
+        buf[self.stamps] = np.frombuffer(_LE.time.pack(*divmod(ns, NS_PER_S)), dtype=np.uint8)
+        buf[scatter] = np.stack((q, p), axis=1).astype('<f8').view(np.uint8).reshape(len(q), -1)
+        blob = buf.tobytes()
+        return [blob[lo:hi] for lo, hi in self.bounds]
+
+
+#: ``builtin_interfaces/Time`` in little-endian CDR.
+_STAMP_LE = np.dtype([('sec', '<i4'), ('nanosec', '<u4')])
 
 
 class CdrWriter:

@@ -29,14 +29,15 @@ from std_msgs.msg import String
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
                                       LEADER_ODOM, LOCKSTEP_QOS, RUNNING, STATUS, STATUS_QOS,
-                                      StepClock, agent_hosts, claimants, cmd_topic, declare,
+                                      StepClock, agent_hosts, cmd_topic, command_claims, declare,
                                       declare_common, declare_value, given, load_scenario,
                                       odom_topic, run_node, timer_period)
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.recording import BagSink, RecordedNode
 from flock_swarm.nodes.stepper import Observation, WorldSettings, WorldStepper
-from flock_swarm.nodes.wire import OdometryEncoder, decode_accel, decode_odometry, encode_clock
+from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
+                                    encode_clock)
 from flock_swarm.outputs import SpooledRecorder, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
@@ -102,7 +103,7 @@ class WorldNode(RecordedNode):
         self.clock_pub = self.recorded_publisher(Clock, CLOCK, CLOCK_QOS)
         self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
                           for i in range(sc.n_agents)]
-        self.odom_encoders = [OdometryEncoder(f'agent_{i}') for i in range(sc.n_agents)]
+        self.odom_encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)])
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
         # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
@@ -166,8 +167,7 @@ class WorldNode(RecordedNode):
 
     def check_claims(self) -> None:
         """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
-        for i in range(self.scenario.n_agents):
-            nodes = claimants(self, i)
+        for i, nodes in sorted(command_claims(self, self.scenario.n_agents).items()):
             if len(nodes) > 1 and i not in self.duplicates:
                 self.duplicates.add(i)
                 names = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
@@ -178,8 +178,7 @@ class WorldNode(RecordedNode):
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
         st = self.stepper
         sent = [(self.clock_pub, encode_clock(t_ns))]
-        sent += [(pub, enc.encode(t_ns, q, p)) for pub, enc, q, p in
-                 zip(self.odom_pubs, self.odom_encoders, st.q.tolist(), st.p.tolist())]
+        sent += zip(self.odom_pubs, self.odom_encoder.encode(t_ns, st.q, st.p))
         for pub, data in sent:
             pub.publish(data)
         for sink in self.sinks:
