@@ -298,6 +298,12 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     if live is not None:
         from flock_swarm.nodes.foxglove_server import BackgroundBridge
         bridge = BackgroundBridge(live, domain_id, base)
+        # The bridge's subscriptions are best effort: it must have matched the leader's and
+        # the agents' publishers before the first step, and the world waits for it as one
+        # more subscriber of every odometry topic.
+        bridge.wait_matched(['/leader/odom', '/leader/accel'] + [
+            f'/agent_{i}/cmd_accel' for i in range(sc.n_agents)], 30.0)
+        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1)
     world = subprocess.Popen(executable('world') + ros_args(
         dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
         env=env)

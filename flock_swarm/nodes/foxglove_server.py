@@ -13,6 +13,7 @@ the server its bytes directly, as one of its sinks (:class:`~flock_swarm.live.Li
 
 import sys
 import threading
+import time
 from typing import Callable
 
 import rclpy
@@ -66,11 +67,17 @@ class LiveBridge(Node):
         self.live = live
         self.received = 0
         self.time_ns = 0
+        self.subscriptions_by_topic = {}
         for topic, type_name in contract_topics(sc.n_agents, self.get_namespace()):
-            name = self.create_subscription(
+            sub = self.create_subscription(
                 message_class(type_name), topic, self._forward(topic, type_name), BRIDGE_QOS,
-                raw=True).topic_name
-            live.add_topic(name, type_name)
+                raw=True)
+            self.subscriptions_by_topic[sub.topic_name] = sub
+            live.add_topic(sub.topic_name, type_name)
+
+    def unmatched(self, topics) -> list[str]:
+        """Return those of ``topics`` that no publisher has matched yet."""
+        return [t for t in topics if self.subscriptions_by_topic[t].get_publisher_count() < 1]
 
     def _forward(self, topic: str, type_name: str) -> Callable[[bytes], None]:
         clock = type_name == CLOCK_TYPE
@@ -119,6 +126,19 @@ class BackgroundBridge:
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._spin, name='foxglove-bridge', daemon=True)
         self.thread.start()
+
+    def wait_matched(self, topics, timeout: float) -> list[str]:
+        """Wait until a publisher matched each of ``topics``; return those still unmatched.
+
+        Run before the world starts, so that a best-effort bridge that discovers the leader
+        or the agents late does not miss their messages from the first step.
+        """
+        deadline = time.monotonic() + timeout
+        left = self.node.unmatched(topics)
+        while left and time.monotonic() < deadline:
+            time.sleep(0.05)
+            left = self.node.unmatched(left)
+        return left
 
     def _spin(self) -> None:
         while not self._stop.is_set() and self.context.ok():
