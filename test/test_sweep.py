@@ -4,11 +4,13 @@ One small study (two axes, a derived box side, three seeds, a metric at a time) 
 this process (``--jobs 1``), on two local worker processes and on a Dask cluster of a real
 ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1: the tables must be the
 same (all but the wall-time column). A second study, of longer runs, is run once
-uninterrupted, then with a worker process SIGKILLed mid-sweep, and with the sweep SIGINTed
-and resumed: every table must equal the uninterrupted one. The CSVs are read back with
+uninterrupted, then with a local worker process SIGKILLed mid-sweep, with a Dask worker
+SIGKILLed mid-sweep (the scheduler hands its tasks to the other worker), and with the sweep
+SIGINTed and resumed: every table must equal the uninterrupted one. The CSVs are read back with
 :mod:`csv`, and a row is checked against a run of ``sim``'s own code path.
 """
 
+import contextlib
 import csv
 import json
 import math
@@ -279,7 +281,12 @@ def test_local_pool_gives_the_same_tables(small_serial):
         == (small_serial / 'serial' / 'summary.csv').read_bytes()
 
 
-def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
+@contextlib.contextmanager
+def dask_cluster(tmp_path: Path, workers: int = 2):
+    """Run a real ``dask scheduler`` and ``workers`` ``dask worker`` processes on 127.0.0.1.
+
+    :return: (context) the scheduler's address and the worker processes.
+    """
     info = tmp_path / 'scheduler.json'
     env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON='False')
     procs = [subprocess.Popen([str(BIN / 'dask'), 'scheduler', '--host', '127.0.0.1',
@@ -289,14 +296,13 @@ def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
         wait_for(info.exists, 60.0, 'the Dask scheduler file')
         address = json.loads(info.read_text())['address']
         assert address.startswith('tcp://127.0.0.1:')
-        for _ in range(2):
+        for _ in range(workers):
+            # --no-nanny: a worker is one process, so that a SIGKILL really ends it.
             procs.append(subprocess.Popen(
                 [str(BIN / 'dask'), 'worker', address, '--nthreads', '1', '--no-nanny',
                  '--host', '127.0.0.1', '--no-dashboard'],
                 env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        out = tmp_path / 'dask'
-        assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
-                     '--out', str(out), '--quiet', '--no-plots']) == 0
+        yield address, procs[1:]
     finally:
         for proc in reversed(procs):
             proc.terminate()
@@ -307,21 +313,44 @@ def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
                 # A worker's graceful close can outwait a busy machine; the test is done.
                 proc.kill()
                 proc.wait()
+
+
+def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
+    with dask_cluster(tmp_path) as (address, _):
+        out = tmp_path / 'dask'
+        assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
+                     '--out', str(out), '--quiet', '--no-plots']) == 0
     assert read_csv(out / 'runs.csv') == read_csv(small_serial / 'serial' / 'runs.csv')
     assert (out / 'summary.csv').read_bytes() \
         == (small_serial / 'serial' / 'summary.csv').read_bytes()
+
+
+def test_a_killed_dask_worker_has_its_runs_redone(long_serial, tmp_path):
+    out = tmp_path / 'dask-killed'
+    with dask_cluster(tmp_path) as (address, workers):
+        status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1,
+                                    lambda proc: workers[0].kill(),
+                                    '--scheduler', address)
+        assert workers[0].wait(timeout=30) == -signal.SIGKILL
+    assert status == 0, err
+    assert len(read_cache(out / 'runs.jsonl')) == 16
+    assert cache_lines(out / 'runs.jsonl') == 16
+    assert read_csv(out / 'runs.csv') == read_csv(long_serial / 'serial' / 'runs.csv')
 
 
 # --------------------------------------------------------------------------------------------
 # Interruptions and the cache
 
 
-def hit_mid_sweep(spec: Path, out: Path, finished: int, hit) -> tuple[int, str]:
+def hit_mid_sweep(spec: Path, out: Path, finished: int, hit, *backend: str
+                  ) -> tuple[int, str]:
     """Run ``sweep`` on two workers, call ``hit(process)`` once ``finished`` runs are cached.
 
+    :param backend: where the sweep runs (default: ``--jobs 2``, two local processes).
     :return: the exit status and the standard error.
     """
-    proc = sweep_process(str(spec), '--jobs', '2', '--out', str(out), '--no-plots')
+    proc = sweep_process(str(spec), *(backend or ('--jobs', '2')), '--out', str(out),
+                         '--no-plots')
     try:
         wait_for(lambda: cache_lines(out / 'runs.jsonl') >= finished, 120.0,
                  f'{finished} finished run(s)')
