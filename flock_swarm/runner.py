@@ -26,7 +26,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import check_law_output
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_yaml, realize
 from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
-from flock_swarm.presets import load_mapping
+from flock_swarm.presets import config_dirs, load_mapping
 
 
 def resolve_scenario(name: str, overrides: list[str], seed: int | None, out: Path) -> Path:
@@ -252,6 +252,29 @@ def stop(procs: list, timeout: float = 10.0) -> None:
             proc.wait()
 
 
+#: Fast DDS profile of swarms of several hundred agents across processes (docs/ros.md).
+LARGE_SWARM_PROFILE = 'fastdds_large_swarm.xml'
+#: From this many agents on, a run across processes applies it (unless the environment
+#: names a profile of its own): at N = 500 and 1000 in the container layout, Fast DDS's
+#: default shared-memory transport lost commands to the step timeout without it.
+LARGE_SWARM_AGENTS = 200
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+
+
+def process_environment(n_agents: int, domain_id: int, base: dict | None = None) -> dict:
+    """Return the environment of a run's processes: the domain id, discovery on this host
+    unless set, and the large-swarm Fast DDS profile for ``n_agents`` of at least
+    :data:`LARGE_SWARM_AGENTS` when the environment names no profile."""
+    env = dict(os.environ if base is None else base, ROS_DOMAIN_ID=str(domain_id))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if n_agents >= LARGE_SWARM_AGENTS and not any(env.get(v) for v in PROFILE_VARIABLES):
+        for d in config_dirs():
+            if (d / LARGE_SWARM_PROFILE).is_file():
+                env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str((d / LARGE_SWARM_PROFILE).resolve())
+                break
+    return env
+
+
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   log=None, realtime_factor: float = 1.0, container: bool = False,
@@ -277,8 +300,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :return: the summary.
     """
     sc = parse_scenario(parse_yaml(scenario.read_text()))
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env = process_environment(sc.n_agents, domain_id)
 
     def ros_args(values: dict) -> list[str]:
         out_args = ['--ros-args']

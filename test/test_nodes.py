@@ -8,6 +8,7 @@ import json
 import os
 import signal
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,10 +22,11 @@ from rosbags.typesys import Stores, get_typestore
 from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.common import StepClock
-from flock_swarm.runner import (executable, resolve_scenario, run_in_process, run_processes,
-                                stop)
+from flock_swarm.runner import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
+                                process_environment, resolve_scenario, run_in_process,
+                                run_processes, stop)
 from flock_swarm.core.run import simulate
-from flock_swarm.testing import wait_for
+from flock_swarm.testing import Swarm, wait_for
 from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
@@ -70,6 +72,25 @@ def test_ros_run_reproduces_sim(tmp_path, ros_domain, preset, overrides):
         assert ros['t'].shape == ref['t'].shape == (sc.steps + 1,)
         for name in ('q', 'p', 'u', 'leader_q', 'leader_p'):
             assert_allclose(ros[name], ref[name], rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_a_steps_commands_are_taken_at_once_and_give_sims_run(tmp_path, ros_domain):
+    """The world takes a lockstep step's commands in one pass (``AccelBatch``; the fault
+    tests cover the one-by-one path): every step after the start does, the bag holds every
+    command, and the run is sim's bit for bit."""
+    overrides = ['n_agents=12', 'informed.count=4', 'duration=1', 'record_every=1']
+    with Swarm('demo', tmp_path / 'run', overrides, domain_id=ros_domain) as swarm:
+        run = swarm.run(RUN_TIMEOUT)
+        world = swarm.world
+    sc = run.scenario
+    assert run.summary['status'] == 'completed' and run.summary['missed_commands'] == 0
+    # Step 0 may be offered again while DDS matches (a repeated command goes one by one).
+    assert sc.steps <= world.steps_at_once <= sc.steps + 1
+    counts = run.bag().message_counts()
+    assert all(counts[f'/agent_{i}/cmd_accel'] >= sc.steps + 1 for i in range(sc.n_agents))
+    ref, ros = simulate(sc).series, run.timeseries()
+    for name in ('q', 'p', 'u'):
+        assert ros[name].tobytes() == ref[name].tobytes(), name
 
 
 def test_swarm_converges_without_collisions(tmp_path, ros_domain):
@@ -154,6 +175,40 @@ def test_bag_of_a_ros_run(tmp_path, ros_domain):
     again = simulate(parse_scenario(json.loads(stored['scenario']))).series
     with np.load(out / 'timeseries.npz') as ros:
         assert_allclose(ros['q'], again['q'], rtol=0, atol=1e-9)
+
+
+def test_large_swarms_across_processes_get_the_large_swarm_dds_profile(tmp_path):
+    """From LARGE_SWARM_AGENTS agents on, the processes' environment names the installed
+    config/fastdds_large_swarm.xml, unless it names a profile of its own."""
+    small = process_environment(LARGE_SWARM_AGENTS - 1, 7, {'PATH': '/bin'})
+    assert small == {'PATH': '/bin', 'ROS_DOMAIN_ID': '7', 'ROS_AUTOMATIC_DISCOVERY_RANGE':
+                     'LOCALHOST'}
+    large = process_environment(LARGE_SWARM_AGENTS, 7, {'PATH': '/bin'})
+    profile = Path(large.pop('FASTRTPS_DEFAULT_PROFILES_FILE'))
+    assert large == small and profile.name == 'fastdds_large_swarm.xml' and profile.is_file()
+    own = tmp_path / 'mine.xml'
+    for variable in PROFILE_VARIABLES:
+        env = process_environment(1000, 7, {variable: str(own)})
+        assert env[variable] == str(own) and len(env) == 3
+
+
+def test_a_large_container_run_flies_with_the_profile(tmp_path, ros_domain):
+    """N = LARGE_SWARM_AGENTS in the container layout (the profile applied by the runner):
+    every command of every step arrives, and the run is the simulator's."""
+    out = tmp_path / 'large'
+    n = LARGE_SWARM_AGENTS
+    side = round((n / 0.05) ** 0.5, 3)
+    scenario = resolve_scenario('su2009_fig3', [
+        f'n_agents={n}', f'initial.position_box=[[0, {side}], [0, {side}]]', 'duration=0.2',
+        'record_every=1'], None, out)
+    with open(tmp_path / 'nodes.log', 'w') as log:
+        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                                log=log, container=True, world_params={'record': False})
+    assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
+    assert summary['missed_commands'] == 0
+    ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
+    with np.load(out / 'timeseries.npz') as ros:
+        assert ros['q'].tobytes() == ref['q'].tobytes()
 
 
 @pytest.mark.parametrize('container', [False, True], ids=['agent-per-process', 'container'])

@@ -113,6 +113,36 @@ def test_every_command_and_the_leader_complete_a_step():
     assert_array_equal(obs.leader.q, leader_at(sc, 0).q)
 
 
+def test_commands_taken_at_once_close_the_step_as_one_by_one():
+    """commands_all (the world's batched path) gives the observation that the same commands
+    given one by one give, bit for bit; a later command of one agent replaces its row."""
+    sc = small()
+    u_in = np.array([[0.5, -0.25], [1.0, 2.0], [-3.0, 0.125], [1e-300, -7.0]])
+    leader = leader_at(sc, 0)
+    one, batch = started(sc), started(sc)
+    for i in range(4):
+        one.command(i, 0, u_in[i], 0.01)
+    batch.commands_all(0, u_in)
+    for st in (one, batch):
+        give_leader(st, leader, 0, 0.02)
+        assert st.complete()
+    a, b = one.close_step(False, 0.05), batch.close_step(False, 0.05)
+    assert a.missing == b.missing == []
+    assert a.u.tobytes() == b.u.tobytes() and b.u is not u_in
+    assert a.metrics == b.metrics
+    assert one.advance(a.u) and batch.advance(b.u)
+    assert one.q.tobytes() == batch.q.tobytes() and one.p.tobytes() == batch.p.tobytes()
+    # A command of the wrong step is ignored; a repeated one for the open step replaces.
+    for st in (one, batch):
+        st.begin_step(0.1)
+    batch.commands_all(0, u_in)
+    assert not batch.commands
+    batch.commands_all(1, u_in)
+    batch.command(2, 1, np.array([9.0, 9.0]), 0.11)
+    give_leader(batch, leader_at(sc, 1), 1, 0.12)
+    assert_array_equal(batch.close_step(False, 0.15).u[2], [9.0, 9.0])
+
+
 def test_resend_waits_back_off_once_a_step_has_finished():
     """Before any step finished, a stalled step is offered every 0.5 s; after a 1 s step,
     first after three times that (3 s), then after twice as long each time (6 s, 12 s), and

@@ -13,7 +13,7 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryBatch,
+from flock_swarm.nodes.wire import (AccelBatch, AccelEncoder, MalformedMessage, OdometryBatch,
                                     OdometryBatchEncoder, OdometryEncoder, decode_accel,
                                     decode_clock, decode_odometry, encode_clock)
 
@@ -201,6 +201,38 @@ def _swap(data, j, msg):
 def test_odometry_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
     data, _ = batch_messages()
     assert OdometryBatch([f'agent_{j}' for j in range(BATCH_N)]).decode(spoil(data)) is None
+
+
+def batch_commands(stamp=(3, 500)):
+    """Return a step's commands of BATCH_N agents as rclpy serialises them, and the values."""
+    lin = np.random.default_rng(8).normal(scale=5.0, size=(BATCH_N, 3))
+    return [serialize_message(accel(*stamp, 'world', lin[i].tolist()))
+            for i in range(BATCH_N)], lin
+
+
+def test_accel_batch_reads_what_rclpy_and_the_agents_write():
+    data, lin = batch_commands()
+    ns, got = AccelBatch(BATCH_N).decode(data)
+    assert ns == 3_000_000_500 and got.shape == (BATCH_N, 1, 3)
+    assert got[:, 0].tobytes() == lin.tobytes()
+    sent = [AccelEncoder().encode(ns, lin[i].tolist()) for i in range(BATCH_N)]
+    assert [decode_accel(msg)[2] for msg in sent] == [tuple(row) for row in got[:, 0]]
+    assert AccelBatch(BATCH_N).decode(sent)[1].tobytes() == got.tobytes()
+
+
+# A command carries no agent id: the world puts each where its topic says, so an agent
+# heard twice leaves another's place empty (None).
+@pytest.mark.parametrize('spoil', [
+    lambda d: _swap(d, 4, None),                                 # agent 4 not in
+    lambda d: d[:-1],                                            # one agent short
+    lambda d: _swap(d, 2, serialize_message(accel(3, 500, 'map', (0, 0, 0)))),  # frame
+    lambda d: _swap(d, 3, serialize_message(accel(3, 501, 'world', (0, 0, 0)))),  # stamp
+    lambda d: _swap(d, 6, d[6] + b'\0' * 8),                    # longer than the layout
+    lambda d: _swap(d, 0, b'\x00\x00' + d[0][2:]),               # big-endian header
+])
+def test_accel_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
+    data, _ = batch_commands()
+    assert AccelBatch(BATCH_N).decode(spoil(data)) is None
 
 
 @pytest.mark.parametrize('dim', [2, 3])

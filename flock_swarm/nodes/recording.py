@@ -188,7 +188,8 @@ class RecordedNode(Node):
             sink.write(topic, data, t_ns)
 
     def recorded_subscription(self, msg_type, topic: str, decode: Callable,
-                              handler: Callable) -> str:
+                              handler: Callable, take: Callable[[bytes], None] | None = None
+                              ) -> str:
         """Subscribe to ``topic``; record each message as received, then hand it on.
 
         The subscription takes the serialised bytes, so the bag stores what came over the
@@ -196,19 +197,28 @@ class RecordedNode(Node):
         ``decode(data)`` (:mod:`flock_swarm.nodes.wire`: its first item is the stamp [ns]).
         Bytes that are no message of the type are recorded at the open step and rejected
         (``malformed``). Return the resolved topic name.
-        """
-        def on_data(data: bytes) -> None:
-            try:
-                msg = decode(data)
-            except MalformedMessage as exc:
-                self.record_message(name, data, self.clock.ns(self.k))
-                self.guard.reject(name, 'malformed', str(exc))
-                return
-            self.record_message(name, data, self.clock.ns(max(self.clock.step_at(msg[0]), 0)))
-            handler(msg)
 
-        name = self.create_subscription(msg_type, topic, on_data, LOCKSTEP_QOS,
-                                        raw=True).topic_name
+        :param take: gets the bytes instead, unrecorded: a node that queues a step's
+            messages to handle them at once records them itself, and hands any it does not
+            take at once to :meth:`take_recorded`.
+        """
+        name = self.create_subscription(
+            msg_type, topic,
+            take or (lambda data: self.take_recorded(name, data, decode, handler)),
+            LOCKSTEP_QOS, raw=True).topic_name
         for sink in self.sinks:
             sink.add_topic(name, msg_type, LOCKSTEP_QOS)
         return name
+
+    def take_recorded(self, name: str, data: bytes, decode: Callable,
+                      handler: Callable) -> None:
+        """Record a message received on ``name`` and hand ``decode(data)`` to ``handler``
+        (see :meth:`recorded_subscription`)."""
+        try:
+            msg = decode(data)
+        except MalformedMessage as exc:
+            self.record_message(name, data, self.clock.ns(self.k))
+            self.guard.reject(name, 'malformed', str(exc))
+            return
+        self.record_message(name, data, self.clock.ns(max(self.clock.step_at(msg[0]), 0)))
+        handler(msg)

@@ -201,6 +201,8 @@ class WorldStepper:
         n = sc.n_agents
         self.k = 0
         self.commands: dict[int, np.ndarray] = {}
+        # The open step's commands as one array, while they came at once (commands_all).
+        self.command_rows: np.ndarray | None = None
         self.held = np.zeros((n, sc.dim))
         self.held_at = np.full(n, -np.inf)
         self.stale_agents: set[int] = set()
@@ -254,8 +256,16 @@ class WorldStepper:
             return False
         if k == self.k:
             self.commands[i] = u
+            self.command_rows = None
             return False
         return i in self.last_missing
+
+    def commands_all(self, k: int, u: np.ndarray) -> None:
+        """Lockstep: take every agent's (checked) command for the open step ``k`` at once
+        (``u``: shape ``(N, dim)``), as :meth:`command` would one by one."""
+        if self.started and not self.done and k == self.k:
+            self.commands = dict(enumerate(u))
+            self.command_rows = u
 
     def leader_state(self, k: int, now: float, q: np.ndarray | None = None,
                      p: np.ndarray | None = None, a: np.ndarray | None = None) -> None:
@@ -308,6 +318,7 @@ class WorldStepper:
     def begin_step(self, now: float) -> None:
         """Open the current step: no command yet, its timeout and first resend ahead."""
         self.commands = {}
+        self.command_rows = None
         self.step_began = now
         self.deadline = now + self.settings.step_timeout
         if self.k == 0:
@@ -352,10 +363,13 @@ class WorldStepper:
             unless it is the last.
         """
         sc, k, n = self.scenario, self.k, self.scenario.n_agents
-        u = np.zeros((n, sc.dim))
-        missing = [i for i in range(n) if i not in self.commands]
-        for i, ui in self.commands.items():
-            u[i] = ui
+        if self.command_rows is not None:
+            u, missing = np.array(self.command_rows, dtype=float), []
+        else:
+            u = np.zeros((n, sc.dim))
+            missing = [i for i in range(n) if i not in self.commands]
+            for i, ui in self.commands.items():
+                u[i] = ui
         leader_missing = k not in self.leader_odom or k not in self.leader_accel
         if missing:
             self.missed[missing] += 1

@@ -189,48 +189,42 @@ class AccelEncoder(_Encoder):
         super().__init__((frame,), ACCEL_BYTES, (0,))
 
 
-class OdometryBatch:
-    """A step's odometry of every agent decoded at once, when it has the layout the world
-    writes (:class:`OdometryEncoder`: little-endian, frame ``world``, child ``agent_<j>``).
+class _MessageBatch:
+    """A step's messages of one fixed layout per sender, decoded at once.
 
     The buffers are joined and read with one gather of NumPy indices: the bytes that must be
-    those of the frame and child ids (and the header's byte order), the stamps, and the
-    position and velocity vectors. Anything else (another length or byte order, another id,
-    a duplicate or a missing agent) makes :meth:`decode` return ``None``, and the caller
-    takes the messages one by one (:func:`decode_odometry`), which judges them.
+    those of the header's byte order and the ids, the stamps, and the vectors. Anything else
+    (another length or byte order, another id, a duplicate or a missing sender) makes
+    :meth:`decode` return ``None``, and the caller takes the messages one by one, which
+    judges them.
     """
 
-    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
-        """Prepare the indices for the agents ``children`` (``agent_<j>`` at index ``j``)."""
-        fixed, stamps, vectors, lengths, start = [], [], [], [], 0
-        expected = []
-        for child in children:
-            buf = bytearray(OdometryEncoder(child, frame).buf)
-            strings = 12 + 4 + len(frame) + 1
-            child_at = _align(strings, 4)
-            pose = _align(child_at + 4 + len(child) + 1, 8)
-            # Header byte order and the two strings (their length fields included); the
-            # padding between them is not checked (rclpy leaves it uninitialised).
-            for lo, hi in ((0, 2), (12, strings), (child_at, child_at + 4 + len(child) + 1)):
+    def __init__(self, layouts: Sequence[tuple[bytes, Sequence[tuple[int, int]], Sequence[int]]]
+                 ) -> None:
+        """Prepare the indices from each sender's ``(template, fixed byte ranges, offsets of
+        its 3-float vectors)``, sender ``j`` at index ``j``."""
+        fixed, expected, stamps, vectors, lengths, start = [], [], [], [], [], 0
+        for buf, ranges, offsets in layouts:
+            for lo, hi in ranges:
                 fixed.extend(range(start + lo, start + hi))
                 expected.extend(buf[lo:hi])
             stamps.extend(range(start + 4, start + 12))
-            for at in (pose, pose + POSE_BYTES):
+            for at in offsets:
                 vectors.extend(range(start + at, start + at + 24))
             lengths.append(len(buf))
             start += len(buf)
-        self.n = len(children)
+        self.n = len(layouts)
+        self.per_message = len(layouts[0][2]) if layouts else 0
         self.lengths = lengths
-        self.total = start
         self.fixed = np.array(fixed, dtype=np.intp)
         self.expected = np.array(expected, dtype=np.uint8)
         self.stamps = np.array(stamps, dtype=np.intp)
         self.vectors = np.array(vectors, dtype=np.intp)
 
     def decode(self, buffers: Sequence[bytes | None]) -> tuple[int, np.ndarray] | None:
-        """Return ``(stamp_ns, states)`` of ``buffers`` (agent ``j``'s message at index
-        ``j``), ``states`` of shape ``(N, 2, 3)`` (positions, velocities), or ``None`` when
-        they are not one stamp's messages of the expected layout."""
+        """Return ``(stamp_ns, vectors)`` of ``buffers`` (sender ``j``'s message at index
+        ``j``), ``vectors`` of shape ``(N, vectors per message, 3)``, or ``None`` when they
+        are not one stamp's messages of the expected layouts."""
         if len(buffers) != self.n or None in buffers \
                 or list(map(len, buffers)) != self.lengths:
             return None
@@ -241,7 +235,45 @@ class OdometryBatch:
         if not (stamps == stamps[0]).all():
             return None
         ns = int(stamps[0]['sec']) * NS_PER_S + int(stamps[0]['nanosec'])
-        return ns, raw[self.vectors].view('<f8').reshape(self.n, 2, 3)
+        return ns, raw[self.vectors].view('<f8').reshape(self.n, self.per_message, 3)
+
+
+def _strings_end(frame: str) -> int:
+    """Return the offset just after a little-endian header's ``frame_id``."""
+    return 12 + 4 + len(frame) + 1
+
+
+class OdometryBatch(_MessageBatch):
+    """A step's odometry of every agent decoded at once, when it has the layout the world
+    writes (:class:`OdometryEncoder`: little-endian, frame ``world``, child ``agent_<j>``):
+    :meth:`decode` gives the states, shape ``(N, 2, 3)`` (positions, velocities)."""
+
+    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
+        """Prepare the indices for the agents ``children`` (``agent_<j>`` at index ``j``)."""
+        layouts = []
+        for child in children:
+            strings = _strings_end(frame)
+            child_at = _align(strings, 4)
+            pose = _align(child_at + 4 + len(child) + 1, 8)
+            # Header byte order and the two strings (their length fields included); the
+            # padding between them is not checked (rclpy leaves it uninitialised).
+            layouts.append((bytes(OdometryEncoder(child, frame).buf),
+                            ((0, 2), (12, strings), (child_at, child_at + 4 + len(child) + 1)),
+                            (pose, pose + POSE_BYTES)))
+        super().__init__(layouts)
+
+
+class AccelBatch(_MessageBatch):
+    """A step's commands of ``n`` agents decoded at once, when they have the layout the
+    agents write (:class:`AccelEncoder`: little-endian, frame ``world``): :meth:`decode`
+    gives the linear accelerations, shape ``(n, 1, 3)``."""
+
+    def __init__(self, n: int, frame: str = FRAME) -> None:
+        """Prepare the indices for ``n`` agents (agent ``i``'s command at index ``i``)."""
+        strings = _strings_end(frame)
+        layout = (bytes(AccelEncoder(frame).buf), ((0, 2), (12, strings)),
+                  (_align(strings, 8),))
+        super().__init__([layout] * n)
 
 
 class OdometryBatchEncoder:

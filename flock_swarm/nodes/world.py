@@ -36,8 +36,8 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.recording import BagSink, RecordedNode
 from flock_swarm.nodes.stepper import Observation, WorldSettings, WorldStepper
-from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
-                                    encode_clock)
+from flock_swarm.nodes.wire import (AccelBatch, OdometryBatchEncoder, decode_accel,
+                                    decode_odometry, encode_clock)
 from flock_swarm.outputs import SpooledRecorder, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
@@ -109,8 +109,18 @@ class WorldNode(RecordedNode):
         self.step_bytes: list[tuple] = []
         self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed)
         subscribe = self.recorded_subscription
+        # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
+        self.cmd_queue: list[tuple[int, bytes]] = []
+        self.cmd_queue_seen = 0
+        self.cmd_batch = AccelBatch(sc.n_agents)
+        #: Steps whose commands were taken in one pass (the rest went one by one).
+        self.steps_at_once = 0
+        self.cmd_handlers = [lambda msg, i=i: self.on_command(i, msg)
+                             for i in range(sc.n_agents)]
         self.cmd_topics = [subscribe(AccelStamped, cmd_topic(i), decode_accel,
-                                     lambda msg, i=i: self.on_command(i, msg))
+                                     self.cmd_handlers[i],
+                                     (lambda data, i=i: self.queue_command(i, data))
+                                     if self.lockstep else None)
                            for i in range(sc.n_agents)]
         self.create_timer(1.0, self.check_claims)
         self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
@@ -129,6 +139,47 @@ class WorldNode(RecordedNode):
                          doc='Why recording failed, or ``None``.')
 
     # -- messages in and out ------------------------------------------------------------------
+
+    def queue_command(self, i: int, data: bytes) -> None:
+        """Lockstep: queue agent ``i``'s command (serialised); take the queue once it can
+        complete the step."""
+        queue = self.cmd_queue
+        queue.append((i, data))
+        if len(queue) + len(self.stepper.commands) >= self.scenario.n_agents:
+            self.take_commands()
+
+    def take_commands(self) -> None:
+        """Lockstep: handle the queued commands, in one pass when they are the open step's
+        command of every agent in the agents' layout, else message by message in the order
+        they came (:meth:`~RecordedNode.take_recorded`, :meth:`on_command`: each judged,
+        counted and recorded as it would have been on arrival).
+
+        The one pass (:class:`~flock_swarm.nodes.wire.AccelBatch`,
+        :meth:`InputGuard.pass_batch`) records them in their order of arrival and hands
+        the step's commands to the stepper at once.
+        """
+        queue, self.cmd_queue = self.cmd_queue, []
+        self.cmd_queue_seen = 0
+        st, n = self.stepper, self.scenario.n_agents
+        if len(queue) == n and not st.commands and st.started and not st.done:
+            buffers: list[bytes | None] = [None] * n
+            for i, data in queue:
+                buffers[i] = data
+            decoded = self.cmd_batch.decode(buffers)
+            if decoded is not None and self.clock.step_at(decoded[0]) == st.k:
+                ns, lin = decoded
+                k = self.guard.pass_batch(self.cmd_topics, ns,
+                                          ((lin, self.guard.limits.accel),))
+                if k is not None:
+                    t_ns, topics = self.clock.ns(k), self.cmd_topics
+                    for i, data in queue:
+                        self.record_message(topics[i], data, t_ns)
+                    st.commands_all(k, lin[:, 0, :self.scenario.dim])
+                    self.steps_at_once += 1
+                    self._maybe_finish()
+                    return
+        for i, data in queue:
+            self.take_recorded(self.cmd_topics[i], data, decode_accel, self.cmd_handlers[i])
 
     def on_command(self, i: int, msg: tuple) -> None:
         """Check agent ``i``'s command ``(stamp_ns, frame_id, linear)`` and hand it on."""
@@ -216,8 +267,22 @@ class WorldNode(RecordedNode):
                 and self.clock_pub.get_subscription_count() >= 1)
 
     def on_lockstep_timer(self) -> None:
-        """Start when everybody is there; turn an expired step into zero commands."""
+        """Start when everybody is there; turn an expired step into zero commands.
+
+        Queued commands are taken one by one once the queue stopped growing for a tick (an
+        agent is missing, or a message was doubled), and before a step times out.
+        """
+        queued = len(self.cmd_queue)
+        if queued and queued == self.cmd_queue_seen:
+            self.take_commands()
+            return
+        self.cmd_queue_seen = queued
         due = self.stepper.tick(time.monotonic(), self.ready_to_start)
+        if due == 'timeout' and self.cmd_queue:
+            k = self.k
+            self.take_commands()
+            if self.k != k or self.done:
+                return
         if due == 'begin':
             self.begin_step()
         elif due == 'timeout':
@@ -274,6 +339,8 @@ class WorldNode(RecordedNode):
     def write_results(self) -> None:
         """Announce the end on ``swarm/status``; write what was recorded so far (also on an
         interrupted run), close the sinks."""
+        # Commands that came but were still queued are judged, counted and recorded too.
+        self.take_commands()
         self.status_pub.publish(String(data=self.stepper.status))
         result = self.stepper.result(time.monotonic(), self.guard.counts(),
                                      sorted(self.duplicates), self.bag_error,
