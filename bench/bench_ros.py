@@ -48,8 +48,8 @@ both floors); N = 100 in one
 process >= 20 steps/s; recording costs <= 10 % (pipeline against no-record). Issue 17, with
 ``--sizes 100 200 500 1000``: cost per agent-step at N = 1000 within 1.5x that at N = 100 in
 each layout, N = 1000 at >= 25 steps/s with recording. The memory check
-(``--memory``) runs the one-process pipeline for S and 10 S steps and compares peak RSS
-(target: < 1.2x).
+(``--memory``; ``--memory-n N`` agents, default 30) runs the one-process pipeline for S and
+10 S steps and compares peak RSS (target: < 1.2x).
 """
 
 import argparse
@@ -64,7 +64,7 @@ import time
 from pathlib import Path
 
 from flock_swarm.cli import accept_sigint
-from flock_swarm.runner import stop
+from flock_swarm.runner import process_environment, stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
 DENSITY = 30 / 400.0
@@ -355,8 +355,13 @@ def discovery_range(layout: str, n: int) -> str:
 
 
 def _env(layout: str, n: int) -> dict:
-    return dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN),
-                ROS_AUTOMATIC_DISCOVERY_RANGE=discovery_range(layout, n))
+    # Across processes as swarm --processes sets it up (the large-swarm DDS profile from 200
+    # agents on), so that floors and pipeline move their messages over the same transport.
+    env = process_environment(0 if layout == 'one' else n, DOMAIN,
+                              {k: v for k, v in os.environ.items()
+                               if k != 'ROS_AUTOMATIC_DISCOVERY_RANGE'})
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery_range(layout, n)
+    return env
 
 
 def floor(layout: str, n: int, steps: int, raw: bool = False) -> dict:
@@ -491,6 +496,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='largest N run in the one-process-per-agent layout')
     parser.add_argument('--memory', action='store_true',
                         help='also compare peak RSS of S and 10 S steps (one process)')
+    parser.add_argument('--memory-n', type=int, default=30,
+                        help='agents of the memory runs (default: 30)')
     parser.add_argument('--json', type=Path, help='write the results here')
     parser.add_argument('--discovery', default='auto', choices=['auto', 'LOCALHOST', 'SUBNET'],
                         help='ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (default auto: '
@@ -583,12 +590,13 @@ def main(argv: list[str] | None = None) -> int:
     checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:
-        short = pipeline('one', 30, args.steps, record=True)
-        long = pipeline('one', 30, 10 * args.steps, record=True)
-        memory = {'steps': args.steps, 'short_mib': short['peak_rss_mib'],
+        short = pipeline('one', args.memory_n, args.steps, record=True)
+        long = pipeline('one', args.memory_n, 10 * args.steps, record=True)
+        memory = {'n': args.memory_n, 'steps': args.steps, 'short_mib': short['peak_rss_mib'],
                   'long_mib': long['peak_rss_mib'],
                   'ratio': long['peak_rss_mib'] / short['peak_rss_mib']}
-        print(f'memory (one process, N = 30): {args.steps} steps {short["peak_rss_mib"]:.0f} '
+        print(f'memory (one process, N = {args.memory_n}): {args.steps} steps '
+              f'{short["peak_rss_mib"]:.0f} '
               f'MiB, {10 * args.steps} steps {long["peak_rss_mib"]:.0f} MiB peak RSS: '
               f'{memory["ratio"]:.3f}x', flush=True)
         checks.append(('10x longer run peaks < 1.2x memory', memory['ratio'] < 1.2))
