@@ -10,6 +10,7 @@ import pytest
 from flock_swarm import reproduce
 from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, settling_time, summarise,
                                          verdict)
+from flock_swarm.reproduce.su2009 import delta_for_eta, fig3_curves_anchors
 from flock_swarm.study.cache import cache_line, read_cache
 
 
@@ -89,3 +90,27 @@ def test_quick_report_renders_from_partial_caches(tmp_path):
     # The other studies have no records: their verdicts say so, and nothing ran for them.
     assert text.count('| not run yet |') >= 6
     assert sorted(p.name for p in partial.iterdir()) == ['reproduce_su2009_fig2.jsonl']
+
+
+def fig3_curve(label, eta100, eta1000, complete=True):
+    """Return a Fig. 3 curve's result whose rows give ``eta100`` at every delta of N = 100
+    and ``eta1000`` at every delta of N = 1000 (N = 300, 500 between them)."""
+    rows = [{'n_agents': n, 'delta': d, 'mean': e + 0.5 * d, 'std': 0.1, 'sem': 0.01,
+             'count': 50, 'seeds': list(range(50))}
+            for n, e in ((100, eta100), (300, eta100), (500, eta1000), (1000, eta1000))
+            for d in (0.1, 0.27, 1.0)]
+    curve = {'label': label, 'rows': rows, 'complete': complete, 'runs_cached': len(rows)}
+    for n in (100, 300, 500, 1000):
+        curve[f'delta_for_eta80_N{n}'] = delta_for_eta(rows, n, 0.8)
+    return curve
+
+
+def test_fig3_curves_are_judged_at_the_papers_anchors():
+    curves = [fig3_curve('far', 0.1, 0.1), fig3_curve('near', 0.665, 0.75),
+              fig3_curve('unfinished', 0.665, 0.75, complete=False)]
+    text = '\n'.join(fig3_curves_anchors(curves))
+    # The anchors: N = 100 at delta = 0.27 (0.665 + 0.135), N = 1000 at delta = 0.1.
+    assert '| near | 0.8 ± 0.01 (50 runs) | 0.8 ± 0.01 (50 runs) | yes (0.27 -> 0.1) |' in text
+    assert 'closest to the paper at its anchors is **near**' in text
+    assert 'Of the complete curves (far, near)' in text
+    assert 'N = 100: yes, N = 1000: yes.' in text
