@@ -49,8 +49,12 @@ def git_revision() -> str:
 
 #: Su Fig. 3 counts as reproduced when our delta at eta = 0.8 is this close to each anchor.
 FIG3_ANCHOR_SLACK = 0.05
-#: Su Fig. 6 counts as reproduced when the COM error follows (48) this closely [m].
-CLOSED_FORM_SLACK = 1e-3
+#: Su Fig. 6 counts as reproduced when the COM error follows (48) to within this many
+#: metres per second of dt: every agent holds f_gamma(t_k) over a step while the leader
+#: integrates the Lorenz equations, which leaves a residual of about dt/2 f_gamma';
+#: test_su2009 allows dt (|e(0)| + |e'(0)| + the range of f_gamma) and checks that it halves
+#: with dt, and the Lorenz acceleration of Fig. 6 ranges over hundreds of m/s^2.
+CLOSED_FORM_SLACK_PER_DT = 100.0
 
 MISPRINTS = (
     'Su, Wang, Lin 2009, eq. (48) (COM error for c2^2 < 4 c1): the velocity formula lacks a '
@@ -193,7 +197,7 @@ def overall(key: str, results: dict[str, dict]) -> tuple[str, str]:
         return 'one seed', 'reproduced' if moving else 'not reproduced'
     if key == 'su2009_fig6':
         close = m.get('closed_form_position_dev') is not None \
-            and m['closed_form_position_dev'] <= CLOSED_FORM_SLACK
+            and m['closed_form_position_dev'] <= CLOSED_FORM_SLACK_PER_DT * res['dt']
         return 'one seed', 'reproduced' if close else 'not reproduced'
     return 'one seed', 'not judged'
 
