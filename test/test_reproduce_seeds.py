@@ -1,8 +1,12 @@
 """The experiments over seeds (:mod:`flock_swarm.reproduce.seeds`): distributions, fractions
 meeting a claim and verdicts on tiny synthetic records, the settling time on a synthetic series,
-and a ``--quick`` report rendered from partial caches."""
+a ``--quick`` report rendered from partial caches, the Fig. 3 curves judged at the
+paper's anchors, and an interrupted reproduction."""
 
 import json
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -12,6 +16,7 @@ from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, settling_time, 
                                          verdict)
 from flock_swarm.reproduce.su2009 import delta_for_eta, fig3_curves_anchors
 from flock_swarm.study.cache import cache_line, read_cache
+from flock_swarm.testing import wait_for
 
 
 def test_distribution_of_a_few_values():
@@ -114,3 +119,28 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     assert 'closest to the paper at its anchors is **near**' in text
     assert 'Of the complete curves (far, near)' in text
     assert 'N = 100: yes, N = 1000: yes.' in text
+
+
+def test_an_interrupted_reproduction_keeps_its_runs_and_says_so_in_one_line(tmp_path):
+    """SIGINT during the studies over seeds: exit status 130, one line saying how to resume,
+    no traceback, every finished run in its cache."""
+    seeds = tmp_path / 'seeds'
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'flock_swarm.reproduce', '--seeds-only', '--jobs', '2',
+         '--seeds-cache', str(seeds), '--out', str(tmp_path / 'out'),
+         '--report', str(tmp_path / 'report.md'), '--figures', str(tmp_path / 'figures')],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        cache = seeds / 'reproduce_su2009_fig2.jsonl'
+        wait_for(lambda: cache.is_file() and cache.read_bytes().count(b'\n') >= 1, 240.0,
+                 'a finished run of Su Fig. 2')
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert 'Traceback' not in err
+    assert err.rstrip().splitlines()[-1].startswith('reproduce: interrupted; every finished run')
+    problems = []
+    assert len(read_cache(cache, report=problems.append)) >= 1 and problems == []
+    assert not (tmp_path / 'report.md').exists()

@@ -61,7 +61,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the reproduction from the command line; return the exit status."""
+    """Run the reproduction from the command line; return the exit status (130 when
+    interrupted: every finished run is in its cache, and the same command resumes)."""
+    try:
+        return run(argv)
+    except KeyboardInterrupt:
+        print('reproduce: interrupted; every finished run is kept in its cache (--out and '
+              'the studies\' caches); run the same command again to resume', file=sys.stderr)
+        return 130
+
+
+def run(argv: list[str] | None = None) -> int:
+    """Run the reproduction; return the exit status (see :func:`main`)."""
     args = build_parser().parse_args(argv)
     if args.realisations is not None and args.realisations < 1:
         print('reproduce: error: --realisations must be >= 1', file=sys.stderr)
