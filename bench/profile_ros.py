@@ -25,7 +25,9 @@ from pathlib import Path
 
 #: (module, class or None, function, label, depth) of what is timed, in print order.
 TIMED = [
-    ('flock_swarm.nodes.world', 'WorldNode', 'on_command', 'world: a command in', 0),
+    # A command is queued; the last of a step takes the step's commands (at once, or one
+    # by one through on_command) and closes the step: both inside this row.
+    ('flock_swarm.nodes.world', 'WorldNode', 'queue_command', 'world: a command in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'on_leader_odom', 'world: leader odometry in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'on_leader_accel', 'world: leader accel in', 0),
     ('flock_swarm.nodes.world', 'WorldNode', 'finish_step', 'world: close the step', 1),
