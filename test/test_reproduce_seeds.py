@@ -116,9 +116,11 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     text = '\n'.join(fig3_curves_anchors(curves))
     # The anchors: N = 100 at delta = 0.27 (0.665 + 0.135), N = 1000 at delta = 0.1.
     assert '| near | 0.8 ± 0.01 (50 runs) | 0.8 ± 0.01 (50 runs) | yes (0.27 -> 0.1) |' in text
-    assert 'closest to the paper at its anchors is **near**' in text
-    assert 'Of the complete curves (far, near)' in text
-    assert 'N = 100: yes, N = 1000: yes.' in text
+    assert 'Of the complete curves (far, near): within 0.05 of eta = 0.8 at both anchors: ' \
+        'near.' in text
+    assert 'at N = 100, delta = 0.27 it is near (eta 0.8); at N = 1000, delta = 0.1 it is ' \
+        'near (eta 0.8)' in text
+    assert 'falls from N = 100 to N = 1000 in: near.' in text  # far never reaches 0.8
 
 
 def test_an_interrupted_reproduction_keeps_its_runs_and_says_so_in_one_line(tmp_path):
