@@ -322,10 +322,11 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         bridge = BackgroundBridge(live, domain_id, base)
         # The bridge's subscriptions are best effort: it must have matched the leader's and
         # the agents' publishers before the first step, and the world waits for it as one
-        # more subscriber of every odometry topic.
+        # more subscriber of every odometry topic and for its markers' and metrics' one.
         bridge.wait_matched(['/leader/odom', '/leader/accel'] + [
             f'/agent_{i}/cmd_accel' for i in range(sc.n_agents)], 30.0)
-        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1)
+        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1,
+                            expect_telemetry_subscribers=1)
     world = subprocess.Popen(executable('world') + ros_args(
         dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
         env=env)
@@ -338,6 +339,10 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     finally:
         stop(others)
         if bridge is not None:
+            silent = bridge.node.silent()
+            if silent:
+                print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
+                      file=sys.stderr, flush=True)
             bridge.close()
     summary = out / 'summary.json'
     return json.loads(summary.read_text()) if summary.is_file() else {}
@@ -441,6 +446,11 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
     if args.no_record:
         world_params['record'] = False
     if live is not None:
+        # Every channel is advertised before the address is announced: a client connecting
+        # on the announcement gets them all at once, not while the nodes are being built
+        # (a subscription sent the moment the last channel appeared could be lost with it).
+        from flock_swarm.live import contract_topics
+        live.add_topics(contract_topics(sc.n_agents, '/'))
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
     if args.processes:

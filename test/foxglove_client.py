@@ -46,6 +46,10 @@ class FoxgloveClient:
         self.messages: list[tuple[str, int, bytes]] = []
         #: server times received [ns].
         self.times: list[int] = []
+        #: the topics of each ``advertise`` message, in order of arrival.
+        self.advertise_ops: list[list[str]] = []
+        #: status messages of the server (a refused subscription, say).
+        self.statuses: list[dict] = []
         self.closed = False
         self.pump_until(lambda: self.server_info is not None, timeout, 'serverInfo')
 
@@ -65,11 +69,14 @@ class FoxgloveClient:
             if message['op'] == 'serverInfo':
                 self.server_info = message
             elif message['op'] == 'advertise':
+                self.advertise_ops.append([channel['topic'] for channel in message['channels']])
                 self.channels.update({channel['id']: channel for channel in message['channels']})
                 self.advertised.update(self.channels)
             elif message['op'] == 'unadvertise':
                 for channel_id in message['channelIds']:
                     self.channels.pop(channel_id, None)
+            elif message['op'] == 'status':
+                self.statuses.append(message)
             return
         if frame[0] == OP_MESSAGE_DATA:
             _, subscription, log_time = _MESSAGE_HEADER.unpack_from(frame)

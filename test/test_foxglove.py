@@ -5,6 +5,7 @@ specification, not from ``foxglove-sdk``; the bag it is compared with is read by
 library and the advertised schemas are parsed by ``mcap_ros2``: three independent readers.
 """
 
+import collections
 import os
 from pathlib import Path
 import re
@@ -101,7 +102,12 @@ def check_received(client: FoxgloveClient, bag: Path, decoders: dict,
         bytes plus the wire's padding to a multiple of 4, at most.
     """
     recorded, _ = bag_messages(bag)
-    assert {topic for topic, _, _ in client.messages} >= set(CONTRACT)
+    got = {topic for topic, _, _ in client.messages}
+    missing = set(CONTRACT) - got
+    assert not missing, (sorted(missing), collections.Counter(
+        topic for topic, _, _ in client.messages), {
+        i: (c['topic'], i in client.channels, i in client.subscriptions.values())
+        for i, c in client.advertised.items() if c['topic'] in missing}, client.statuses)
     for topic, t_ns, data in client.messages:
         forms = unpadded(data) if wire else {data}
         assert forms & recorded.get((topic, t_ns), set()), (topic, t_ns)
@@ -233,8 +239,10 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
             # The bridge's subscriptions are matched before the first step: each topic the
             # world publishes has the agents' (or leader's) subscriber and the bridge's.
             world = swarm.world
+            telemetry = [world.telemetry.marker_pub, world.telemetry.metrics_pub]
             wait_for(lambda: all(pub.get_subscription_count() >= 2
-                                 for pub in [world.clock_pub, *world.odom_pubs]),
+                                 for pub in [world.clock_pub, *world.odom_pubs])
+                     and all(pub.get_subscription_count() >= 1 for pub in telemetry),
                      TIMEOUT, "the bridge's subscriptions")
             return client
         _, client, bag = fly(tmp_path, ros_domain, None, connect=connect)
@@ -262,6 +270,8 @@ def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
                             text=True)
     try:
         client = subscribed_client(announced(proc, r'live view on (ws://\S+)').group(1))
+        # Every channel was there before the announcement: the first advertisement has all.
+        assert set(CONTRACT) <= set(client.advertise_ops[0]), client.advertise_ops
         # The client reads until the run is over and the server has gone.
         client.pump(TIMEOUT)
         assert proc.wait(timeout=TIMEOUT) == 0
@@ -272,6 +282,7 @@ def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
             proc.kill()
             proc.wait()
     assert client.messages, log
+    assert 'warning' not in log, log
     decoders = check_advertised(client, bag_messages(out / 'bag')[1])
     check_received(client, out / 'bag', decoders, wire=bool(layout))
 

@@ -26,7 +26,7 @@ from flock_swarm.runner import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executabl
                                 process_environment, resolve_scenario, run_in_process,
                                 run_processes, stop)
 from flock_swarm.core.run import simulate
-from flock_swarm.testing import Swarm, wait_for
+from flock_swarm.testing import Swarm, spin_until, wait_for
 from conftest import start_nodes
 
 pytestmark = pytest.mark.ros
@@ -91,6 +91,47 @@ def test_a_steps_commands_are_taken_at_once_and_give_sims_run(tmp_path, ros_doma
     ref, ros = simulate(sc).series, run.timeseries()
     for name in ('q', 'p', 'u'):
         assert ros[name].tobytes() == ref[name].tobytes(), name
+
+
+def test_the_world_waits_for_its_telemetry_subscribers(tmp_path, ros_domain):
+    """``expect_telemetry_subscribers=1`` (``swarm --processes --foxglove``'s bridge): the
+    world does not start until ``/swarm/markers`` and ``/swarm/metrics`` have a subscriber,
+    which then receives every marker and metrics message the bag holds."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from visualization_msgs.msg import MarkerArray
+
+    from flock_swarm.nodes.common import TELEMETRY_QOS
+
+    def stamp_ns(header) -> int:
+        return header.stamp.sec * 10**9 + header.stamp.nanosec
+
+    overrides = ['n_agents=4', 'informed.count=2', 'duration=1']
+    with Swarm('demo', tmp_path / 'run', overrides, domain_id=ros_domain,
+               world_params={'expect_telemetry_subscribers': 1}) as swarm:
+        world = swarm.world
+        swarm.spin_until(lambda: all(pub.get_subscription_count() >= 1
+                                     for pub in [world.clock_pub, *world.odom_pubs])
+                         and world.count_publishers(world.leader_odom_topic) >= 1,
+                         RUN_TIMEOUT, 'the agents and the leader')
+        assert not world.ready_to_start() and world.k == 0
+        received = {'/swarm/markers': [], '/swarm/metrics': []}
+        monitor = swarm.add(rclpy.create_node('monitor', context=swarm.context))
+        for topic, kind in [('/swarm/markers', MarkerArray), ('/swarm/metrics', DiagnosticArray)]:
+            monitor.create_subscription(kind, topic, lambda msg, t=topic: received[t].append(
+                stamp_ns(msg.markers[0].header if t == '/swarm/markers' else msg.header)),
+                TELEMETRY_QOS)
+        # The run's last markers and metrics (at t = 1 s) may still be on their way.
+        last = world.clock.ns(int(round(1.0 / world.scenario.dt)))
+        spin_until(swarm.executor, lambda: world.done and all(
+            times and times[-1] == last for times in received.values()), RUN_TIMEOUT,
+            'the last markers and metrics')
+        swarm.close()
+        run = swarm.result()
+    assert run.summary['status'] == 'completed'
+    for topic, times in received.items():
+        recorded = [m.log_time_ns for m in run.bag().messages(topic)]
+        assert recorded and times == recorded, topic
 
 
 def test_swarm_converges_without_collisions(tmp_path, ros_domain):
@@ -336,6 +377,7 @@ def _stepped(out) -> bool:
     ({}, ['-p', 'out_dir:=/proc/version/run'], 'out_dir'),
     ({}, ['-p', 'max_abs_accel:=0.0'], 'max_abs_accel'),
     ({}, ['-p', 'staleness:=-1.0'], 'staleness'),
+    ({}, ['-p', 'expect_telemetry_subscribers:=-1'], 'expect_telemetry_subscribers'),
     ({}, ['-p', 'bag_max_size:=-1'], 'bag_max_size'),
     ({}, ['-p', 'bag_max_duration:=-0.5'], 'bag_max_duration'),
 ])

@@ -453,7 +453,8 @@ NODE_AGENTS = 3
 #: Every parameter of each node kind (its own, the common ones, the input limits).
 NODE_PARAMS = {
     'world': ('out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every',
-              'metrics_every', 'expect_subscribers', 'staleness', 'max_abs_position',
+              'metrics_every', 'expect_subscribers', 'expect_telemetry_subscribers',
+              'staleness', 'max_abs_position',
               'max_abs_velocity', 'max_abs_accel'),
     'leader': ('expect_subscribers', 'start_timeout'),
     'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'leader_start_timeout',

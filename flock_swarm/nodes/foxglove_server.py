@@ -66,6 +66,8 @@ class LiveBridge(Node):
                 raise ScenarioError(exc.option, exc.reason) from None
         self.live = live
         self.received = 0
+        #: Messages forwarded per topic.
+        self.counts: dict[str, int] = {}
         self.time_ns = 0
         self.subscriptions_by_topic = {}
         for topic, type_name in contract_topics(sc.n_agents, self.get_namespace()):
@@ -73,14 +75,21 @@ class LiveBridge(Node):
                 message_class(type_name), topic, self._forward(topic, type_name), BRIDGE_QOS,
                 raw=True)
             self.subscriptions_by_topic[sub.topic_name] = sub
+            self.counts[sub.topic_name] = 0
             live.add_topic(sub.topic_name, type_name)
 
     def unmatched(self, topics) -> list[str]:
         """Return those of ``topics`` that no publisher has matched yet."""
         return [t for t in topics if self.subscriptions_by_topic[t].get_publisher_count() < 1]
 
+    def silent(self) -> list[str]:
+        """Return the topics no message came in on, each with its matched publishers."""
+        return [f'{t} ({self.subscriptions_by_topic[t].get_publisher_count()} publishers '
+                'matched)' for t, n in self.counts.items() if n == 0]
+
     def _forward(self, topic: str, type_name: str) -> Callable[[bytes], None]:
         clock = type_name == CLOCK_TYPE
+        counts = self.counts
 
         def on_data(data: bytes) -> None:
             stamp = message_stamp_ns(type_name, data)
@@ -91,6 +100,7 @@ class LiveBridge(Node):
                 self.live.set_time(t_ns)
             self.live.write(topic, data, t_ns)
             self.received += 1
+            counts[topic] += 1
         return on_data
 
     def close(self) -> None:

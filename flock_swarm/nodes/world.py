@@ -42,7 +42,8 @@ from flock_swarm.outputs import SpooledRecorder, write_outputs
 
 WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
     'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
-    'expect_subscribers', 'staleness', 'bag_max_size', 'bag_max_duration'}
+    'expect_subscribers', 'expect_telemetry_subscribers', 'staleness', 'bag_max_size',
+    'bag_max_duration'}
 
 
 class WorldNode(RecordedNode):
@@ -75,6 +76,12 @@ class WorldNode(RecordedNode):
         self.expect_subscribers = declare(self, 'expect_subscribers', -1,
                                           'subscribers each odometry topic must have before '
                                           'the start (-1: one per node hosting agents)')
+        self.expect_telemetry = declare(self, 'expect_telemetry_subscribers', 0,
+                                        'subscribers /swarm/markers and /swarm/metrics must '
+                                        'have before the start (a live-view bridge: 1)')
+        if self.expect_telemetry < 0:
+            raise ScenarioError('expect_telemetry_subscribers',
+                                f'must be 0 or more, not {self.expect_telemetry}')
         sc = self.scenario = load_scenario(self, WORLD_PARAMS)
         self.progress = progress
         self.mode = self.get_parameter('mode').value
@@ -262,6 +269,9 @@ class WorldNode(RecordedNode):
             if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
                 return False
         if any(pub.get_subscription_count() < need for pub in self.odom_pubs):
+            return False
+        if any(pub.get_subscription_count() < self.expect_telemetry
+               for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub)):
             return False
         return (self.count_publishers(self.leader_odom_topic) >= 1
                 and self.clock_pub.get_subscription_count() >= 1)
