@@ -14,7 +14,8 @@ import pytest
 from flock_swarm import reproduce
 from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, settling_time, summarise,
                                          verdict)
-from flock_swarm.reproduce.su2009 import delta_for_eta, fig3_curves_anchors
+from flock_swarm.reproduce.su2009 import (FIG3_CURVES, delta_for_eta, fig3_curves_anchors,
+                                          fig3_curves_tested)
 from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.testing import wait_for
 
@@ -121,6 +122,22 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     assert 'at N = 100, delta = 0.27 it is near (eta 0.8); at N = 1000, delta = 0.1 it is ' \
         'near (eta 0.8)' in text
     assert 'falls from N = 100 to N = 1000 in: near.' in text  # far never reaches 0.8
+
+
+def test_the_fig3_discussion_cites_the_complete_curves_at_the_anchors():
+    linear, bounded, linear300, bounded300 = [spec for spec, _ in FIG3_CURVES]
+    curves = [dict(fig3_curve('a', 0.2, 0.1), spec=linear),
+              dict(fig3_curve('b', 0.5, 0.0), spec=bounded),
+              dict(fig3_curve('c', 0.3, 0.1, complete=False), spec=linear300),
+              dict(fig3_curve('d', 0.5, 0.0), spec=bounded300)]
+    text = fig3_curves_tested(curves)
+    # At the anchors: 0.2 + 0.135 (N = 100, delta = 0.27), 0.1 + 0.05 (N = 1000, delta = 0.1).
+    assert 'the linear term over 100 s gives eta = 0.335 and 0.15;' in text
+    assert 'bounded navigation (Olfati-Saber 2006) at the same 100 s gives 0.635 and 0.05;' \
+        in text
+    assert 'bounded navigation over 300 s gives 0.635 and 0.05.' in text
+    assert '300 s run with the linear term' not in text  # incomplete: not cited
+    assert fig3_curves_tested(curves[1:]) == ''  # nothing to compare with
 
 
 def test_an_interrupted_reproduction_keeps_its_runs_and_says_so_in_one_line(tmp_path):

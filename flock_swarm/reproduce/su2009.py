@@ -586,9 +586,52 @@ def fig3_discussion(res: dict, plan: Plan) -> str:
             'component with an informed agent at delta = 0.1); the paper does not say '
             'whether it bounded the term or placed the leader differently. a = b = 5 are '
             'Olfati-Saber\'s values, which the paper does not restate.')
+    tested = fig3_curves_tested(res.get('curves', {}).get('curves', []))
+    if tested:
+        parts.append(tested)
     parts.append(f'Fewer realisations than the paper\'s {FIG3_PAPER_REALISATIONS} make our '
                  'points noisier (error bars: standard error of the mean), not biased.')
     return ' '.join(parts)
+
+
+def anchor_row(curve: dict, n: int) -> dict | None:
+    """Return a curve's row at the paper's anchor of size ``n`` (None: not run)."""
+    delta = FIG3_PAPER_DELTA[n]
+    return next((r for r in curve['rows']
+                 if r['n_agents'] == n and abs(r['delta'] - delta) < 1e-9), None)
+
+
+def anchor_eta(curve: dict, n: int) -> float | None:
+    """Return a curve's mean eta at the paper's anchor of size ``n`` (None: not run)."""
+    row = anchor_row(curve, n)
+    return None if row is None else row['mean']
+
+
+def fig3_curves_tested(curves: list[dict]) -> str:
+    """Return what the complete Fig. 3 curves say of the bounded-navigation and run-length
+    hypotheses, against the linear 100 s curve at the paper's anchors ('' without them)."""
+    by_spec = {c['spec']: c for c in curves if c['complete']}
+    base = by_spec.get(FIG3_CURVES[0][0])
+    if base is None:
+        return ''
+    (small, d_small), (large, d_large) = sorted(FIG3_PAPER_DELTA.items())
+    ref = [anchor_eta(base, small), anchor_eta(base, large)]
+    parts = []
+    for spec, what in ((FIG3_CURVES[1][0], 'bounded navigation (Olfati-Saber 2006) at the '
+                        'same 100 s'),
+                       (FIG3_CURVES[2][0], 'a 300 s run with the linear term'),
+                       (FIG3_CURVES[3][0], 'bounded navigation over 300 s')):
+        c = by_spec.get(spec)
+        if c is None:
+            continue
+        got = [anchor_eta(c, small), anchor_eta(c, large)]
+        parts.append(f'{what} gives {fmt(got[0])} and {fmt(got[1])}')
+    if not parts:
+        return ''
+    return (f'The four curves below test the last two hypotheses. At the paper\'s anchors '
+            f'(N = {small}, delta = {d_small:g}; N = {large}, delta = {d_large:g}; the paper: '
+            f'eta = {FIG3_PAPER_ETA:g} at both) the linear term over 100 s gives eta = '
+            f'{fmt(ref[0])} and {fmt(ref[1])}; ' + '; '.join(parts) + '.')
 
 
 def metric_table_fig3(res: dict) -> list[str]:
@@ -867,11 +910,7 @@ def fig3_curves_anchors(curves: list[dict]) -> list[str]:
              'delta at eta = 0.8 falls from N = 100 to 1000 |', '|---|---|---|---|']
     scores = []
     for c in curves:
-        at = {}
-        for n, delta in FIG3_PAPER_DELTA.items():
-            row = next((r for r in c['rows'] if r['n_agents'] == n
-                        and abs(r['delta'] - delta) < 1e-9), None)
-            at[n] = row
+        at = {n: anchor_row(c, n) for n in FIG3_PAPER_DELTA}
         needed = [c[f'delta_for_eta80_N{n}'] for n in FIG3_SIZES]
         if c['runs_cached'] and None not in needed:
             falls = 'yes' if needed[-1] < needed[0] else 'no'
