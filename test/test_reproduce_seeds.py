@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from flock_swarm import reproduce
-from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, settling_time, summarise,
-                                         verdict)
+from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, longer_run, settling_time,
+                                         summarise, verdict)
 from flock_swarm.reproduce.su2009 import (FIG3_CURVES, delta_for_eta, fig3_curves_anchors,
                                           fig3_curves_tested)
 from flock_swarm.study.cache import cache_line, read_cache
@@ -122,6 +122,20 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     assert 'at N = 100, delta = 0.27 it is near (eta 0.8); at N = 1000, delta = 0.1 it is ' \
         'near (eta 0.8)' in text
     assert 'falls from N = 100 to N = 1000 in: near.' in text  # far never reaches 0.8
+
+
+def test_a_longer_run_is_compared_with_the_shorter_seed_by_seed():
+    def rec(seed, t_final, settling, gain):
+        return {'seed': seed, 'metrics': {'t_final': t_final, 'settling_time': settling,
+                                          'adaptive_gain_max': gain}}
+    short = [rec(1, 30.0, None, 40.0), rec(2, 30.0, 28.0, 50.0), rec(3, 30.0, None, 10.0)]
+    long = [rec(1, 90.0, 80.0, 60.0), rec(2, 90.0, 28.0, 50.0)]  # seed 3 not run for 90 s
+    text = longer_run([('30 s', short, 3), ('greedy', [], 3), ('90 s', long, 2)])
+    assert text == ('Seed by seed (2 seeds run for both 30 s and 90 s; the first 30 s of a '
+                    'longer run are the shorter run): settled within 30 s: 1; within 90 s: 2, '
+                    'those settling only after 30 s at 80 .. 80 s. The largest adaptive gain '
+                    'at 90 s is 1 .. 1.5 times its value at 30 s.')
+    assert longer_run([('30 s', short, 3), ('90 s', [], 2)]) == ''
 
 
 def test_the_fig3_discussion_cites_the_complete_curves_at_the_anchors():
