@@ -118,10 +118,27 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     # The anchors: N = 100 at delta = 0.27 (0.665 + 0.135), N = 1000 at delta = 0.1.
     assert '| near | 0.8 ± 0.01 (50 runs) | 0.8 ± 0.01 (50 runs) | yes (0.27 -> 0.1) |' in text
     assert 'Of the complete curves (far, near): within 0.05 of eta = 0.8 at both anchors: ' \
-        'near.' in text
+        'near; at one anchor, ' in text
     assert 'at N = 100, delta = 0.27 it is near (eta 0.8); at N = 1000, delta = 0.1 it is ' \
         'near (eta 0.8)' in text
+    assert 'at one anchor, at N = 100, delta = 0.27: **near**; at N = 1000, delta = 0.1: ' \
+        '**near**.' in text
     assert 'falls from N = 100 to N = 1000 in: near.' in text  # far never reaches 0.8
+
+
+def test_the_fig3_verdict_names_a_variant_that_meets_the_anchors():
+    from flock_swarm.reproduce.report import fig3_verdict
+    paper = {'delta_for_eta80_N100': 0.29, 'delta_for_eta80_N1000': 0.13}
+    far = {'delta_for_eta80_N100': 0.73, 'delta_for_eta80_N1000': 0.70}
+    half = {'delta_for_eta80_N100': 0.43, 'delta_for_eta80_N1000': 0.13}
+    curves = [dict(far, label='linear', complete=True),
+              dict(half, label='bounded', complete=True),
+              dict(paper, label='unfinished', complete=False)]
+    assert fig3_verdict(paper, []) == 'reproduced'
+    assert fig3_verdict(far, curves) == 'not reproduced (one anchor only: N = 1000 under bounded)'
+    assert fig3_verdict(far, curves + [dict(paper, label='both', complete=True)]) == \
+        'reproduced under variant: both'
+    assert fig3_verdict(far, curves[:1]) == 'not reproduced'
 
 
 def test_a_longer_run_is_compared_with_the_shorter_seed_by_seed():

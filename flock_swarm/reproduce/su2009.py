@@ -933,8 +933,15 @@ def fig3_curves_anchors(curves: list[dict]) -> list[str]:
             parts.append(f'at N = {n}, delta = {delta:g} it is {c["label"]} (eta '
                          f'{fmt(at[n]["mean"])})')
         falls = [c['label'] for _, c, _, trend in scores if trend.startswith('yes')]
+        each = []
+        for n, delta in FIG3_PAPER_DELTA.items():
+            close = [c['label'] for _, c, at, _ in scores
+                     if abs(at[n]['mean'] - FIG3_PAPER_ETA) <= 0.05]
+            each.append(f'at N = {n}, delta = {delta:g}: '
+                        + (', '.join(f'**{c}**' for c in close) if close else 'none'))
         lines += ['', f'Of the complete curves ({done}): within 0.05 of eta = 0.8 at both '
-                  'anchors: ' + (', '.join(near) if near else '**none**') + '. Closest to '
+                  'anchors: ' + (', '.join(near) if near else '**none**') + '; at one anchor, '
+                  + '; '.join(each) + '. Closest to '
                   'the paper ' + '; '.join(parts) + '. The fraction needed for eta = 0.8 '
                   'falls from N = 100 to N = 1000 in: '
                   + (', '.join(falls) if falls else 'none') + '.']
