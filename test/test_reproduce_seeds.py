@@ -169,6 +169,13 @@ def test_the_fig3_discussion_cites_the_complete_curves_at_the_anchors():
     assert 'bounded navigation over 300 s gives 0.635 and 0.05.' in text
     assert '300 s run with the linear term' not in text  # incomplete: not cited
     assert fig3_curves_tested(curves[1:]) == ''  # nothing to compare with
+    assert 'Closest to the paper over both anchors' not in text  # b never reaches 0.8
+    close = dict(fig3_curve('e', 0.6, 0.7), spec=bounded300)
+    text = fig3_curves_tested([curves[0], close])
+    assert text.endswith('Closest to the paper over both anchors: e, whose fraction needed for '
+                         'eta = 0.8 is 0.4 (N = 100), 0.4 (N = 300), 0.2 (N = 500), 0.2 '
+                         '(N = 1000), not falling steadily with N (the paper: 0.27 at N = 100, '
+                         '0.1 at N = 1000).'), text
 
 
 def test_an_interrupted_reproduction_keeps_its_runs_and_says_so_in_one_line(tmp_path):

@@ -628,10 +628,22 @@ def fig3_curves_tested(curves: list[dict]) -> str:
         parts.append(f'{what} gives {fmt(got[0])} and {fmt(got[1])}')
     if not parts:
         return ''
-    return (f'The four curves below test the last two hypotheses. At the paper\'s anchors '
+    text = (f'The four curves below test the last two hypotheses. At the paper\'s anchors '
             f'(N = {small}, delta = {d_small:g}; N = {large}, delta = {d_large:g}; the paper: '
             f'eta = {FIG3_PAPER_ETA:g} at both) the linear term over 100 s gives eta = '
             f'{fmt(ref[0])} and {fmt(ref[1])}; ' + '; '.join(parts) + '.')
+    best = min(by_spec.values(), key=lambda c: sum(
+        abs((anchor_eta(c, n) or 0.0) - FIG3_PAPER_ETA) for n in (small, large)))
+    needed = [best[f'delta_for_eta80_N{n}'] for n in FIG3_SIZES]
+    if None not in needed:
+        falls = all(b < a for a, b in zip(needed, needed[1:]))
+        text += (f' Closest to the paper over both anchors: {best["label"]}, whose fraction '
+                 'needed for eta = 0.8 is ' + ', '.join(
+                     f'{fmt(d)} (N = {n})' for d, n in zip(needed, FIG3_SIZES))
+                 + (', falling with every larger group as the paper says' if falls else
+                    ', not falling steadily with N')
+                 + f' (the paper: {d_small:g} at N = {small}, {d_large:g} at N = {large}).')
+    return text
 
 
 def metric_table_fig3(res: dict) -> list[str]:
