@@ -16,14 +16,13 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
-import re
 import sys
 import time
 
 import numpy as np
 
 from flock_swarm.cli import EXIT_USAGE, OneLineParser
-from flock_swarm import __version__
+from flock_swarm import __version__, contract
 from flock_swarm.bag import BagError, BagReader
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
@@ -49,12 +48,12 @@ VERIFY_TOLERANCE = 1e-6
 FALLBACK_ETA_TOLERANCE = 0.1
 FALLBACK_COLLISION_DISTANCE = 0.1
 #: The status of the world's live metrics on ``/swarm/metrics``.
-METRICS_STATUS = 'flock_swarm/metrics'
+METRICS_STATUS = contract.METRICS_STATUS
 
-ODOMETRY = 'nav_msgs/msg/Odometry'
-ACCEL = 'geometry_msgs/msg/AccelStamped'
-DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
-_AGENT_TOPIC = re.compile(r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel)$')
+ODOMETRY = contract.ODOMETRY_TYPE
+ACCEL = contract.ACCEL_TYPE
+DIAGNOSTICS = contract.METRICS_TYPE
+_AGENT_TOPIC = contract.AGENT_TOPIC
 #: What ``analyze`` needs from a bag, in one sentence (said with every missing-topic error).
 NEEDS = ('analyze needs /agent_<i>/odom (nav_msgs/msg/Odometry) of every agent; it also '
          'uses, when present, /agent_<i>/cmd_accel and /leader/accel '

@@ -27,6 +27,8 @@ import threading
 from typing import Iterable
 
 from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
+from flock_swarm.contract import (ACCEL_TYPE, CLOCK_TYPE, MARKERS_TYPE, METRICS_TYPE,  # noqa: F401
+                                  ODOMETRY_TYPE, contract_topics)
 
 #: Default port of the Foxglove WebSocket protocol (what the apps try first).
 DEFAULT_PORT = 8765
@@ -39,33 +41,9 @@ SERVER_NAME = 'flock_swarm'
 #: Longest wait [s] for the server to stop when the run ends (:meth:`LiveServer.close`).
 CLOSE_TIMEOUT = 2.0
 
-CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
-ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
-ACCEL_TYPE = 'geometry_msgs/msg/AccelStamped'
-MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
-METRICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 _NS = 10**9
 _TIME = {0: struct.Struct('>iI'), 1: struct.Struct('<iI')}
-
-
-def contract_topics(n_agents: int, namespace: str = '/') -> list[tuple[str, str]]:
-    """Return the topics of the contract for ``n_agents`` agents, with their message types.
-
-    :param n_agents: number of agents.
-    :param namespace: the namespace the nodes run in (``/``: none); ``/clock`` stays global.
-    :return: ``(topic, pkg/msg/Type)`` pairs, ``/clock`` first.
-    """
-    prefix = namespace.rstrip('/')
-    topics = [('/clock', CLOCK_TYPE),
-              (f'{prefix}/leader/odom', ODOMETRY_TYPE),
-              (f'{prefix}/leader/accel', ACCEL_TYPE)]
-    for i in range(n_agents):
-        topics += [(f'{prefix}/agent_{i}/odom', ODOMETRY_TYPE),
-                   (f'{prefix}/agent_{i}/cmd_accel', ACCEL_TYPE)]
-    topics += [(f'{prefix}/swarm/markers', MARKERS_TYPE),
-               (f'{prefix}/swarm/metrics', METRICS_TYPE)]
-    return topics
 
 
 def message_stamp_ns(type_name: str, data: bytes) -> int | None:

@@ -44,25 +44,23 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 from rosgraph_msgs.msg import Clock
 
+from flock_swarm import contract
 from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
+from flock_swarm.contract import qos_profile
 from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 
 #: Exit status when the bag turns out unreadable during playback.
 EXIT_FAILURE = 1
 #: The simulation clock topic (REP-2008 ``/clock``).
-CLOCK_TOPIC = '/clock'
+CLOCK_TOPIC = contract.CLOCK
 #: Publisher depth of replayed volatile topics, at least: the recorded offer's depth sized the
 #: original publisher's queue for its own rate, while a replay at ``--rate 10`` sends bursts ten
 #: times denser; a reliable writer overwrites unacknowledged samples once its queue is full.
 REPLAY_DEPTH = 100
-#: /clock: reliable, because a reliable offer matches both reliable subscribers (this
-#: package's nodes) and best-effort ones (rclpy's and rclcpp's time sources); volatile, so a
-#: late joiner does not receive stale times; a short queue, since only the latest time matters.
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
+#: /clock as the world publishes it (the contract's QoS).
+CLOCK_QOS = qos_profile(contract.CLOCK_QOS)
 #: Longest single wait (s): bounds the reaction time to Ctrl-C and :meth:`Player.stop`.
 MAX_WAIT = 0.05
 #: Final stretch (s) of a wait that is slept rather than spent in the executor: rcl's wait

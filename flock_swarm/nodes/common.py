@@ -23,58 +23,26 @@ from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from flock_swarm import contract
 from flock_swarm.cli import EXIT_USAGE
+from flock_swarm.contract import (CLOCK, FRAME, LEADER_ACCEL, LEADER_ODOM, MARKERS,  # noqa: F401
+                                  METRICS, RUNNING, STATUS, cmd_topic, odom_topic,
+                                  qos_profile)
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.run import check_law_output
 from flock_swarm.core.scenario import Scenario, parse_yaml, realize
 from flock_swarm.presets import load, load_mapping
 
-#: Lockstep state and commands: reliable, because a lost odometry or command stalls the step
-#: until its timeout; the depth covers a burst of one message per agent and step.
-LOCKSTEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.VOLATILE)
-#: /clock: reliable so that every tick reaches the leader in lockstep mode.
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-#: Markers and metrics: reliable with a short queue, so RViz and Foxglove (which subscribe
-#: reliable by default) match, and a slow viewer only ever lags by a few frames.
-TELEMETRY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
-                           reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.VOLATILE)
-#: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
-#: world announced the end of the run still learns it.
-STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The topic contract's QoS as rclpy profiles (the names, types and QoS live in
+#: :mod:`flock_swarm.contract`).
+LOCKSTEP_QOS = qos_profile(contract.LOCKSTEP_QOS)
+CLOCK_QOS = qos_profile(contract.CLOCK_QOS)
+TELEMETRY_QOS = qos_profile(contract.TELEMETRY_QOS)
+STATUS_QOS = qos_profile(contract.STATUS_QOS)
 
 #: Parameters every rclpy node has; they are not scenario overrides.
 ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
-#: The fixed frame of every position (REP-103).
-FRAME = 'world'
-
-
-def odom_topic(i: int) -> str:
-    """Return the odometry topic of agent ``i`` (relative: namespaces apply)."""
-    return f'agent_{i}/odom'
-
-
-def cmd_topic(i: int) -> str:
-    """Return the command topic of agent ``i``."""
-    return f'agent_{i}/cmd_accel'
-
-
-LEADER_ODOM = 'leader/odom'
-LEADER_ACCEL = 'leader/accel'
-CLOCK = '/clock'
-MARKERS = 'swarm/markers'
-METRICS = 'swarm/metrics'
-STATUS = 'swarm/status'
-#: The world's status while it runs; any other is the end of the run (``summary.json``).
-RUNNING = 'running'
 
 
 class StepClock:

@@ -20,20 +20,17 @@ import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from flock_swarm import contract
 from flock_swarm.bag.msgdefs import message_class
+from flock_swarm.contract import qos_profile
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.live import (CLOCK_TYPE, DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
                               contract_topics, message_stamp_ns, start_live)
 from flock_swarm.nodes.common import (COMMON_PARAMS, declare, declare_common, load_scenario,
                                       make_executor, run_node)
 
-#: Best effort: a viewer never makes a writer wait for its acknowledgements (it matches the
-#: reliable writers of the contract); the depth covers a step's burst.
-BRIDGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                        reliability=ReliabilityPolicy.BEST_EFFORT,
-                        durability=DurabilityPolicy.VOLATILE)
+BRIDGE_QOS = qos_profile(contract.BRIDGE_QOS)
 #: The node's own parameters (the others override scenario keys, as in every node).
 BRIDGE_PARAMS = COMMON_PARAMS | {'host', 'port'}
 

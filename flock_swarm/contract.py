@@ -1,0 +1,149 @@
+"""The topic contract of flock_swarm: every topic's name, message type and QoS, in one place.
+
+The nodes, the recorder, the live view (``--foxglove``), ``analyze``, ``replay`` and the
+process launcher all read the topics from here (docs/ros.md, "Topics"; shared/DESIGN.md).
+This module imports no rclpy: names and types are plain strings, and a QoS is a small
+frozen :class:`QosSpec` that :func:`qos_profile` turns into an rclpy ``QoSProfile`` where a
+node needs one. Topic names are relative (namespaces apply) except ``/clock``.
+"""
+
+from dataclasses import dataclass
+import re
+
+#: The fixed frame of every position (REP-103).
+FRAME = 'world'
+
+#: Message types of the contract (``pkg/msg/Type``), standard messages only.
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
+ACCEL_TYPE = 'geometry_msgs/msg/AccelStamped'
+MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+METRICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+STATUS_TYPE = 'std_msgs/msg/String'
+
+#: The simulation clock (REP-2008), global whatever the namespace.
+CLOCK = '/clock'
+LEADER_ODOM = 'leader/odom'
+LEADER_ACCEL = 'leader/accel'
+MARKERS = 'swarm/markers'
+METRICS = 'swarm/metrics'
+STATUS = 'swarm/status'
+#: The world's status while it runs; any other is the end of the run (``summary.json``).
+RUNNING = 'running'
+#: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
+METRICS_STATUS = 'flock_swarm/metrics'
+
+#: An agent topic of the contract, absolute, in any namespace: ``<ns>/agent_<i>/<kind>``.
+AGENT_TOPIC = re.compile(r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel)$')
+
+
+def odom_topic(i: int) -> str:
+    """Return the odometry topic of agent ``i`` (relative: namespaces apply)."""
+    return f'agent_{i}/odom'
+
+
+def cmd_topic(i: int) -> str:
+    """Return the command topic of agent ``i`` (relative: namespaces apply)."""
+    return f'agent_{i}/cmd_accel'
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    """A QoS of the contract: KEEP_LAST history of ``depth``, reliability and durability.
+
+    :ivar depth: the history depth.
+    :ivar reliable: ``RELIABLE`` (``True``) or ``BEST_EFFORT``.
+    :ivar latched: ``TRANSIENT_LOCAL`` (``True``) or ``VOLATILE``.
+    """
+
+    depth: int
+    reliable: bool = True
+    latched: bool = False
+
+
+#: Lockstep state and commands: reliable, because a lost odometry or command stalls the step
+#: until its timeout; the depth covers a burst of one message per agent and step.
+LOCKSTEP_QOS = QosSpec(depth=100)
+#: /clock: reliable, because a reliable offer matches both reliable subscribers (this
+#: package's nodes) and best-effort ones (rclpy's and rclcpp's time sources); volatile, so a
+#: late joiner does not receive stale times; a short queue, since only the latest time matters.
+CLOCK_QOS = QosSpec(depth=10)
+#: Markers and metrics: reliable with a short queue, so RViz and Foxglove (which subscribe
+#: reliable by default) match, and a slow viewer only ever lags by a few frames.
+TELEMETRY_QOS = QosSpec(depth=5)
+#: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
+#: world announced the end of the run still learns it.
+STATUS_QOS = QosSpec(depth=1, latched=True)
+#: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
+#: acknowledgements (it matches the reliable writers of the contract); the depth covers a
+#: step's burst.
+BRIDGE_QOS = QosSpec(depth=100, reliable=False)
+
+
+def qos_profile(spec: QosSpec):
+    """Return the rclpy ``QoSProfile`` of a contract QoS (imports rclpy on first use).
+
+    :param spec: the contract's QoS.
+    :return: an ``rclpy.qos.QoSProfile``.
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
+        reliability=(ReliabilityPolicy.RELIABLE if spec.reliable
+                     else ReliabilityPolicy.BEST_EFFORT),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.latched
+                    else DurabilityPolicy.VOLATILE))
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the contract.
+
+    :ivar name: the topic name (relative unless it starts with ``/``).
+    :ivar type: the message type, ``pkg/msg/Type``.
+    :ivar qos: its QoS.
+    :ivar publisher: the node that publishes it.
+    """
+
+    name: str
+    type: str
+    qos: QosSpec
+    publisher: str
+
+
+def contract(n_agents: int) -> list[Topic]:
+    """Return every topic of the contract for ``n_agents`` agents, ``/clock`` first.
+
+    The recorded topics of a bag, in the order the live view advertises them.
+
+    :param n_agents: the number of agents.
+    """
+    topics = [Topic(CLOCK, CLOCK_TYPE, CLOCK_QOS, 'world'),
+              Topic(LEADER_ODOM, ODOMETRY_TYPE, LOCKSTEP_QOS, 'leader'),
+              Topic(LEADER_ACCEL, ACCEL_TYPE, LOCKSTEP_QOS, 'leader')]
+    for i in range(n_agents):
+        topics += [Topic(odom_topic(i), ODOMETRY_TYPE, LOCKSTEP_QOS, 'world'),
+                   Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, f'agent_{i}')]
+    topics += [Topic(MARKERS, MARKERS_TYPE, TELEMETRY_QOS, 'world'),
+               Topic(METRICS, METRICS_TYPE, TELEMETRY_QOS, 'world')]
+    return topics
+
+
+def absolute(name: str, namespace: str = '/') -> str:
+    """Return a contract topic's absolute name in ``namespace`` (``/clock`` stays global).
+
+    :param name: a topic of the contract.
+    :param namespace: the nodes' namespace (``/``: none).
+    """
+    if name.startswith('/'):
+        return name
+    return f"{namespace.rstrip('/')}/{name}"
+
+
+def contract_topics(n_agents: int, namespace: str = '/') -> list[tuple[str, str]]:
+    """Return ``(absolute topic, pkg/msg/Type)`` of the contract's topics, ``/clock`` first.
+
+    :param n_agents: number of agents.
+    :param namespace: the namespace the nodes run in (``/``: none).
+    """
+    return [(absolute(t.name, namespace), t.type) for t in contract(n_agents)]
