@@ -31,15 +31,15 @@ setup(
     python_requires='>=3.10',
     entry_points={
         'console_scripts': [
-            'sim = flock_swarm.sim:main',
-            'swarm = flock_swarm.runner:main',
+            'sim = flock_swarm.cli.sim:main',
+            'swarm = flock_swarm.cli.swarm:main',
             'leader = flock_swarm.nodes.leader:main',
             'agent = flock_swarm.nodes.agent:main',
             'agents = flock_swarm.nodes.agent:container_main',
             'world = flock_swarm.nodes.world:main',
-            'replay = flock_swarm.replay:main',
-            'analyze = flock_swarm.analyze:main',
-            'sweep = flock_swarm.sweep:main',
+            'replay = flock_swarm.cli.replay:main',
+            'analyze = flock_swarm.cli.analyze:main',
+            'sweep = flock_swarm.cli.sweep:main',
             'foxglove_server = flock_swarm.nodes.foxglove_server:main',
         ],
         # The built-in laws and leader models, registered exactly as a user's package

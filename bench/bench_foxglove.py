@@ -9,7 +9,7 @@ after the other and interleaved over ``--repeat`` rounds; the best run of each c
 
 ``off``      no server (``swarm`` without ``--foxglove``);
 ``tee``      ``--foxglove`` as ``swarm`` serves: the world's bytes handed to the server by
-             one of its sinks (:class:`flock_swarm.live.LiveSink`), no client connected;
+             one of its sinks (:class:`flock_swarm.foxglove_ws.LiveSink`), no client connected;
 ``client``   the same with one client subscribed to every topic and reading;
 ``stalled``  the same with one client subscribed to every topic that never reads (its TCP
              receive buffer 4 KiB): the server must drop, the world must not wait;
@@ -89,9 +89,9 @@ def start_client(live, stalled: bool) -> subprocess.Popen:
 
 def run_role(variant: str, n: int, steps: int) -> dict:
     """Fly one run of ``variant`` in this process; return its numbers."""
-    from flock_swarm.live import start_live
+    from flock_swarm.foxglove_ws import start_live
     from flock_swarm.nodes.foxglove_server import LiveBridge
-    from flock_swarm.runner import InProcessSwarm, resolve_scenario
+    from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
         scenario = resolve_scenario('demo', scenario_overrides(n, steps), None, out)
@@ -108,7 +108,7 @@ def run_role(variant: str, n: int, steps: int) -> dict:
                 if variant in ('client', 'stalled', 'bridge'):
                     client = start_client(live, variant == 'stalled')
                 cpu = time.process_time()
-                swarm.spin_until(lambda: False, RUN_TIMEOUT)
+                swarm.spin_to_end(RUN_TIMEOUT)
                 cpu = time.process_time() - cpu
                 summary = swarm.summary()
         finally:

@@ -63,8 +63,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from flock_swarm.cli import accept_sigint
-from flock_swarm.runner import process_environment, stop
+from flock_swarm.console import accept_sigint
+from flock_swarm.nodes.harness import process_environment, stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
 DENSITY = 30 / 400.0
@@ -396,7 +396,7 @@ def last_json(stdout: str) -> dict:
 
 def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> list[str]:
     """Return the ``swarm`` command of a pipeline run."""
-    cmd = [sys.executable, '-m', 'flock_swarm.runner', 'demo', '--out', str(out), '--no-plots',
+    cmd = [sys.executable, '-m', 'flock_swarm.cli.swarm', 'demo', '--out', str(out), '--no-plots',
            '--domain-id', str(DOMAIN)]
     for item in scenario_overrides(n, steps):
         cmd += ['--set', item]

@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     side = math.sqrt(args.agents / 0.075)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'soak'
-        cmd = [sys.executable, '-m', 'flock_swarm.runner', 'demo', '--mode', 'realtime',
+        cmd = [sys.executable, '-m', 'flock_swarm.cli.swarm', 'demo', '--mode', 'realtime',
                '--out', str(out), '--no-plots', '--domain-id', str(DOMAIN),
                '--set', f'n_agents={args.agents}', '--set', f'informed.count={args.agents // 3}',
                '--set', f'initial.position_box=[[0, {side:.3f}], [0, {side:.3f}]]',

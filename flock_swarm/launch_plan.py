@@ -11,7 +11,7 @@ check them in the virtualenv.
 from dataclasses import dataclass, field
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.live import DEFAULT_PORT
+from flock_swarm.foxglove_ws import DEFAULT_PORT
 
 #: The launch arguments: name, default, description (``ros2 launch ... --show-args``).
 LAUNCH_ARGUMENTS = (

@@ -17,11 +17,12 @@ from numpy.testing import assert_allclose
 from PIL import Image
 import pytest
 
-from flock_swarm.analyze import analyze, load_run, main
+from flock_swarm.analysis import analyze, load_run
+from flock_swarm.cli.analyze import main
 from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.plots import plot_analysis
-from flock_swarm.runner import resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
@@ -248,7 +249,7 @@ def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.analyze', *args],
+    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze', *args],
                           capture_output=True, text=True, timeout=120, check=False)
 
 

@@ -32,11 +32,11 @@ from rosbags.rosbag2 import StoragePlugin, Writer as RosbagsWriter
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
-from flock_swarm.analyze import main as analyze_main
+from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.bag import BagReader
 from flock_swarm.core.metrics import STEP_METRICS
-from flock_swarm.replay import Player
-from flock_swarm.runner import resolve_scenario, run_in_process
+from flock_swarm.nodes.player import Player
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process
 
 pytestmark = pytest.mark.ros
 
@@ -106,7 +106,7 @@ def world_outputs(run: Path) -> tuple[dict, dict]:
 
 
 def run_analyze(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.analyze', *args],
+    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze', *args],
                           capture_output=True, text=True, timeout=RUN_TIMEOUT, check=False)
 
 

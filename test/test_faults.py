@@ -1,7 +1,7 @@
 """Faults: lost agents, a lost leader, killed processes, full disks and faulty messages.
 
 Every case runs the real nodes on real DDS (each test its own domain id): in one process
-(:class:`flock_swarm.runner.InProcessSwarm`, where a test can remove and restart nodes) or
+(:class:`flock_swarm.nodes.harness.InProcessSwarm`, where a test can remove and restart nodes) or
 as the ``ros2 run`` executables in their own processes.
 """
 
@@ -24,7 +24,7 @@ from nav_msgs.msg import Odometry
 from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.node import Node
 
-from flock_swarm.analyze import main as analyze_main
+from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.nodes import stepper as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.leaders.base import LeaderState
@@ -34,7 +34,7 @@ from flock_swarm.nodes.agent import AgentNode
 from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock
 from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
-from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, stop
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from flock_swarm.testing import wait_for
 from broken_law import nan_command_for
@@ -119,7 +119,7 @@ def test_faulty_messages_are_rejected_counted_and_harmless(tmp_path, ros_domain,
     with InProcessSwarm(path, out, domain_id=ros_domain,
                         world_params={'start_timeout': 3.0}) as swarm:
         faulty = swarm.add(FaultyPublisher(swarm.world, context=swarm.context))
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
         assert faulty.sent > 20
         agent_rejections = swarm.agents.guard.counts()
     summary = json.loads((out / 'summary.json').read_text())
@@ -165,7 +165,7 @@ def test_non_finite_command_is_published_as_zero(tmp_path, ros_domain, monkeypat
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
                                            'record_every=1'])
     with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
         counts = dict(swarm.agents.controller.non_finite)
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
@@ -197,7 +197,7 @@ def test_late_leader_is_waited_for_at_the_start(tmp_path, ros_domain):
         swarm.spin_until(lambda: time.monotonic() - t0 > 0.6, RUN_TIMEOUT)
         assert swarm.agents.controller.answered == -1 and not swarm.agents.leader_lost
         swarm.leader = swarm.add_leader()
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
     assert summary['leader_events'] == []
@@ -262,7 +262,7 @@ def run_losing_offers(tmp_path, ros_domain, step: int, offers: int) -> tuple[dic
         lossy = swarm.add(LosesOffers(step, offers, node_name='agent_0',
                                       context=swarm.context,
                                       parameter_overrides=swarm.parameters(agent_ids=[0])))
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
     return json.loads((out / 'summary.json').read_text()), lossy.lost
 
 
@@ -296,7 +296,7 @@ def test_lost_leader_fallback_and_return(tmp_path, ros_domain):
         swarm.remove(swarm.leader)
         swarm.spin_until(lambda: swarm.world.leader_lost and swarm.world.k >= 150, RUN_TIMEOUT)
         swarm.leader = swarm.add_leader()
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
     (lost_at, lost), (back_at, back) = summary['leader_events']
@@ -420,7 +420,7 @@ def test_realtime_lost_agent_is_held_then_zeroed(tmp_path, ros_domain):
         swarm.spin_until(lambda: swarm.world.k >= 60, RUN_TIMEOUT)
         killed_at = swarm.world.k
         swarm.remove(swarm.agents)
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'completed'
     with np.load(out / 'timeseries.npz') as ros:
@@ -507,7 +507,7 @@ def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_dom
     sc = parse_scenario(yaml.safe_load(path.read_text()))
     out = small_disk / 'run'
     with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
-        swarm.spin_until(lambda: False, RUN_TIMEOUT)
+        swarm.spin_to_end(RUN_TIMEOUT)
         world = swarm.world
         assert world.status == 'recording_failed'
         assert 'No space left on device' in world.bag_error

@@ -23,9 +23,9 @@ import pytest
 from flock_swarm.testing import wait_for
 from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
-from flock_swarm.live import (CLOSE_TIMEOUT, LiveServer, contract_topics, message_stamp_ns,
-                              start_live)
-from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.contract import contract_topics
+from flock_swarm.foxglove_ws import CLOSE_TIMEOUT, LiveServer, message_stamp_ns, start_live
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
 
 pytestmark = pytest.mark.ros
 
@@ -140,7 +140,7 @@ def fly(tmp_path: Path, domain: int, live: LiveServer | None, overrides=(), conn
             reader = threading.Thread(target=client.pump, args=(2.0,))
             reader.start()
         try:
-            swarm.spin_until(lambda: False, TIMEOUT)
+            swarm.spin_to_end(TIMEOUT)
         finally:
             if reader is not None:
                 reader.join()

@@ -24,7 +24,7 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from flock_swarm.core.scenario import parse_scenario, parse_yaml
-from flock_swarm.runner import InProcessSwarm, executable, resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, run_in_process
 
 pytestmark = pytest.mark.ros
 

@@ -12,7 +12,7 @@ import pytest
 import yaml
 from numpy.testing import assert_array_equal
 
-from flock_swarm.runner import executable
+from flock_swarm.nodes.harness import executable
 
 RUN_TIMEOUT = 240.0
 SERVICE_TIMEOUT = 30.0

@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from flock_swarm.runner import executable, resolve_scenario
+from flock_swarm.nodes.harness import executable, resolve_scenario
 from flock_swarm.testing import wait_for
 
 RUN_TIMEOUT = 240.0

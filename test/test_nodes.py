@@ -1,7 +1,8 @@
 """The ROS 2 swarm, launch-free and in-process: real rclpy nodes on real DDS.
 
 Each run starts the world, the leader and the agents in one process on one executor with
-its own ``rclpy.Context`` and a unique domain id (:func:`flock_swarm.runner.run_in_process`).
+its own ``rclpy.Context`` and a unique domain id
+(:func:`flock_swarm.nodes.harness.run_in_process`).
 """
 
 import json
@@ -22,9 +23,9 @@ from rosbags.typesys import Stores, get_typestore
 from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.common import StepClock
-from flock_swarm.runner import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
-                                process_environment, resolve_scenario, run_in_process,
-                                run_processes, stop)
+from flock_swarm.nodes.harness import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
+                                       process_environment, resolve_scenario, run_in_process,
+                                       run_processes, stop)
 from flock_swarm.core.run import simulate
 from flock_swarm.testing import Swarm, spin_until, wait_for
 from conftest import start_nodes

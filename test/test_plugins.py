@@ -150,7 +150,7 @@ def scenario(tmp_path, protocol, leader=None):
 def sim(site, *args, out=None):
     """Run the ``sim`` command with the plugins of ``site``; return the completed process."""
     env = dict(os.environ, PYTHONPATH=str(site))
-    cmd = [sys.executable, '-m', 'flock_swarm.sim', *map(str, args), '--quiet']
+    cmd = [sys.executable, '-m', 'flock_swarm.cli.sim', *map(str, args), '--quiet']
     if out is not None:
         cmd += ['--out', str(out)]
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)

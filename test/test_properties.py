@@ -5,7 +5,7 @@ finite, or stops with exit status 2 and exactly one line naming the offending ke
 traceback. Scenario files are mutations of the real presets in ``config/`` (wrong types,
 out-of-range numbers, NaN and infinities, missing and unknown keys, wrong vector lengths,
 huge values, strings where numbers go, scaled paper values), shortened to a few steps and
-fed to :func:`flock_swarm.sim.main` in-process, as files and as ``--set`` / ``--seed``
+fed to :func:`flock_swarm.cli.sim.main` in-process, as files and as ``--set`` / ``--seed``
 arguments. ROS parameters are generated ``parameter_overrides`` of the world, leader and
 agent nodes, built in a per-test ``rclpy.Context`` on the test's own domain id; the nodes'
 ``main()`` is checked on malformed ``--ros-args``.
@@ -34,7 +34,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, event, given, settings, strategies as st
 
-from flock_swarm import sim
+from flock_swarm.cli import sim
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import TOP_KEYS, apply_override, parse_yaml
 from flock_swarm.presets import load_mapping, preset_names

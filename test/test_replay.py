@@ -28,9 +28,9 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from flock_swarm.bag import BagReader, BagWriter
-from flock_swarm.replay import (
+from flock_swarm.nodes.player import (
     CLOCK_TOPIC, format_ns, Player, REPLAY_DEPTH, replay_qos, ReplayError, select_topics)
-from flock_swarm.runner import resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process
 
 pytestmark = pytest.mark.ros
 
@@ -447,7 +447,7 @@ def cli_env() -> dict:
 
 
 def run_cli(args: list[str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.replay', *args],
+    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.replay', *args],
                           capture_output=True, text=True, timeout=60, env=cli_env())
 
 

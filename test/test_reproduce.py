@@ -14,7 +14,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from flock_swarm import reproduce
+from flock_swarm.cli import reproduce
 from flock_swarm.reproduce import execution, su2009
 from flock_swarm.reproduce.catalogue import EXPERIMENTS
 from flock_swarm.reproduce.common import FIG_MAX_BYTES, fmt

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from flock_swarm import reproduce
+from flock_swarm.cli import reproduce
 from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, longer_run, settling_time,
                                          summarise, verdict)
 from flock_swarm.reproduce.su2009 import (FIG3_CURVES, delta_for_eta, fig3_curves_anchors,

@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from flock_swarm.runner import executable
+from flock_swarm.nodes.harness import executable
 
 #: Wall-clock bound of one process [s].
 TIMEOUT = 120.0
@@ -37,7 +37,7 @@ def commands(path: str, out: str) -> dict[str, list[str]]:
     """Return the command of every entry point, reading the scenario file ``path``."""
     ros = ['--ros-args', '-p', f'scenario:={path}']
     return {
-        'sim': [sys.executable, '-m', 'flock_swarm.sim', path, '--out', out],
+        'sim': [sys.executable, '-m', 'flock_swarm.cli.sim', path, '--out', out],
         'swarm': executable('swarm') + [path, '--out', out],
         'world': executable('world') + ros + ['-p', f'out_dir:={out}'],
         'leader': executable('leader') + ros,

@@ -217,7 +217,7 @@ def test_packing_degree():
 
 
 def run_sim(*args, cwd=None):
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.sim', *args],
+    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', *args],
                           capture_output=True, text=True, timeout=120, cwd=cwd)
 
 

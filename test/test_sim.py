@@ -17,7 +17,7 @@ from flock_swarm.core.scenario import realize
 from flock_swarm.core import run
 from flock_swarm.core.run import keep_freed_memory, simulate, simulate_stack, stack_mismatch
 from flock_swarm.presets import load
-from flock_swarm.sim import main
+from flock_swarm.cli.sim import main
 
 SUMMARY_KEYS = {'n_agents', 't_final', 'steps', 'eta', 'eta_tolerance', 'velocity_mismatch_max',
                 'com_position_error', 'com_velocity_error', 'min_pair_distance', 'collisions',

@@ -10,7 +10,7 @@ from flock_swarm.core.run import Recorder
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.outputs import SpooledRecorder
 from flock_swarm.presets import load
-from flock_swarm.sim import simulate
+from flock_swarm.core.run import simulate
 
 
 def rows_of(series: dict[str, np.ndarray]) -> list[dict]:

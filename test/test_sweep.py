@@ -33,7 +33,7 @@ from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.study.execute import Job, Progress, make_jobs
 from flock_swarm.study.expr import Expression, ExpressionError
 from flock_swarm.study.spec import Run, parse_spec, plan_runs, points, read_spec
-from flock_swarm.sweep import main, spec_path
+from flock_swarm.cli.sweep import main, spec_path
 
 BIN = Path(sys.executable).parent
 #: The small study: 2 x 2 points, 3 seeds, 1 s runs of 10 and 16 agents.

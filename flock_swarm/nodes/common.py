@@ -25,7 +25,7 @@ from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
 
 from flock_swarm import contract
-from flock_swarm.cli import EXIT_USAGE
+from flock_swarm.console import EXIT_USAGE
 from flock_swarm.contract import (CLOCK, FRAME, LEADER_ACCEL, LEADER_ODOM, MARKERS,  # noqa: F401
                                   METRICS, RUNNING, STATUS, cmd_topic, odom_topic,
                                   qos_profile)

@@ -1,14 +1,14 @@
 """``foxglove_server``: a node that serves a running swarm's topics to Foxglove / Lichtblick.
 
 It subscribes to every topic of the contract with ``raw=True`` and hands the bytes, as they
-came over the wire, to a :class:`~flock_swarm.live.LiveServer`, logged at the message's
+came over the wire, to a :class:`~flock_swarm.foxglove_ws.LiveServer`, logged at the message's
 stamp; ``/clock`` sets the server's time. For runs started node by node::
 
     foxglove_server --ros-args -p scenario:=demo [-p port:=8765] [-p host:=127.0.0.1]
 
 ``swarm --processes --foxglove`` spins the same node in a thread of its own process
 (:class:`BackgroundBridge`); a one-process ``swarm --foxglove`` needs none: the world hands
-the server its bytes directly, as one of its sinks (:class:`~flock_swarm.live.LiveSink`).
+the server its bytes directly, as one of its sinks (:class:`~flock_swarm.foxglove_ws.LiveSink`).
 """
 
 import sys
@@ -23,10 +23,10 @@ from rclpy.parameter import Parameter
 
 from flock_swarm import contract
 from flock_swarm.bag.msgdefs import message_class
-from flock_swarm.contract import qos_profile
+from flock_swarm.contract import CLOCK_TYPE, contract_topics, qos_profile
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.live import (CLOCK_TYPE, DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
-                              contract_topics, message_stamp_ns, start_live)
+from flock_swarm.foxglove_ws import (DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
+                                     message_stamp_ns, start_live)
 from flock_swarm.nodes.common import (COMMON_PARAMS, declare, declare_common, load_scenario,
                                       make_executor, run_node)
 

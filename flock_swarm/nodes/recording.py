@@ -28,7 +28,7 @@ from flock_swarm.nodes.wire import MalformedMessage
 from flock_swarm.outputs import json_text
 
 
-class Sink(Protocol):
+class MessageSink(Protocol):
     """A consumer of the world's messages (the bag; a live viewer could be another)."""
 
     def add_topic(self, name: str, msg_type: type, qos) -> None:
@@ -167,7 +167,7 @@ class RecordedNode(Node):
     def __init__(self, name: str, **kwargs) -> None:
         """Create the node, without sinks yet (``kwargs``: :class:`rclpy.node.Node`'s)."""
         super().__init__(name, **kwargs)
-        self.sinks: list[Sink] = []
+        self.sinks: list[MessageSink] = []
 
     def recorded_publisher(self, msg_type, topic: str, qos):
         """Create a publisher whose topic every sink knows."""

@@ -22,10 +22,10 @@ The package: one module per paper (:mod:`~flock_swarm.reproduce.su2009`,
 experiments, analysis, table rows, discussion and figures), gathered by
 :mod:`~flock_swarm.reproduce.catalogue`; the runs and caches in
 :mod:`~flock_swarm.reproduce.execution`, the Markdown in :mod:`~flock_swarm.reproduce.report`,
-the command line in :mod:`~flock_swarm.reproduce.command`.
+the whole of it in :mod:`~flock_swarm.reproduce.pipeline`; the command line is
+:mod:`flock_swarm.cli.reproduce`.
 """
 
 from flock_swarm.reproduce.catalogue import EXPERIMENTS
-from flock_swarm.reproduce.command import build_parser, main
 
-__all__ = ['EXPERIMENTS', 'build_parser', 'main']
+__all__ = ['EXPERIMENTS']

@@ -2,7 +2,7 @@
 
 import sys
 
-from flock_swarm.reproduce.command import main
+from flock_swarm.cli.reproduce import main
 
 if __name__ == '__main__':
     sys.exit(main())

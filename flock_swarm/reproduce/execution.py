@@ -144,7 +144,8 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
     :param say: progress output.
     :return: the comparison (flat mapping; ``error`` set when the run failed).
     """
-    from flock_swarm.runner import resolve_scenario, run_in_process
+    from flock_swarm.analysis.compare import compare_runs
+    from flock_swarm.nodes.harness import resolve_scenario, run_in_process
 
     overrides = list(exp.ros_quick if quick else exp.ros)
     run_dir = out / 'ros' / exp.key
@@ -186,7 +187,13 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
     sim = simulate(sc)
     with np.load(run_dir / 'timeseries.npz') as data:
         ros_series = {k: data[k] for k in data.files}
-    res.update(compare_runs(ros, sim.summary, ros_series, sim.series))
+    # sim is the reference, the ROS run the run under test.
+    comparison = compare_runs(sim.summary, sim.series, ros, ros_series)
+    res.update(comparison.side_by_side(COMPARED, 'sim', 'ros'))
+    res['recorded_instants'] = int(ros_series['t'].shape[0])
+    for name in ('q', 'p'):
+        res[f'max_dev_{name}'] = (comparison.max_deviation[name] if comparison.same_instants
+                                  else None)
     res.update({'n_agents': sc.n_agents, 'steps': sc.steps, 'ros_wall_s': round(wall, 1),
                 'ros_steps_per_s': round(sc.steps / wall, 1),
                 'ros_missed_commands': int(ros.get('missed_commands', 0)),
@@ -200,27 +207,6 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
 #: The summary metrics compared between the ROS run and sim.
 COMPARED = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
             'min_pair_distance', 'collisions', 'components_final')
-
-
-def compare_runs(ros: dict, sim: dict, ros_series: dict, sim_series: dict) -> dict:
-    """Return the ROS and sim metrics side by side and the largest trajectory deviations.
-
-    :param ros: the ROS run's summary.
-    :param sim: sim's summary.
-    :param ros_series: the ROS run's ``timeseries.npz`` arrays.
-    :param sim_series: sim's time series.
-    :return: ``ros_<metric>``, ``sim_<metric>``, ``max_dev_q``, ``max_dev_p`` (``None``
-        when the recorded instants differ), ``recorded_instants``.
-    """
-    out: dict[str, Any] = {}
-    for key in COMPARED:
-        out[f'sim_{key}'] = sim.get(key)
-        out[f'ros_{key}'] = ros.get(key)
-    same = all(ros_series[k].shape == sim_series[k].shape for k in ('t', 'q', 'p'))
-    out['recorded_instants'] = int(ros_series['t'].shape[0])
-    out['max_dev_q'] = float(np.abs(ros_series['q'] - sim_series['q']).max()) if same else None
-    out['max_dev_p'] = float(np.abs(ros_series['p'] - sim_series['p']).max()) if same else None
-    return out
 
 
 def experiment_result(exp: Experiment, plan: Plan, summary: dict, out: Path,

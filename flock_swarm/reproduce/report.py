@@ -94,7 +94,7 @@ def ros_section(res: dict) -> list[str]:
     if res is None:
         return []
     lines = ['', f'**Through the ROS 2 nodes.** `{res["command"]}` (world, leader and every '
-             'agent in one process, lockstep, `flock_swarm.runner.run_in_process`), and '
+             'agent in one process, lockstep, `flock_swarm.nodes.harness.run_in_process`), and '
              '`sim` on the same resolved scenario:', '']
     if 'error' in res:
         return lines + [f'The node run failed: `{res["error"]}`; no comparison.']

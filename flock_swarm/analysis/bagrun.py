@@ -1,48 +1,30 @@
-"""``analyze BAG``: the metrics, time series and figures of a recorded run, from its bag.
+"""A run rebuilt from its bag: :func:`load_run` reads a rosbag2 MCAP bag into :class:`RunData`.
 
-``analyze BAG [--out DIR] [--verify] ...`` rebuilds every step of a run from the agents'
-odometry and commands and the leader's state in a rosbag2 MCAP bag, recomputes the flocking
-metrics with the code ``sim`` and the world node use
-(:func:`flock_swarm.core.metrics.step_metrics`, :class:`flock_swarm.core.metrics.RunMetrics`)
-and writes ``summary.json``, ``timeseries.npz``, ``timeseries.csv`` and figures
-(``docs/analysis.md``). The scenario stored in the bag (MCAP metadata record ``flock_swarm``)
-gives ``dt``, the radius and the tolerances; ``--verify`` re-runs ``sim`` from it and compares
-the trajectories. Bags without that record (any rosbag2 bag with ``/agent_<i>/odom`` topics)
-are analysed with ``--radius``, ``--eta-tolerance`` and ``--collision-distance``.
+Every step of a run is rebuilt from the agents' odometry and commands and the leader's state
+(grouped by header stamp, ``t_k = k dt``). The scenario stored in the bag (MCAP metadata
+record ``flock_swarm``) gives ``dt``, the radius and the tolerances; bags without that record
+(any rosbag2 bag with ``/agent_<i>/odom`` topics) are read with a radius and tolerances given
+by the caller (``analyze --radius``...). The topic names and types are the contract's
+(:mod:`flock_swarm.contract`).
 """
 
-import argparse
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
-import sys
 import time
 
 import numpy as np
 
-from flock_swarm.cli import EXIT_USAGE, OneLineParser
-from flock_swarm import __version__, contract
-from flock_swarm.bag import BagError, BagReader
-from flock_swarm.core.leaders.base import LeaderState
+from flock_swarm import contract
+from flock_swarm.bag import BagReader
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
-from flock_swarm.core.run import RunLog, build_summary, simulate
-from flock_swarm.outputs import ensure_writable, json_text
 
-#: Exit status when ``--verify`` finds the recording off the simulation.
-EXIT_VERIFY_FAILED = 1
-#: Exit status after Ctrl-C.
-EXIT_INTERRUPTED = 130
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
 METADATA_RECORD = 'flock_swarm'
 #: Wall-clock seconds between progress lines.
 PROGRESS_EVERY = 2.0
-#: Default largest deviation from ``sim`` that ``--verify`` accepts (m, m/s). A lockstep run
-#: reproduces ``sim`` bit for bit; the margin only absorbs a different floating-point library.
-VERIFY_TOLERANCE = 1e-6
 #: Tolerances for bags without a scenario: the scenario schema's defaults
 #: (``metrics.eta_tolerance``, ``metrics.collision_distance`` in ``docs/scenarios.md``).
 FALLBACK_ETA_TOLERANCE = 0.1
@@ -147,39 +129,7 @@ class RunData:
         return self.scenario.name if self.scenario is not None else self.bag.name
 
 
-@dataclass(frozen=True)
-class Verification:
-    """How far the recorded trajectory is from ``sim`` run on the stored scenario and seed."""
-
-    #: ``max_k max_i ||q_i - q_i^sim||`` [m] over the compared steps.
-    max_position_error: float
-    #: ``max_k max_i ||p_i - p_i^sim||`` [m/s].
-    max_velocity_error: float
-    #: Number of steps compared.
-    steps_compared: int
-    #: The largest accepted error.
-    tolerance: float
-
-    @property
-    def passed(self) -> bool:
-        """Return whether both errors are within the tolerance."""
-        return max(self.max_position_error, self.max_velocity_error) <= self.tolerance
-
-
-@dataclass
-class Analysis:
-    """What :func:`analyze` produced."""
-
-    #: ``summary.json``.
-    summary: dict
-    #: ``timeseries.npz``.
-    series: dict[str, np.ndarray]
-    #: Every file written, ``summary.json`` last.
-    files: list[Path] = field(default_factory=list)
-    verification: Verification | None = None
-
-
-class _Ticker:
+class Ticker:
     """Calls ``progress`` with a line at most every :data:`PROGRESS_EVERY` seconds."""
 
     def __init__(self, progress: Progress | None) -> None:
@@ -383,7 +333,7 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
     total = sum(counts.get(name, 0) for name in kinds)
     n = len(topics.odom)
     out = _Messages()
-    tick = _Ticker(progress)
+    tick = Ticker(progress)
     read = 0
     bad: list[str] = []
 
@@ -577,342 +527,3 @@ def _leader(raw: _Messages, topics: SwarmTopics, sc: Scenario | None, steps: np.
     if not need_accel:
         notes.append('no /leader/accel in the bag: f_gamma taken as zero')
     return out, missing
-
-
-def recompute(run: RunData, record_every: int | None = None,
-              progress: Progress | None = None) -> tuple[dict[str, np.ndarray], RunMetrics]:
-    """Recompute the metrics of every step as the world node does, and the time series.
-
-    Every complete step updates the whole-run metrics from its r-disk edges
-    (:meth:`RunMetrics.update_from_edges`: minimum distance, collision pairs); every
-    ``record_every``-th step and the last are recorded with :func:`step_metrics`, exactly as
-    in ``WorldStepper.observe`` (and ``sim`` for r-disk scenarios).
-
-    :param run: the run.
-    :param record_every: subsampling of the series (default: the scenario's).
-    :param progress: called with a line every few seconds.
-    :return: the series (the arrays of ``timeseries.npz``) and the whole-run metrics.
-    """
-    log = RunLog(run.eta_tolerance, run.collision_distance, run.radius, run.strict_radius,
-                 record_every or run.record_every)
-    last = len(run.steps) - 1
-    tick = _Ticker(progress)
-    for row, k in enumerate(run.steps):
-        q, p = run.q[row], run.p[row]
-        leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
-        log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
-                    disk_graph(q, run.radius, run.strict_radius), run.radius, row == last)
-        tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
-    return log.rec.arrays(), log.metrics
-
-
-def _status(run: RunData) -> str:
-    if run.scenario is not None and run.steps[-1] >= run.scenario.steps:
-        return 'completed'
-    if run.warning is not None:
-        return 'truncated'
-    return 'interrupted' if run.scenario is not None else 'completed'
-
-
-def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) -> dict:
-    """Return ``summary.json``: the world's summary for the same run, from the bag.
-
-    :param run: the run.
-    :param series: its recomputed series.
-    :param metrics: its whole-run metrics.
-    :return: the keys of ``docs/outputs.md``, provenance, the world's ``mode`` and
-        missed-command counts, and where the data came from (``bag``, ``complete_steps``,
-        ``bag_warning``).
-    """
-    status = _status(run)
-    last_step = int(run.steps[-1])
-    if run.scenario is not None:
-        summary = build_summary(run.scenario, realize(run.scenario), series, metrics,
-                                last_step, status)
-    else:
-        final = {name: float(series[f'metric_{name}'][-1]) for name in STEP_METRICS}
-        summary = {
-            'n_agents': run.n_agents, 't_final': float(series['t'][-1]), 'steps': last_step,
-            'eta': final['eta'], 'eta_tolerance': run.eta_tolerance,
-            'velocity_mismatch_max': final['velocity_mismatch_max'],
-            'com_position_error': final['com_position_error'],
-            'com_velocity_error': final['com_velocity_error'],
-            'min_pair_distance': metrics.min_pair_distance,
-            'collisions': len(metrics.collision_pairs),
-            'collision_distance': run.collision_distance,
-            'components_final': int(final['components']),
-            'informed': [int(i) for i in np.flatnonzero(run.informed)],
-            'scenario': None, 'seed': None, 'protocol': None, 'dt': run.dt, 'status': status,
-            'flock_swarm_version': __version__,
-        }
-    summary.update({
-        'mode': run.mode,
-        'missed_commands': int(sum(run.missed_commands_per_agent)),
-        'missed_commands_per_agent': run.missed_commands_per_agent,
-        'leader_missed': run.leader_missed,
-        'bag': str(run.bag),
-        'complete_steps': int(len(run.steps)),
-        'bag_warning': run.warning,
-    })
-    return summary
-
-
-def verify_run(run: RunData, tolerance: float = VERIFY_TOLERANCE,
-               progress: Progress | None = None) -> Verification:
-    """Re-run ``sim`` on the bag's scenario and seed; compare positions and velocities.
-
-    The simulation runs to the last complete step of the bag and records every step; each
-    complete step of the bag is compared with the simulated state of the same step.
-
-    :param run: a run whose bag stores its scenario.
-    :param tolerance: the largest accepted error (m and m/s).
-    :param progress: forwarded to :func:`flock_swarm.core.run.simulate`.
-    :return: the largest errors.
-    :raises AnalyzeError: if the bag has no scenario.
-    """
-    sc = run.scenario
-    if sc is None:
-        raise AnalyzeError('--verify needs the scenario stored in the bag (MCAP metadata '
-                           f'record {METADATA_RECORD!r}); this bag has none')
-    data = dict(sc.raw, record_every=1)
-    last = int(run.steps[-1])
-    if last < sc.steps:
-        data['duration'] = max(last, 1) * sc.dt
-    reference = simulate(parse_scenario(data), progress=progress).series
-    simulated = reference['q'].shape[0]
-    rows = np.flatnonzero(run.steps < simulated)
-    if rows.size < len(run.steps):
-        # The simulation diverged before the recording ended: no agreement there.
-        return Verification(float('inf'), float('inf'), int(rows.size), tolerance)
-    k = run.steps[rows]
-    dq = np.linalg.norm(run.q[rows] - reference['q'][k], axis=2)
-    dp = np.linalg.norm(run.p[rows] - reference['p'][k], axis=2)
-    return Verification(float(dq.max()), float(dp.max()), int(rows.size), tolerance)
-
-
-def write_csv(series: dict[str, np.ndarray], path: Path) -> Path:
-    """Write the metric time series as CSV: ``t`` and the metrics of :data:`STEP_METRICS`.
-
-    :param series: the time series.
-    :param path: the file.
-    :return: the path.
-    """
-    columns = ['t'] + [f'metric_{name}' for name in STEP_METRICS]
-    table = np.column_stack([series[name] for name in columns])
-    np.savetxt(path, table, fmt='%.17g', delimiter=',', comments='',
-               header=','.join(['t', *STEP_METRICS]))
-    return path
-
-
-def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None,
-            animate: bool = True, verify: bool = False,
-            verify_tolerance: float = VERIFY_TOLERANCE, record_every: int | None = None,
-            progress: Progress | None = None) -> Analysis:
-    """Recompute the metrics of a run and write its outputs and figures into ``out``.
-
-    Files: ``timeseries.npz``, ``timeseries.csv``, ``scenario.json`` (when the bag stores the
-    scenario), the figures of :func:`flock_swarm.plots.plot_analysis`, and ``summary.json``
-    last (atomically: its presence means the other files are complete).
-
-    :param run: the run, from :func:`load_run`.
-    :param out: the output directory (created).
-    :param snapshots: snapshot times [s] (default: first, middle and last instants).
-    :param animate: write ``flock.gif``.
-    :param verify: compare with ``sim`` (:func:`verify_run`) and add ``verify_*`` keys.
-    :param verify_tolerance: the largest accepted deviation.
-    :param record_every: subsampling of the series (default: the scenario's).
-    :param progress: called with one-line progress messages.
-    :return: the summary, the series, the files written and the verification.
-    :raises OSError: if ``out`` cannot be written.
-    """
-    from flock_swarm.plots import plot_analysis
-    series, metrics = recompute(run, record_every, progress)
-    summary = summarize(run, series, metrics)
-    verification = None
-    if verify:
-        verification = verify_run(run, verify_tolerance, progress)
-        summary.update({
-            'verify_max_position_error': verification.max_position_error,
-            'verify_max_velocity_error': verification.max_velocity_error,
-            'verify_steps_compared': verification.steps_compared,
-            'verify_tolerance': verification.tolerance,
-            'verify_passed': verification.passed,
-        })
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out / 'timeseries.npz', **series)
-    files = [out / 'timeseries.npz', write_csv(series, out / 'timeseries.csv')]
-    if run.scenario is not None:
-        (out / 'scenario.json').write_text(
-            json_text(run.scenario.raw))
-        files.append(out / 'scenario.json')
-
-    def wrote(path: Path) -> None:
-        files.append(path)
-        if progress is not None:
-            progress(f'[analyze] wrote {path}')
-
-    plot_analysis(series, out, radius=run.radius, strict=run.strict_radius, title=run.name,
-                  informed=run.informed, eta_tolerance=run.eta_tolerance,
-                  collision_distance=run.collision_distance, snapshots=snapshots,
-                  animate=animate, progress=wrote)
-    tmp = out / 'summary.json.tmp'
-    tmp.write_text(json_text(summary))
-    tmp.replace(out / 'summary.json')
-    files.append(out / 'summary.json')
-    return Analysis(summary, series, files, verification)
-
-
-def default_out(bag: Path) -> Path:
-    """Return the default output directory: ``<bag>_analysis`` next to the bag.
-
-    :param bag: the bag directory or ``.mcap`` file.
-    :return: for ``out/demo_ros/bag``, ``out/demo_ros/bag_analysis``.
-    """
-    bag = Path(bag)
-    if not bag.name:
-        bag = bag.resolve()
-    stem = bag.stem if bag.suffix == '.mcap' else bag.name
-    return bag.parent / f'{stem}_analysis'
-
-
-def _times(text: str) -> list[float]:
-    try:
-        times = [float(part) for part in text.split(',') if part.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected times in seconds like 0,10,30, got {text!r}')
-    if not times or not all(np.isfinite(times)):
-        raise argparse.ArgumentTypeError(f'expected times in seconds like 0,10,30, got {text!r}')
-    return times
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float('nan')
-    if not value > 0 or not np.isfinite(value):
-        raise argparse.ArgumentTypeError(f'must be a positive number, got {text!r}')
-    return value
-
-
-def _positive_int(text: str) -> int:
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f'must be a positive integer, got {text!r}')
-    return int(text)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """Return the command-line parser of ``analyze``."""
-    parser = OneLineParser(
-        prog='analyze',
-        description='Metrics, time series and figures of a recorded flock_swarm run.')
-    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
-    parser.add_argument('--out', type=Path,
-                        help='output directory (default: BAG_analysis next to the bag)')
-    parser.add_argument('--snapshots', type=_times, metavar='T,T,...',
-                        help='snapshot times in seconds (default: first, middle, last)')
-    parser.add_argument('--no-anim', action='store_true', help='do not write flock.gif')
-    parser.add_argument('--record-every', type=_positive_int, metavar='N',
-                        help='record every N-th step in the series (default: the scenario\'s '
-                        'record_every, 1 without a scenario)')
-    parser.add_argument('--verify', action='store_true',
-                        help='re-run sim from the scenario and seed in the bag and compare '
-                        'the trajectories (exit status 1 if they differ)')
-    parser.add_argument('--verify-tolerance', type=_positive, default=VERIFY_TOLERANCE,
-                        metavar='TOL', help='largest accepted deviation in m and m/s '
-                        f'(default {VERIFY_TOLERANCE:g})')
-    fallback = parser.add_argument_group(
-        'bags without a flock_swarm scenario (ignored when the bag has one)')
-    fallback.add_argument('--radius', type=_positive, metavar='R',
-                          help='interaction radius r [m] (required for such bags)')
-    fallback.add_argument('--eta-tolerance', type=_positive, metavar='TOL',
-                          help=f'tolerance of eta [m/s] (default {FALLBACK_ETA_TOLERANCE:g})')
-    fallback.add_argument('--collision-distance', type=_positive, metavar='D',
-                          help='collision distance [m] '
-                          f'(default {FALLBACK_COLLISION_DISTANCE:g})')
-    parser.add_argument('--quiet', action='store_true',
-                        help='no progress output (warnings and the --verify result remain)')
-    return parser
-
-
-def _check_writable(out: Path) -> None:
-    try:
-        ensure_writable(out)
-    except OSError as exc:
-        raise AnalyzeError(f'--out: cannot write to {out}: {exc.strerror or exc}') from None
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run ``analyze`` from the command line; return the exit status."""
-    args = build_parser().parse_args(argv)
-
-    def warn(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
-    say = None if args.quiet else warn
-    try:
-        return _run(args, say, warn)
-    except KeyboardInterrupt:
-        warn('analyze: interrupted')
-        return EXIT_INTERRUPTED
-    except (AnalyzeError, BagError) as exc:
-        warn(f'analyze: error: {exc}')
-        return EXIT_USAGE
-    except OSError as exc:
-        warn(f'analyze: error: {exc.filename or ""}: {exc.strerror or exc}')
-        return EXIT_USAGE
-    except Exception as exc:
-        # One line, as promised for every failure; the type says where to look.
-        warn(f'analyze: error: {type(exc).__name__}: {" ".join(str(exc).split())}')
-        return EXIT_USAGE
-
-
-def _run(args: argparse.Namespace, say: Progress | None, warn: Progress) -> int:
-    started = time.monotonic()
-    run = load_run(args.bag, radius=args.radius, eta_tolerance=args.eta_tolerance,
-                   collision_distance=args.collision_distance, progress=say)
-    if run.warning is not None:
-        warn(f'[analyze] warning: {run.warning}; analysing the {len(run.steps)} complete '
-             'step(s)')
-    for note in run.notes:
-        warn(f'[analyze] note: {note}')
-    if args.verify and run.scenario is None:
-        raise AnalyzeError('--verify needs the scenario stored in the bag (MCAP metadata '
-                           f'record {METADATA_RECORD!r}); this bag has none')
-    if args.verify and run.mode == 'realtime':
-        warn('[analyze] note: a realtime run is asynchronous; --verify compares it with the '
-             'deterministic sim anyway')
-    out = args.out if args.out is not None else default_out(args.bag)
-    _check_writable(out)
-    if say:
-        say(f'[analyze] {run.name}: {run.n_agents} agents in {run.dim}-D, '
-            f'{len(run.steps)} complete steps of {run.dt:g} s')
-    try:
-        result = analyze(run, out, snapshots=args.snapshots, animate=not args.no_anim,
-                         verify=args.verify, verify_tolerance=args.verify_tolerance,
-                         record_every=args.record_every, progress=say)
-    except OSError as exc:
-        raise AnalyzeError(f'--out: writing {out} failed: {exc.strerror or exc}') from None
-    s = result.summary
-    if say:
-        say(f'[analyze] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
-            f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
-            f'collisions = {s["collisions"]}, components = {s["components_final"]} '
-            f'({time.monotonic() - started:.1f} s)')
-        say(f'[analyze] wrote {len(result.files)} files to {out}')
-    check = result.verification
-    if check is not None:
-        print(f'[analyze] verify: largest deviation from sim over {check.steps_compared} '
-              f'steps: position {check.max_position_error:.3g} m, velocity '
-              f'{check.max_velocity_error:.3g} m/s (tolerance {check.tolerance:g})', flush=True)
-        if not check.passed:
-            warn(f'analyze: verify failed: the recording deviates from sim by '
-                 f'{check.max_position_error:.3g} m, {check.max_velocity_error:.3g} m/s '
-                 f'(tolerance {check.tolerance:g})')
-            return EXIT_VERIFY_FAILED
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -1,5 +1,6 @@
-"""The command line of the reproduction (``python -m flock_swarm.reproduce``,
-``scripts/reproduce``)."""
+"""The whole reproduction, end to end: the runs, the studies over seeds, the results and the
+report, as ``python -m flock_swarm.reproduce`` asks (its command line is
+:mod:`flock_swarm.cli.reproduce`)."""
 
 import argparse
 import json
@@ -7,9 +8,9 @@ import shlex
 import sys
 import time
 from datetime import datetime, timezone
-from pathlib import Path
 from typing import Any, Callable
 
+from flock_swarm.console import EXIT_USAGE
 from flock_swarm.reproduce.catalogue import EXPERIMENTS
 from flock_swarm.reproduce.common import FIG_MAX_BYTES
 from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, experiment_result, ros_experiments,
@@ -23,64 +24,12 @@ from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, Sw
 from flock_swarm.study.spec import plain
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the command-line parser of ``python -m flock_swarm.reproduce``."""
-    parser = argparse.ArgumentParser(
-        prog='python -m flock_swarm.reproduce',
-        description='Run every experiment of the papers and write the reproduction report.')
-    parser.add_argument('--out', type=Path, default=Path('out/reproduce'),
-                        help='runs, caches and JSON results (default: out/reproduce)')
-    parser.add_argument('--report', type=Path, default=Path('docs/reproduction.md'),
-                        help='the Markdown report (default: docs/reproduction.md)')
-    parser.add_argument('--figures', type=Path, default=Path('docs/figures'),
-                        help='the report\'s PNG figures (default: docs/figures)')
-    parser.add_argument('--realisations', type=int,
-                        help='realisations per point of Su 2009 Fig. 3 (default: 10; '
-                        '1 with --quick)')
-    parser.add_argument('--quick', action='store_true',
-                        help='tiny sizes and durations, for tests (numbers are no reproduction)')
-    parser.add_argument('--skip-ros', action='store_true', help='skip the ROS node runs')
-    parser.add_argument('--jobs', type=int, default=2, help='worker processes (default: 2)')
-    parser.add_argument('--scheduler', metavar='ADDRESS',
-                        help='run the simulations on the Dask scheduler at ADDRESS, or "local" '
-                        '(see docs/sweeps.md)')
-    parser.add_argument('--fresh', action='store_true', help='ignore cached runs')
-    parser.add_argument('--seeds-cache', type=Path, metavar='DIR',
-                        help='the caches of the experiments over seeds (default: '
-                        f'{SEEDS_CACHE}, the committed ones; OUT/seeds with --quick)')
-    parser.add_argument('--fig3-curves', action='store_true',
-                        help='run (or resume) the four Su 2009 Fig. 3 curves (hours); '
-                        'without it the report draws what their caches hold')
-    parser.add_argument('--seeds-only', action='store_true',
-                        help='only the experiments over seeds and the Fig. 3 curves: no '
-                        'presets, no ROS runs; the report holds their sections alone')
-    parser.add_argument('--cached-seeds', action='store_true',
-                        help='run nothing new over seeds: the distributions use what the '
-                        'caches hold (the report states the counts)')
-    return parser
+def run(args: argparse.Namespace, argv_used: list[str]) -> int:
+    """Run the reproduction; return the exit status (2 for a scheduler it cannot reach).
 
-
-def main(argv: list[str] | None = None) -> int:
-    """Run the reproduction from the command line; return the exit status (130 when
-    interrupted: every finished run is in its cache, and the same command resumes)."""
-    try:
-        return run(argv)
-    except KeyboardInterrupt:
-        print('reproduce: interrupted; every finished run is kept in its cache (--out and '
-              'the studies\' caches); run the same command again to resume', file=sys.stderr)
-        return 130
-
-
-def run(argv: list[str] | None = None) -> int:
-    """Run the reproduction; return the exit status (see :func:`main`)."""
-    args = build_parser().parse_args(argv)
-    if args.realisations is not None and args.realisations < 1:
-        print('reproduce: error: --realisations must be >= 1', file=sys.stderr)
-        return 2
-    if args.jobs < 1:
-        print('reproduce: error: --jobs must be >= 1', file=sys.stderr)
-        return 2
-    argv_used = sys.argv[1:] if argv is None else list(argv)
+    :param args: the options of :func:`flock_swarm.cli.reproduce.build_parser` (checked).
+    :param argv_used: the command line's arguments, recorded in the report.
+    """
     started = time.monotonic()
 
     def say(line: str) -> None:
@@ -115,7 +64,7 @@ def run(argv: list[str] | None = None) -> int:
             backend = DaskBackend(args.scheduler, args.jobs)
         except SweepError as exc:
             print(f'reproduce: error: {exc}', file=sys.stderr)
-            return 2
+            return EXIT_USAGE
     live = terminal_line if sys.stderr.isatty() else None
     try:
         sims = run_simulations(plan, args.out, args.jobs, args.fresh, say, live=live,

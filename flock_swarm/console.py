@@ -1,10 +1,17 @@
-"""Command-line plumbing shared by the package's tools (``sim``, ``swarm``, ``analyze`` ...)."""
+"""The console side of every executable: exit statuses, one-line argument errors, SIGINT.
+
+Shared by the commands (:mod:`flock_swarm.cli`) and the node executables (their ``main`` in
+:mod:`flock_swarm.nodes`): a neutral module that libraries may import, so that no library
+imports a command module.
+"""
 
 import argparse
 import signal
 
 #: Exit status for invalid input (as argparse uses), of every command and node of the package.
 EXIT_USAGE = 2
+#: Exit status after Ctrl-C (as a shell reports SIGINT), of every command that catches it.
+EXIT_INTERRUPTED = 130
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -33,9 +40,9 @@ def accept_sigint() -> None:
     A non-interactive shell starts background jobs (``cmd &`` in a script) with SIGINT
     ignored; Python then raises no ``KeyboardInterrupt``, and every child inherits the
     ignored signal. A ``world`` started so could not be stopped cleanly (its bag closed),
-    and ``runner.stop`` would wait out its timeout on every node before killing it (seen:
-    a benchmark of 50 agent processes took 20 s per process to tear down). Restores
-    Python's default handler when, and only when, SIGINT is ignored.
+    and :func:`flock_swarm.nodes.harness.stop` would wait out its timeout on every node
+    before killing it (seen: a benchmark of 50 agent processes took 20 s per process to tear
+    down). Restores Python's default handler when, and only when, SIGINT is ignored.
     """
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)

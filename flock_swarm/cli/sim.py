@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from flock_swarm.cli import EXIT_USAGE, OneLineParser
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.run import check_law_output, simulate
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)
         return EXIT_DIVERGED
-    return 130 if s['status'] == 'interrupted' else 0
+    return EXIT_INTERRUPTED if s['status'] == 'interrupted' else 0
 
 
 if __name__ == '__main__':

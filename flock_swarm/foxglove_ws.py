@@ -1,4 +1,4 @@
-"""Live view: serve the swarm's topics over the Foxglove WebSocket protocol (``foxglove-sdk``).
+"""The live view of ``--foxglove``: the swarm's topics over the Foxglove WebSocket protocol.
 
 The Foxglove app and Lichtblick connect to ``ws://localhost:8765`` and show every topic of
 the contract (``/clock``, ``/leader/odom``, ``/leader/accel``, ``/agent_<i>/odom``,
@@ -10,12 +10,14 @@ as they are, and the server's time is simulation time.
 Three ways in, one :class:`LiveServer` under each:
 
 - ``swarm ... --foxglove [PORT]`` in one process: :class:`LiveSink`, one of the world's
-  sinks, hands the server every message the world publishes or receives, without another
-  DDS subscriber (the cheapest, docs/performance.md);
+  message sinks (:class:`~flock_swarm.nodes.recording.MessageSink`), hands the server every
+  message the world publishes or receives, without another DDS subscriber (the cheapest,
+  docs/performance.md);
 - ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
 - ``foxglove_server`` for runs started node by node and ``swarm --processes --foxglove`` (in
-  the runner's process): a bridge node subscribing to the contract topics with ``raw=True``
-  and forwarding the bytes (:mod:`flock_swarm.nodes.foxglove_server`).
+  the harness's process, :func:`flock_swarm.nodes.harness.run_processes`): a bridge node
+  subscribing to the contract topics with ``raw=True`` and forwarding the bytes
+  (:mod:`flock_swarm.nodes.foxglove_server`).
 
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
 bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
@@ -27,8 +29,7 @@ import threading
 from typing import Iterable
 
 from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
-from flock_swarm.contract import (ACCEL_TYPE, CLOCK_TYPE, MARKERS_TYPE, METRICS_TYPE,  # noqa: F401
-                                  ODOMETRY_TYPE, contract_topics)
+from flock_swarm.contract import MARKERS_TYPE
 
 #: Default port of the Foxglove WebSocket protocol (what the apps try first).
 DEFAULT_PORT = 8765
@@ -173,13 +174,14 @@ class LiveServer:
 
 
 class LiveSink:
-    """A sink of the world (:class:`~flock_swarm.nodes.recording.Sink`) serving its messages.
+    """A message sink of the world serving its messages (a
+    :class:`~flock_swarm.nodes.recording.MessageSink`).
 
     The world hands every message of the contract it publishes or receives to its sinks
     once a step, as the bytes on the wire: this sink forwards those to a
     :class:`LiveServer`, so a one-process run is served without another DDS subscriber
     (docs/performance.md). The server's topics are advertised beforehand
-    (:func:`contract_topics`); the server is the caller's to close.
+    (:func:`flock_swarm.contract.contract_topics`); the server is the caller's to close.
 
     :param live: the server.
     """

@@ -13,11 +13,8 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.cli import EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
-
-#: Exit status after Ctrl-C (as a shell reports SIGINT).
-EXIT_INTERRUPTED = 130
 
 
 def spec_path(name_or_path: str) -> Path:

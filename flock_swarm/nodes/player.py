@@ -1,32 +1,22 @@
-"""Republish a recorded bag with its recorded timing, like ``ros2 bag play``.
+"""The player: a node that republishes a recorded bag with its recorded timing.
 
-Usage::
-
-    replay BAG [--rate R] [--loop] [--topics T [T ...]] [--regex PATTERN]
-               [--exclude PATTERN] [--start-offset S] [--clock] [--clock-rate HZ]
-               [--wait-for-subscribers N] [--wait-timeout S] [--delay S] [--quiet]
-               [--foxglove [PORT]] [--foxglove-host HOST] [--ros-args ...]
-
-``BAG`` is a bag directory or one ``.mcap`` file, written by this package or by
-``ros2 bag record -s mcap``. Each message is published at wall time
-``start + (log_time - t_start) / rate`` (monotonic clock), as the CDR bytes it was recorded
-with: :meth:`rclpy.publisher.Publisher.publish` takes ``bytes`` and hands them to
-``rcl_publish_serialized_message``, so nothing is deserialised. Unless ``--quiet``, a
-progress line on stderr, updated twice a second, gives the bag time (ns since the epoch, or
-simulation time for a simulated run) and the time elapsed since the start of the bag::
+What ``replay`` runs (:mod:`flock_swarm.cli.replay`), like ``ros2 bag play``. ``BAG`` is a bag
+directory or one ``.mcap`` file, written by this package or by ``ros2 bag record -s mcap``.
+Each message is published at wall time ``start + (log_time - t_start) / rate`` (monotonic
+clock), as the CDR bytes it was recorded with: :meth:`rclpy.publisher.Publisher.publish`
+takes ``bytes`` and hands them to ``rcl_publish_serialized_message``, so nothing is
+deserialised. With a progress stream, a line updated twice a second gives the bag time (ns
+since the epoch, or simulation time for a simulated run) and the time elapsed since the start
+of the bag::
 
     [RUNNING]  Bag Time 1700000012.340000000  Duration 2.340000000/10.000000000
 
-With ``--foxglove`` the same bytes, on the same schedule, are also served over the Foxglove
-WebSocket protocol (:mod:`flock_swarm.live`), logged at their recorded times, the server's
-time following bag time.
-
-Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
-expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
-with status 2. Ctrl-C stops the playback and exits with status 0. See ``docs/replay.md``.
+Given a :class:`~flock_swarm.foxglove_ws.LiveServer`, the same bytes, on the same schedule,
+are also served over the Foxglove WebSocket protocol, logged at their recorded times, the
+server's time following bag time. Invalid options raise :class:`ReplayError`, one line
+naming the option. See ``docs/replay.md``.
 """
 
-import argparse
 from dataclasses import dataclass, field
 import math
 from numbers import Integral
@@ -45,14 +35,10 @@ from rclpy.qos import (
 from rosgraph_msgs.msg import Clock
 
 from flock_swarm import contract
-from flock_swarm.cli import EXIT_USAGE, OneLineParser
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
 from flock_swarm.contract import qos_profile
-from flock_swarm.live import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 
-#: Exit status when the bag turns out unreadable during playback.
-EXIT_FAILURE = 1
 #: The simulation clock topic (REP-2008 ``/clock``).
 CLOCK_TOPIC = contract.CLOCK
 #: Publisher depth of replayed volatile topics, at least: the recorded offer's depth sized the
@@ -264,10 +250,6 @@ def format_ns(ns: int) -> str:
     return f'{sign}{ns // _NS}.{ns % _NS:09d}'
 
 
-def _count(number: int, noun: str, plural: str | None = None) -> str:
-    return f'{number} {noun if number == 1 else plural or noun + "s"}'
-
-
 def _check_number(option: str, value: float, low: float, strict: bool) -> float:
     value = float(value)
     if not math.isfinite(value) or value < low or (strict and value == low):
@@ -299,7 +281,7 @@ class Player(Node):
     :param delay: wall seconds to wait before the first message (after the subscribers).
     :param progress: stream for the progress line (None: no progress).
     :param say: receives warning and information lines (default: stderr).
-    :param live: a :class:`~flock_swarm.live.LiveServer` that serves every replayed message
+    :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` that serves every replayed message
         too (its recorded bytes, logged at its recorded time), or None.
     :param node_name: name of the node.
     :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``namespace``...).
@@ -555,114 +537,3 @@ class Player(Node):
             stream.write(f'{line}\n')
         stream.flush()
         self._progress_shown = True
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """Return the command-line parser of ``replay``."""
-    parser = OneLineParser(
-        prog='replay', description='Republish the topics of a ROS 2 MCAP bag with their '
-        'recorded timing and QoS, like ros2 bag play. Progress on stderr: [RUNNING]  Bag Time '
-        'T  Duration ELAPSED/TOTAL (seconds).',
-        epilog='ROS arguments go after --ros-args (remapping, namespace); the domain comes '
-        'from ROS_DOMAIN_ID.')
-    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
-    parser.add_argument('-r', '--rate', type=float, default=1.0,
-                        help='time scaling: 2 plays twice as fast (default 1)')
-    parser.add_argument('-l', '--loop', action='store_true',
-                        help='play again from the start offset after the end, until Ctrl-C')
-    parser.add_argument('--topics', nargs='+', metavar='TOPIC',
-                        help='replay only these topics (each must be in the bag)')
-    parser.add_argument('-e', '--regex', metavar='PATTERN',
-                        help='replay only topics matching this Python regular expression '
-                        '(searched anywhere in the name)')
-    parser.add_argument('-x', '--exclude', metavar='PATTERN',
-                        help='do not replay topics matching this regular expression')
-    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S',
-                        help='start S seconds after the first message of the bag')
-    parser.add_argument('--clock', action='store_true',
-                        help='publish /clock from bag time (a recorded /clock is then not '
-                        'replayed)')
-    parser.add_argument('--clock-rate', type=float, default=100.0, metavar='HZ',
-                        help='/clock publications per second with --clock (default 100)')
-    parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
-                        help='before playing, wait until every publisher has N subscribers')
-    parser.add_argument('--wait-timeout', type=float, default=10.0, metavar='S',
-                        help='longest wait for those subscribers, then play anyway '
-                        '(default 10)')
-    parser.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
-                        help='wait S seconds before the first message (time for discovery)')
-    parser.add_argument('-q', '--quiet', action='store_true',
-                        help='no progress line and no summary')
-    parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
-                        help='also serve the replayed messages to Foxglove / Lichtblick over '
-                        f'the Foxglove WebSocket protocol (default port {DEFAULT_PORT}; 0: '
-                        'any free port)')
-    parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
-                        help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
-                        'this machine only)')
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run ``replay`` from the command line; return the exit status."""
-    import rclpy
-    from rclpy.utilities import remove_ros_args
-
-    if argv is None:
-        argv = sys.argv[1:]
-    try:
-        own_args = remove_ros_args(['replay', *argv])[1:]
-    except Exception as exc:
-        # rclpy's parse errors (RCLInvalidROSArgsError, UnknownROSArgsError) have no common
-        # base class but Exception.
-        print(f"replay: error: --ros-args: {' '.join(str(exc).split())}", file=sys.stderr)
-        return EXIT_USAGE
-    args = build_parser().parse_args(own_args)
-    player = None
-    live = None
-    try:
-        if args.foxglove is not None:
-            live = start_live(args.foxglove_host, args.foxglove, '--foxglove')
-        rclpy.init(args=['replay', *argv])
-        player = Player(
-            args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,
-            exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
-            clock_rate=args.clock_rate, wait_subscribers=args.wait_for_subscribers,
-            wait_timeout=args.wait_timeout, delay=args.delay,
-            progress=None if args.quiet else sys.stderr, live=live)
-        if live is not None and not args.quiet:
-            print(f'[replay] live view on {live.url} ({len(live.channels)} topics)',
-                  file=sys.stderr, flush=True)
-        result = player.play()
-    except ServeError as exc:
-        print(f'replay: error: {exc}', file=sys.stderr)
-        return EXIT_USAGE
-    except (BagError, ReplayError) as exc:
-        status = EXIT_USAGE if player is None else EXIT_FAILURE
-        print(f'replay: error: {exc}', file=sys.stderr)
-        return status
-    except KeyboardInterrupt:
-        return 0
-    except Exception:
-        # Ctrl-C while the bag is opened shuts the context down under rclpy's signal handler:
-        # creating the publishers then fails. That is the user stopping, not a fault.
-        if rclpy.ok():
-            raise
-        return 0
-    finally:
-        if player is not None:
-            player.destroy_node()
-        if live is not None:
-            live.close()
-        rclpy.try_shutdown()
-    if not args.quiet:
-        how = 'stopped' if result.interrupted else 'done'
-        clock = f', {result.clock_ticks} /clock' if args.clock else ''
-        print(f'[replay] {how}: {_count(result.total, "message")} on '
-              f'{_count(len(result.published), "topic")}{clock} in '
-              f'{_count(result.passes, "pass", "passes")}', file=sys.stderr, flush=True)
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

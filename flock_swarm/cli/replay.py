@@ -1,0 +1,145 @@
+"""``replay BAG``: republish a recorded bag with its recorded timing, like ``ros2 bag play``.
+
+Usage::
+
+    replay BAG [--rate R] [--loop] [--topics T [T ...]] [--regex PATTERN]
+               [--exclude PATTERN] [--start-offset S] [--clock] [--clock-rate HZ]
+               [--wait-for-subscribers N] [--wait-timeout S] [--delay S] [--quiet]
+               [--foxglove [PORT]] [--foxglove-host HOST] [--ros-args ...]
+
+A thin command over the player node (:class:`flock_swarm.nodes.player.Player`). Unless
+``--quiet``, a progress line on stderr gives the bag time and the time elapsed since the start
+of the bag; with ``--foxglove`` the replayed messages are also served over the Foxglove
+WebSocket protocol (:mod:`flock_swarm.foxglove_ws`).
+
+Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
+expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
+with status 2. Ctrl-C stops the playback and exits with status 0. See ``docs/replay.md``.
+"""
+
+import argparse
+from pathlib import Path
+import sys
+
+from flock_swarm.bag import BagError
+from flock_swarm.console import EXIT_USAGE, OneLineParser
+from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
+from flock_swarm.nodes.player import Player, ReplayError
+
+#: Exit status when the bag turns out unreadable during playback.
+EXIT_FAILURE = 1
+
+
+def _count(number: int, noun: str, plural: str | None = None) -> str:
+    return f'{number} {noun if number == 1 else plural or noun + "s"}'
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the command-line parser of ``replay``."""
+    parser = OneLineParser(
+        prog='replay', description='Republish the topics of a ROS 2 MCAP bag with their '
+        'recorded timing and QoS, like ros2 bag play. Progress on stderr: [RUNNING]  Bag Time '
+        'T  Duration ELAPSED/TOTAL (seconds).',
+        epilog='ROS arguments go after --ros-args (remapping, namespace); the domain comes '
+        'from ROS_DOMAIN_ID.')
+    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
+    parser.add_argument('-r', '--rate', type=float, default=1.0,
+                        help='time scaling: 2 plays twice as fast (default 1)')
+    parser.add_argument('-l', '--loop', action='store_true',
+                        help='play again from the start offset after the end, until Ctrl-C')
+    parser.add_argument('--topics', nargs='+', metavar='TOPIC',
+                        help='replay only these topics (each must be in the bag)')
+    parser.add_argument('-e', '--regex', metavar='PATTERN',
+                        help='replay only topics matching this Python regular expression '
+                        '(searched anywhere in the name)')
+    parser.add_argument('-x', '--exclude', metavar='PATTERN',
+                        help='do not replay topics matching this regular expression')
+    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                        help='start S seconds after the first message of the bag')
+    parser.add_argument('--clock', action='store_true',
+                        help='publish /clock from bag time (a recorded /clock is then not '
+                        'replayed)')
+    parser.add_argument('--clock-rate', type=float, default=100.0, metavar='HZ',
+                        help='/clock publications per second with --clock (default 100)')
+    parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
+                        help='before playing, wait until every publisher has N subscribers')
+    parser.add_argument('--wait-timeout', type=float, default=10.0, metavar='S',
+                        help='longest wait for those subscribers, then play anyway '
+                        '(default 10)')
+    parser.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
+                        help='wait S seconds before the first message (time for discovery)')
+    parser.add_argument('-q', '--quiet', action='store_true',
+                        help='no progress line and no summary')
+    parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
+                        help='also serve the replayed messages to Foxglove / Lichtblick over '
+                        f'the Foxglove WebSocket protocol (default port {DEFAULT_PORT}; 0: '
+                        'any free port)')
+    parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
+                        help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
+                        'this machine only)')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``replay`` from the command line; return the exit status."""
+    import rclpy
+    from rclpy.utilities import remove_ros_args
+
+    if argv is None:
+        argv = sys.argv[1:]
+    try:
+        own_args = remove_ros_args(['replay', *argv])[1:]
+    except Exception as exc:
+        # rclpy's parse errors (RCLInvalidROSArgsError, UnknownROSArgsError) have no common
+        # base class but Exception.
+        print(f"replay: error: --ros-args: {' '.join(str(exc).split())}", file=sys.stderr)
+        return EXIT_USAGE
+    args = build_parser().parse_args(own_args)
+    player = None
+    live = None
+    try:
+        if args.foxglove is not None:
+            live = start_live(args.foxglove_host, args.foxglove, '--foxglove')
+        rclpy.init(args=['replay', *argv])
+        player = Player(
+            args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,
+            exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
+            clock_rate=args.clock_rate, wait_subscribers=args.wait_for_subscribers,
+            wait_timeout=args.wait_timeout, delay=args.delay,
+            progress=None if args.quiet else sys.stderr, live=live)
+        if live is not None and not args.quiet:
+            print(f'[replay] live view on {live.url} ({len(live.channels)} topics)',
+                  file=sys.stderr, flush=True)
+        result = player.play()
+    except ServeError as exc:
+        print(f'replay: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    except (BagError, ReplayError) as exc:
+        status = EXIT_USAGE if player is None else EXIT_FAILURE
+        print(f'replay: error: {exc}', file=sys.stderr)
+        return status
+    except KeyboardInterrupt:
+        return 0
+    except Exception:
+        # Ctrl-C while the bag is opened shuts the context down under rclpy's signal handler:
+        # creating the publishers then fails. That is the user stopping, not a fault.
+        if rclpy.ok():
+            raise
+        return 0
+    finally:
+        if player is not None:
+            player.destroy_node()
+        if live is not None:
+            live.close()
+        rclpy.try_shutdown()
+    if not args.quiet:
+        how = 'stopped' if result.interrupted else 'done'
+        clock = f', {result.clock_ticks} /clock' if args.clock else ''
+        print(f'[replay] {how}: {_count(result.total, "message")} on '
+              f'{_count(len(result.published), "topic")}{clock} in '
+              f'{_count(result.passes, "pass", "passes")}', file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

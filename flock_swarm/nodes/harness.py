@@ -1,0 +1,500 @@
+"""The harness: world, leader and N agents in one process or as separate OS processes.
+
+What ``swarm`` runs (:mod:`flock_swarm.cli.swarm`), what the testing API runs
+(:mod:`flock_swarm.testing`: its ``Swarm`` is :class:`InProcessSwarm`) and what the
+reproduction runs through the nodes (:mod:`flock_swarm.reproduce.execution`):
+
+- :func:`resolve_scenario`: a preset or a file, with overrides and a seed, validated and
+  written to ``DIR/scenario.yaml``, the one file every node starts on;
+- :class:`InProcessSwarm` and :func:`run_in_process`: every node in this process on one
+  executor (the agents in one container node);
+- :func:`run_processes`: every node as its own process (the ``ros2 run`` executables,
+  :func:`executable`), in the environment of :func:`process_environment`, ended by
+  :func:`stop`;
+- :class:`SwarmRun`: what a finished run left in its output directory.
+
+The run ends when the world has recorded its last step: ``DIR/bag/`` (rosbag2 MCAP),
+``DIR/summary.json``, ``DIR/timeseries.npz``. Optionally served live over the Foxglove
+WebSocket protocol (:mod:`flock_swarm.foxglove_ws`). Importing this module imports no rclpy,
+NumPy or YAML (the testing API's pytest plugin imports it in every pytest run): those come
+with the first run.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from typing import Any, Callable, Iterable, TYPE_CHECKING
+
+from flock_swarm.core.errors import ScenarioError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from flock_swarm.bag import BagReader
+    from flock_swarm.core.scenario import Scenario
+    from flock_swarm.foxglove_ws import LiveServer
+
+#: Wall-clock bound [s] of one whole test run when the caller gives none (a hung run fails).
+RUN_TIMEOUT = 240.0
+#: Domain ids handed out by :func:`unique_domain`: [1, DOMAIN_SPAN]. Domain 0 is everybody's
+#: default, and ids above are left to the demo and to people's own runs.
+DOMAIN_SPAN = 200
+
+_domains = itertools.count()
+
+
+def unique_domain() -> int:
+    """Return a ROS domain id not handed out before in this process, in [1, 200].
+
+    Ids are spread over the range by process id, so two test processes on one machine are
+    unlikely to collide (200 ids a process before one repeats).
+    """
+    return 1 + (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+
+
+def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path) -> Path:
+    """Validate the scenario with its overrides and write it to ``out/scenario.yaml``.
+
+    :param name: preset name or path.
+    :param overrides: ``key=value`` assignments.
+    :param seed: seed replacing the scenario's, or ``None``.
+    :param out: the output directory (created).
+    :return: the path every node is started with.
+    :raises ScenarioError: on invalid input.
+    """
+    import yaml
+
+    from flock_swarm.core.run import check_law_output
+    from flock_swarm.core.scenario import apply_override, parse_scenario, realize
+    from flock_swarm.presets import load_mapping
+
+    data = load_mapping(name)
+    for assignment in overrides:
+        data = apply_override(data, assignment)
+    if seed is not None:
+        if seed < 0:
+            raise ScenarioError('--seed', f'must be >= 0, got {seed}')
+        data['seed'] = seed
+    sc = parse_scenario(data)
+    check_law_output(sc, realize(sc))
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / 'scenario.yaml'
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def read_scenario(path: Path) -> Scenario:
+    """Return the validated scenario of a resolved scenario file."""
+    from flock_swarm.core.scenario import parse_scenario, parse_yaml
+    return parse_scenario(parse_yaml(Path(path).read_text()))
+
+
+def node_parameters(scenario: Path, mode: str, realtime_factor: float) -> dict:
+    """Return the parameters every node gets."""
+    return {'scenario': str(scenario), 'mode': mode, 'realtime_factor': float(realtime_factor)}
+
+
+class SwarmRun:
+    """What a finished run left in its output directory, read back from the files.
+
+    :param out: the run's output directory (``summary.json``, ``timeseries.npz``, ``bag/``).
+    :raises AssertionError: when the run wrote no ``summary.json``.
+    """
+
+    def __init__(self, out: Path) -> None:
+        """Read the scenario and the summary the run wrote."""
+        self.out = Path(out)
+        summary = self.out / 'summary.json'
+        if not summary.is_file():
+            raise AssertionError(f'the run wrote no {summary}')
+        #: The ``summary.json`` mapping.
+        self.summary: dict = json.loads(summary.read_text())
+        #: The resolved scenario file every node ran on.
+        self.scenario_path = self.out / 'scenario.yaml'
+        #: The validated scenario.
+        self.scenario: Scenario = read_scenario(self.scenario_path)
+
+    def timeseries(self) -> dict[str, np.ndarray]:
+        """Return the recorded time series (``timeseries.npz``) as arrays."""
+        import numpy as np
+
+        with np.load(self.out / 'timeseries.npz') as data:
+            return {name: data[name] for name in data.files}
+
+    def bag(self) -> BagReader:
+        """Return a reader of the recorded bag (:class:`flock_swarm.bag.BagReader`).
+
+        :raises AssertionError: when the run recorded no bag (``record: False``).
+        """
+        from flock_swarm.bag import BagReader
+
+        if not (self.out / 'bag').is_dir():
+            raise AssertionError(f'the run recorded no bag in {self.out / "bag"}')
+        return BagReader(self.out / 'bag')
+
+    def messages(self, topics: Iterable[str] | str) -> list:
+        """Return the messages of ``topics`` in the bag as ``(BagMessage, rclpy message)``."""
+        return list(self.bag().decoded(topics))
+
+
+class InProcessSwarm:
+    """World, leader and the agents in this process on one executor (a launch-free swarm).
+
+    ``swarm`` without ``--processes`` runs one, and so do tests: it is the testing API's
+    :class:`flock_swarm.testing.Swarm`. The scenario is resolved as ``swarm`` resolves it
+    (:func:`resolve_scenario`: a preset name or a path, with ``key=value`` overrides and a
+    seed) into ``out/scenario.yaml``, and every node starts on that file. The agents are
+    hosted by one agent node (a container: one subscription per odometry topic for all of
+    them), as ``ros2 run flock_swarm agents`` hosts them. Use it as a context manager; reach
+    the nodes (``world``, ``leader``, ``agents``), add or remove nodes, spin until a condition
+    holds (bounded, failing with a message) or to the end, and read the outputs back::
+
+        with InProcessSwarm('demo', out, ['n_agents=5'], domain_id=7) as swarm:
+            swarm.spin_until(lambda: swarm.world.k >= 100, timeout=60, what='step 100')
+            swarm.remove(swarm.leader)
+        run = swarm.result()
+
+    :param scenario: a preset name or a scenario file.
+    :param out: the output directory (created).
+    :param overrides: ``key=value`` assignments, as ``swarm --set``.
+    :param seed: a seed replacing the scenario's, or ``None``.
+    :param domain_id: the ROS domain id of the run (``None``: :func:`unique_domain`).
+    :param mode: ``lockstep`` or ``realtime``.
+    :param step_timeout: the world's per-step timeout [s].
+    :param executor: ``single`` (SingleThreadedExecutor) or ``events`` (EventsExecutor).
+    :param progress: callback for progress lines.
+    :param agents: ids of the agents to host (``None``: all); the others stay absent.
+    :param world_params: further parameters of the world node.
+    :param realtime_factor: realtime mode: simulated seconds per wall second.
+    :param agent_params: further parameters of the agents' node.
+    :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` to serve the run on (see
+        :meth:`serve`), or None.
+    :raises ScenarioError: for an invalid scenario, before any node exists.
+    """
+
+    def __init__(self, scenario: str | Path, out: Path, overrides: Iterable[str] = (),
+                 seed: int | None = None, domain_id: int | None = None, *,
+                 mode: str = 'lockstep', step_timeout: float = 2.0, executor: str = 'events',
+                 progress: Callable[[str], None] | None = None,
+                 agents: Iterable[int] | None = None, world_params: dict | None = None,
+                 realtime_factor: float = 1.0, agent_params: dict | None = None,
+                 live: LiveServer | None = None) -> None:
+        """Resolve the scenario; create the context, the nodes and the executor."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        from flock_swarm.nodes.common import make_executor
+        from flock_swarm.nodes.world import WorldNode
+
+        self.out = Path(out)
+        self.domain_id = unique_domain() if domain_id is None else domain_id
+        #: The resolved scenario file every node runs on.
+        self.scenario_path = resolve_scenario(str(scenario), list(overrides), seed, self.out)
+        self.scenario = read_scenario(self.scenario_path)
+        self.base = node_parameters(self.scenario_path, mode, realtime_factor)
+        self.closed = False
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id)
+        self.nodes = []
+        self.executor = make_executor(self.context) if executor == 'events' \
+            else SingleThreadedExecutor(context=self.context)
+        try:
+            self.world = self.add(WorldNode(
+                progress=progress, context=self.context, parameter_overrides=self.parameters(
+                    out_dir=str(self.out), step_timeout=step_timeout, **(world_params or {}))))
+            self.leader = self.add_leader()
+            hosted = range(self.scenario.n_agents) if agents is None else agents
+            self.agents = self.add_agents([int(i) for i in hosted], 'agents',
+                                          **(agent_params or {}))
+            if live is not None:
+                self.serve(live)
+        except BaseException:
+            self.close()
+            raise
+
+    def serve(self, live: LiveServer) -> None:
+        """Serve the run on ``live`` (a :class:`~flock_swarm.foxglove_ws.LiveServer`).
+
+        The world already holds every message of the contract once a step, as the bytes on
+        the wire: a :class:`~flock_swarm.foxglove_ws.LiveSink` among its sinks gives them to
+        the server too, at no cost in DDS deliveries (docs/performance.md).
+        """
+        from flock_swarm.contract import contract_topics
+        from flock_swarm.foxglove_ws import LiveSink
+        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace()))
+        self.world.sinks.append(LiveSink(live))
+
+    def parameters(self, **values) -> list:
+        """Return the common node parameters plus ``values`` as rclpy parameters."""
+        from rclpy.parameter import Parameter
+        return [Parameter(k, value=v) for k, v in dict(self.base, **values).items()]
+
+    def add(self, node):
+        """Spin ``node`` with the others; return it."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def add_leader(self):
+        """Start a leader node (again, after :meth:`remove`); return it."""
+        from flock_swarm.nodes.leader import LeaderNode
+        return self.add(LeaderNode(context=self.context,
+                                   parameter_overrides=self.parameters(expect_subscribers=2)))
+
+    def add_agents(self, ids: list[int], name: str, **params):
+        """Start an agent node hosting ``ids``; return it."""
+        from flock_swarm.nodes.agent import AgentNode
+        return self.add(AgentNode(node_name=name, context=self.context,
+                                  parameter_overrides=self.parameters(agent_ids=ids, **params)))
+
+    def remove(self, node) -> None:
+        """Stop spinning ``node`` (a process that died, as the others see it).
+
+        It is destroyed with the others by :meth:`close`: an executor may still hold events
+        of a node it has just let go.
+        """
+        self.executor.remove_node(node)
+
+    def spin_until(self, condition: Callable[[], Any], timeout: float,
+                   what: str = 'the condition') -> None:
+        """Spin every node until ``condition`` holds.
+
+        :param condition: checked after every callback (or every 0.1 s without one).
+        :param timeout: wall-clock bound [s].
+        :param what: what is awaited, for the failure message.
+        :raises AssertionError: on the timeout, or when the world finished first.
+        """
+        world = self.world
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if world.done:
+                raise AssertionError(f'the run ended ({world.status} at step {world.k}) '
+                                     f'before {what}')
+            if time.monotonic() > deadline:
+                raise AssertionError(f'timed out after {timeout:g} s waiting for {what} '
+                                     f'(the world is at step {world.k})')
+            self.executor.spin_once(timeout_sec=0.1)
+
+    def spin_to_end(self, timeout: float | None = None) -> None:
+        """Spin until the world is done (or the context is shut down, by Ctrl-C).
+
+        :param timeout: wall-clock bound [s] (``None``: no limit).
+        :raises TimeoutError: after ``timeout`` seconds.
+        """
+        started = time.monotonic()
+        while self.context.ok() and not self.world.done:
+            self.executor.spin_once(timeout_sec=0.1)
+            if timeout is not None and time.monotonic() - started > timeout:
+                raise TimeoutError(f'the run did not finish within {timeout:g} s')
+
+    def run(self, timeout: float = RUN_TIMEOUT) -> SwarmRun:
+        """Spin until the world has recorded its last step; close; return the outputs.
+
+        :param timeout: wall-clock bound [s] of the rest of the run.
+        :raises AssertionError: on the timeout.
+        """
+        world = self.world
+        self.spin_until(lambda: world.done, timeout, 'the world to finish')
+        self.close()
+        return self.result()
+
+    def summary(self) -> dict:
+        """Return the world's summary (after the world finished or :meth:`close`)."""
+        return self.world.result.summary if hasattr(self.world, 'result') else {}
+
+    def result(self) -> SwarmRun:
+        """Return the outputs (once the world finished, or after :meth:`close`)."""
+        return SwarmRun(self.out)
+
+    def close(self) -> None:
+        """Let the world write what it recorded; destroy every node and the context (once)."""
+        import rclpy
+        if self.closed:
+            return
+        self.closed = True
+        world = getattr(self, 'world', None)
+        if world is not None:
+            world.close()
+        self.executor.shutdown()
+        for node in self.nodes:
+            node.destroy_node()
+        self.nodes = []
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> InProcessSwarm:
+        """Return the swarm."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Close the swarm."""
+        self.close()
+
+
+def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                   step_timeout: float = 2.0, executor: str = 'events',
+                   progress: Callable[[str], None] | None = None,
+                   timeout: float | None = None, agents: Iterable[int] | None = None,
+                   world_params: dict | None = None, realtime_factor: float = 1.0,
+                   live: LiveServer | None = None) -> dict:
+    """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
+
+    Ctrl-C ends the run early; the world still writes what it recorded.
+
+    :param scenario: the resolved scenario file (or a preset name or a file: it is resolved
+        into ``out/scenario.yaml``).
+    :param timeout: wall-clock limit [s] of the whole run (``None``: none).
+    :return: the summary.
+    :raises TimeoutError: after ``timeout`` seconds.
+
+    The other parameters are :class:`InProcessSwarm`'s.
+    """
+    with InProcessSwarm(scenario, out, domain_id=domain_id, mode=mode,
+                        step_timeout=step_timeout, executor=executor, progress=progress,
+                        agents=agents, world_params=world_params,
+                        realtime_factor=realtime_factor, live=live) as swarm:
+        try:
+            swarm.spin_to_end(timeout)
+        except KeyboardInterrupt:
+            pass
+        swarm.world.close()
+        return swarm.summary()
+
+
+#: Modules of the executables that are not ``flock_swarm.nodes.<name>``, for ``python -m``.
+MODULES = {name: f'flock_swarm.cli.{name}'
+           for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
+
+
+def executable(name: str) -> list[str]:
+    """Return the command of a node executable: ``ros2 run``'s, the venv's, or ``python -m``."""
+    prefix_lib = Path(sys.prefix) / 'lib' / 'flock_swarm' / name
+    if prefix_lib.is_file():
+        return [str(prefix_lib)]
+    found = shutil.which(name)
+    if found:
+        return [found]
+    return [sys.executable, '-m', MODULES.get(name, f'flock_swarm.nodes.{name}')]
+
+
+def stop(procs: list, timeout: float = 10.0) -> None:
+    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``.
+
+    One deadline for all: a hundred agent processes that ignore SIGINT are killed after
+    ``timeout``, not after ``timeout`` each.
+    """
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + timeout
+    for proc in procs:
+        try:
+            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+#: Fast DDS profile of swarms of several hundred agents across processes (docs/ros.md).
+LARGE_SWARM_PROFILE = 'fastdds_large_swarm.xml'
+#: From this many agents on, a run across processes applies it (unless the environment
+#: names a profile of its own): at N = 500 and 1000 in the container layout, Fast DDS's
+#: default shared-memory transport lost commands to the step timeout without it.
+LARGE_SWARM_AGENTS = 200
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+
+
+def process_environment(n_agents: int, domain_id: int, base: dict | None = None) -> dict:
+    """Return the environment of a run's processes: the domain id, discovery on this host
+    unless set, and the large-swarm Fast DDS profile for ``n_agents`` of at least
+    :data:`LARGE_SWARM_AGENTS` when the environment names no profile."""
+    env = dict(os.environ if base is None else base, ROS_DOMAIN_ID=str(domain_id))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if n_agents >= LARGE_SWARM_AGENTS and not any(env.get(v) for v in PROFILE_VARIABLES):
+        from flock_swarm.presets import config_dirs
+        for d in config_dirs():
+            if (d / LARGE_SWARM_PROFILE).is_file():
+                env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str((d / LARGE_SWARM_PROFILE).resolve())
+                break
+    return env
+
+
+def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
+                  step_timeout: float = 2.0, timeout: float | None = None,
+                  log=None, realtime_factor: float = 1.0, container: bool = False,
+                  world_params: dict | None = None, live: LiveServer | None = None) -> dict:
+    """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
+
+    Every agent gets its own process (``agent``, as on real robots), or with ``container``
+    all agents share one (``agents``).
+
+    :param scenario: the resolved scenario file.
+    :param out: the output directory.
+    :param mode: ``lockstep`` or ``realtime``.
+    :param domain_id: ``ROS_DOMAIN_ID`` of every process.
+    :param step_timeout: the world's per-step timeout [s].
+    :param timeout: wall-clock limit [s] of the whole run.
+    :param log: file object receiving the agents' and leader's output (default: discarded).
+    :param realtime_factor: realtime mode: simulated seconds per wall second.
+    :param container: host every agent in one ``agents`` process.
+    :param world_params: further parameters of the world node.
+    :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` to serve the run on, through a
+        bridge node spun by a thread of this process
+        (:class:`~flock_swarm.nodes.foxglove_server.BackgroundBridge`), or None.
+    :return: the summary.
+    """
+    sc = read_scenario(scenario)
+    env = process_environment(sc.n_agents, domain_id)
+
+    def ros_args(values: dict) -> list[str]:
+        out_args = ['--ros-args']
+        for k, v in values.items():
+            out_args += ['-p', f'{k}:={v}']
+        return out_args
+
+    base = node_parameters(scenario, mode, realtime_factor)
+    sink = log if log is not None else subprocess.DEVNULL
+    others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
+                               stderr=sink)]
+    hosts = [executable('agents') + ros_args(base)] if container else [
+        executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
+    for command in hosts:
+        others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
+    bridge = None
+    if live is not None:
+        from flock_swarm.nodes.foxglove_server import BackgroundBridge
+        bridge = BackgroundBridge(live, domain_id, base)
+        # The bridge's subscriptions are best effort: it must have matched the leader's and
+        # the agents' publishers before the first step, and the world waits for it as one
+        # more subscriber of every odometry topic and for its markers' and metrics' one.
+        bridge.wait_matched(['/leader/odom', '/leader/accel'] + [
+            f'/agent_{i}/cmd_accel' for i in range(sc.n_agents)], 30.0)
+        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1,
+                            expect_telemetry_subscribers=1)
+    world = subprocess.Popen(executable('world') + ros_args(
+        dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
+        env=env)
+    try:
+        world.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        world.send_signal(signal.SIGINT)
+        world.wait(timeout=30)
+        raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
+    finally:
+        stop(others)
+        if bridge is not None:
+            silent = bridge.node.silent()
+            if silent:
+                print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
+                      file=sys.stderr, flush=True)
+            bridge.close()
+    summary = out / 'summary.json'
+    return json.loads(summary.read_text()) if summary.is_file() else {}
