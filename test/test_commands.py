@@ -1,0 +1,72 @@
+"""Commands over libraries: every command a module of flock_swarm.cli, imported by no library.
+
+The console scripts of the commands point into :mod:`flock_swarm.cli`; the node executables
+keep their ``main`` in their node module; no module outside :mod:`flock_swarm.cli` imports
+it (``python -m flock_swarm.reproduce``'s ``__main__`` is itself a way in to a command).
+"""
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / 'flock_swarm'
+#: The commands and their modules.
+COMMANDS = {name: f'flock_swarm.cli.{name}:main'
+            for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
+#: Modules that run a command when executed (``python -m``): entry points, not libraries.
+ENTRY_MODULES = {PACKAGE / 'reproduce' / '__main__.py'}
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Return every module ``path`` imports (at any depth of the file, absolute names)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found.update(f'{node.module}.{alias.name}' for alias in node.names)
+    return found
+
+
+def console_scripts() -> dict[str, str]:
+    """Return the console scripts of setup.py, name to ``module:function``."""
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for key, value in zip(node.keys, node.values):
+                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
+                    entries = [ast.literal_eval(e) for e in value.elts]
+                    return dict(tuple(part.strip() for part in e.split('=')) for e in entries)
+    raise AssertionError('setup.py declares no console_scripts')
+
+
+def test_no_library_imports_a_command():
+    offenders = []
+    for path in sorted(PACKAGE.rglob('*.py')):
+        if (PACKAGE / 'cli') in path.parents or path in ENTRY_MODULES:
+            continue
+        for name in imported_modules(path):
+            if name == 'flock_swarm.cli' or name.startswith('flock_swarm.cli.'):
+                offenders.append(f'{path.relative_to(ROOT)} imports {name}')
+    assert offenders == []
+
+
+def test_every_command_is_a_module_of_the_cli_package():
+    scripts = console_scripts()
+    assert {name: scripts[name] for name in COMMANDS} == COMMANDS
+    for name, target in scripts.items():
+        if name not in COMMANDS:
+            assert target.startswith('flock_swarm.nodes.'), (name, target)
+    modules = {path.stem for path in (PACKAGE / 'cli').glob('*.py')} - {'__init__'}
+    assert modules == set(COMMANDS) | {'reproduce'}
+
+
+def test_the_commands_share_the_console_plumbing():
+    """Exit statuses and argument errors come from flock_swarm.console, not from each other."""
+    for path in sorted((PACKAGE / 'cli').glob('*.py')):
+        if path.stem == '__init__':
+            continue
+        imported = imported_modules(path)
+        assert 'flock_swarm.console' in imported, path.name
+        assert not any(name.startswith('flock_swarm.cli.') for name in imported), path.name
