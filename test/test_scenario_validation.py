@@ -300,8 +300,7 @@ def test_exponents_in_files_are_numbers(tmp_path):
     ('sweep', ['nope'], "sweep: error: spec: unknown sweeps preset 'nope'"),
 ])
 def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
-    module = {'swarm': 'runner'}.get(tool, tool)
-    res = subprocess.run([sys.executable, '-m', f'flock_swarm.{module}', *args],
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', *args],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith(start), res.stderr
