@@ -172,7 +172,8 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
     ns, kinds = next(iter(found.items()))
     odom = kinds['odom']
     n = n_agents if n_agents is not None else max(odom) + 1
-    missing = [f'{ns}/agent_{i}/odom' for i in range(n) if i not in odom]
+    missing = [contract.absolute(contract.odom_topic(i), ns or '/') for i in range(n)
+               if i not in odom]
     if missing:
         wrong = [f'{name} is {topics[name]}' for name in missing if name in topics]
         typed = f' ({"; ".join(wrong)})' if wrong else ''
@@ -189,8 +190,8 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
 
     return SwarmTopics(ns, tuple(odom[i] for i in range(n)),
                        {i: name for i, name in kinds['cmd_accel'].items() if i < n},
-                       topic('leader/odom', ODOMETRY), topic('leader/accel', ACCEL),
-                       topic('swarm/metrics', DIAGNOSTICS))
+                       topic(contract.LEADER_ODOM, ODOMETRY),
+                       topic(contract.LEADER_ACCEL, ACCEL), topic(contract.METRICS, DIAGNOSTICS))
 
 
 def optional_topics_missing(topics: SwarmTopics) -> list[str]:
@@ -201,8 +202,8 @@ def optional_topics_missing(topics: SwarmTopics) -> list[str]:
     """
     ns = topics.namespace
     missing = [f'{ns}/{suffix}' for suffix, name in (
-        ('leader/odom', topics.leader_odom), ('leader/accel', topics.leader_accel),
-        ('swarm/metrics', topics.metrics)) if name is None]
+        (contract.LEADER_ODOM, topics.leader_odom), (contract.LEADER_ACCEL, topics.leader_accel),
+        (contract.METRICS, topics.metrics)) if name is None]
     no_cmd = [i for i in range(len(topics.odom)) if i not in topics.cmd]
     if no_cmd:
         missing.insert(0, f'{ns}/agent_<i>/cmd_accel of agent(s) {_id_list(no_cmd)}')

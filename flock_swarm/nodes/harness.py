@@ -33,6 +33,7 @@ import sys
 import time
 from typing import Any, Callable, Iterable, TYPE_CHECKING
 
+from flock_swarm import contract
 from flock_swarm.core.errors import ScenarioError
 
 if TYPE_CHECKING:
@@ -475,8 +476,9 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         # The bridge's subscriptions are best effort: it must have matched the leader's and
         # the agents' publishers before the first step, and the world waits for it as one
         # more subscriber of every odometry topic and for its markers' and metrics' one.
-        bridge.wait_matched(['/leader/odom', '/leader/accel'] + [
-            f'/agent_{i}/cmd_accel' for i in range(sc.n_agents)], 30.0)
+        bridge.wait_matched([contract.absolute(name) for name in (
+            contract.LEADER_ODOM, contract.LEADER_ACCEL,
+            *(contract.cmd_topic(i) for i in range(sc.n_agents)))], 30.0)
         world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1,
                             expect_telemetry_subscribers=1)
     world = subprocess.Popen(executable('world') + ros_args(
