@@ -2,10 +2,13 @@
 read-only ROS parameter with its effective value, read through the real parameter services;
 the parameters dumped from running nodes reproduce their run."""
 
+import importlib
 import json
 import os
+import re
 import signal
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -215,8 +218,6 @@ def test_each_node_declares_exactly_its_table_and_the_scenario(kind, tmp_path, r
     """A node's parameters are its table's (each once, the common ones first, read-only,
     with the table's description) and the scenario keys; nothing else given stays declared
     (a section given as YAML text, ``qos_overrides``)."""
-    import importlib
-
     from rclpy.parameter import Parameter
 
     from flock_swarm.nodes.parameters import COMMON_PARAMS, ROS_PARAMS, scenario_parameters
@@ -294,3 +295,22 @@ def test_a_parameter_without_a_type_is_one_line(tmp_path, ros_context, ros_domai
     assert status == 2 and out == ''
     assert err_text.startswith('leader: error: --ros-args: a parameter has no value of any '
                                'type') and err_text.count('\n') == 1
+
+
+def test_the_parameter_tables_are_documented():
+    """docs/ros.md's parameter table has a row for every parameter of the world's, the
+    leader's and the agents' tables, naming the node kinds that have it."""
+    from flock_swarm.nodes.parameters import COMMON_PARAMS
+    text = (Path(__file__).resolve().parent.parent / 'docs' / 'ros.md').read_text()
+    documented: dict[str, set[str]] = {}
+    for kinds, names in re.findall(r'^\| ([a-z, ]+) \| ((?:`[a-z_]+`(?:, )?)+) \|', text, re.M):
+        for name in re.findall(r'`([a-z_]+)`', names):
+            documented.setdefault(name, set()).update(
+                {'world', 'leader', 'agent'} if kinds == 'every node' else kinds.split(', '))
+    common = {param.name for param in COMMON_PARAMS} - {'realtime_factor'}
+    for kind in ('world', 'leader', 'agent'):
+        module, _, table_name = NODE_KINDS[kind]
+        table = getattr(importlib.import_module(f'flock_swarm.nodes.{module}'), table_name)
+        for param in table:
+            if param.name not in common:
+                assert kind in documented.get(param.name, ()), (kind, param.name)
