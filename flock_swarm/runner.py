@@ -95,7 +95,7 @@ class InProcessSwarm:
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from flock_swarm.nodes.common import make_executor
+        from flock_swarm.nodes.spin import make_executor
         from flock_swarm.nodes.world import WorldNode
 
         self.scenario = parse_scenario(parse_yaml(scenario.read_text()))
