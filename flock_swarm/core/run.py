@@ -3,8 +3,9 @@
 :func:`simulate` (and :func:`simulate_stack`, several realisations side by side) runs a scenario
 to its end; :class:`RunLog` is the bookkeeping of a run (whole-run metrics and the subsampled
 time series) shared by ``sim``, the world node and ``analyze``; :func:`build_summary` assembles
-``summary.json`` (see ``docs/outputs.md``). The step uses the same law functions as the agent
-node (:mod:`flock_swarm.core.laws`). No file I/O here: :mod:`flock_swarm.outputs` writes.
+``summary.json`` (see ``docs/outputs.md``); :func:`check_law_output` and :func:`check_step`
+are the checks before a run. The step uses the same law functions as the agent node
+(:mod:`flock_swarm.core.laws`). No file I/O here: :mod:`flock_swarm.outputs` writes.
 """
 
 import ctypes
@@ -19,11 +20,13 @@ from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
-from flock_swarm.core.laws.base import AgentData, advance_state, output_problem, swarm_control
+from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
+                                        swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
+from flock_swarm.core.stability import model_bounds
 
 #: glibc's mallopt() parameters (malloc.h) and the values simulate() sets: blocks below
 #: 32 MB come from the heap, and up to 64 MB freed at its top are kept (see keep_freed_memory).
@@ -177,6 +180,23 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
     problem = output_problem(u, sc.n_agents, sc.dim)
     if problem is not None:
         raise PluginError('protocol.name', f'{label}: {problem}')
+
+
+def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
+    """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
+
+    The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`, given the
+    run's :class:`~flock_swarm.core.laws.base.LawSetup`), then RK4's for the leader model
+    and the intrinsic dynamics (:func:`~flock_swarm.core.stability.model_bounds`).
+
+    :param sc: the scenario.
+    :param real: its realisation (fixed graphs, informed set).
+    :return: the violations.
+    """
+    found = list(sc.law.step_bounds(real.setup))
+    for part, model in (('leader model', sc.leader.model), ('intrinsic dynamics', sc.intrinsic)):
+        found += model_bounds(part, model, sc.leader.velocity, sc.dim, sc.dt)
+    return found
 
 
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,

@@ -20,8 +20,7 @@ import yaml
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import stack_mismatch
-from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml, realize
-from flock_swarm.core.stability import check_step
+from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml
 from flock_swarm.study.expr import Expression, ExpressionError
 
 #: The keys of a spec file.
@@ -377,22 +376,21 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
         ``sim --allow-unstable``).
     :raises ScenarioError: naming the point and the key a scenario rejects.
     """
-    from flock_swarm.presets import load
+    from flock_swarm.presets import StepError, prepare
     resolved = []
     for point in points(spec):
         values = resolve_point(spec, point)
+        where = ', '.join(f'{k}={v!r}' for k, v in point.items())
         try:
-            sc = load(spec.scenario, spec.overrides, spec.seeds[0], values)
+            sc, _ = prepare(spec.scenario, spec.overrides, spec.seeds[0], extra=values,
+                            allow_unstable=allow_unstable)
+        except StepError as exc:
+            raise ScenarioError(where or 'dt', f'dt: {exc.reason} (sweep --allow-unstable '
+                                'runs it anyway)') from None
         except ScenarioError as exc:
-            where = ', '.join(f'{k}={v!r}' for k, v in point.items())
             if exc.key in ('scenario', '--set'):
                 raise
             raise ScenarioError(where or 'set', str(exc)) from None
-        violations = [] if allow_unstable else check_step(sc, realize(sc))
-        if violations:
-            reason = violations[0].message(sc.dt).split(': ', 1)[1]
-            raise ScenarioError(', '.join(f'{k}={v!r}' for k, v in point.items()) or 'dt',
-                                f'dt: {reason} (sweep --allow-unstable runs it anyway)')
         for t in spec.times:
             if t > sc.duration + 0.5 * sc.dt:
                 raise ScenarioError('times', f'{t:g} s is after the end of the run '
