@@ -438,7 +438,8 @@ def test_no_import_cycle_among_the_core_modules():
 
 @pytest.mark.parametrize('module', ['flock_swarm.core.laws.base', 'flock_swarm.core.stability',
                                     'flock_swarm.core.registry', 'flock_swarm.core.scenario',
-                                    'flock_swarm.core.run', 'flock_swarm.plugin'])
+                                    'flock_swarm.core.run', 'flock_swarm.core.summary',
+                                    'flock_swarm.plugin'])
 def test_each_core_module_imports_alone_in_a_fresh_interpreter(module):
     proc = subprocess.run([sys.executable, '-c', f'import {module}'], capture_output=True,
                           text=True, timeout=60)

@@ -3,6 +3,8 @@ the documentation, so that a new key is one new row."""
 
 import dataclasses
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -149,3 +151,13 @@ def test_docs_outputs_lists_the_table():
 def test_a_summary_is_plain_json(summaries):
     for s in summaries:
         assert json.loads(json.dumps(s)) == s
+
+
+def test_reading_the_table_imports_no_numpy():
+    """The pytest plugin (flock_swarm.testing) reads the table; it must stay cheap to import."""
+    code = ('import sys, flock_swarm.core.summary as s, flock_swarm.testing as t; '
+            'assert s.sim_only_keys() and t.SIM_ONLY; '
+            'assert "numpy" not in sys.modules, "numpy imported"')
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
