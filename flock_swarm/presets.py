@@ -1,8 +1,8 @@
 """Presets (the scenario files of config/) and scenario files: lookup, YAML, ``--set``.
 
-:func:`prepare` is the one preparation of a run every front end calls (``sim``, ``sweep``,
-the reproduction; ``swarm`` and the nodes): load, overrides, seed, validation, the law's
-output and the step-size check, each failure one :class:`ScenarioError` line.
+:func:`prepare` is the one preparation of a run for every front end (``sim``, ``sweep`` and
+the reproduction call it): load, overrides, seed, validation, the law's output and the
+step-size check, each failure one :class:`ScenarioError` line.
 """
 
 import copy
