@@ -34,6 +34,8 @@ from typing import Any, Callable, Iterable, Iterator, TYPE_CHECKING
 
 import pytest
 
+from flock_swarm.core.summary import sim_only_keys
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -52,8 +54,9 @@ DOMAIN_SPAN = 200
 #: The poll interval [s] of :func:`wait_for`.
 POLL = 0.05
 #: Keys of ``sim``'s summary that are not the swarm's but the simulator's own: its wall time,
-#: and its count of pseudo-leader reselections (the world does not keep one).
-SIM_ONLY = ('wall_time_s', 'pseudo_leader_reselections')
+#: and its count of pseudo-leader reselections (the world does not keep one); from the table
+#: of summary keys (:mod:`flock_swarm.core.summary`, which imports no NumPy).
+SIM_ONLY = sim_only_keys()
 
 _domains = itertools.count()
 
