@@ -30,9 +30,8 @@ import numpy as np
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.run import check_law_output
-from flock_swarm.core.scenario import Scenario, parse_yaml, realize
-from flock_swarm.presets import load, load_mapping
+from flock_swarm.core.scenario import Scenario, parse_yaml
+from flock_swarm.presets import load_mapping, prepare
 
 #: Parameters every rclpy node has; they are not scenario overrides.
 ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
@@ -93,6 +92,8 @@ COMMON_PARAMS = (
     Param('seed', -1, 'random seed of the run (given as -1: the scenario seed, and it reads '
           'back as that seed)', lambda v: v >= -1,
           'must be -1 (the scenario seed) or >= 0, got {value!r}'),
+    Param('allow_unstable', False, 'run a dt beyond the stability bounds of the scenario '
+          "(as sim's --allow-unstable); refused with the bound it violates otherwise"),
 )
 #: The leader's and the agents' own parameter on the world's end (:func:`follow_world`).
 KEEP_RUNNING = Param('keep_running', False, 'keep running after the world announced the end '
@@ -299,11 +300,13 @@ class NodeParameters:
         :raises ScenarioError: on any invalid value.
         """
         name, seed = self.values['scenario'], self.values['seed']
-        extra = scenario_overrides(self.given, self.table, load_mapping(name))
-        sc = load(name, seed=None if seed == -1 else seed, extra=extra)
-        # A plugin law that raises or returns unusable commands fails here, in one line, not
-        # in a callback of the running node.
-        check_law_output(sc, realize(sc))
+        base = load_mapping(name)
+        # The one preparation of every front end (sim's too): validation, a plugin law that
+        # raises or returns unusable commands, and a dt beyond a stability bound all fail
+        # here, in one line, not in a callback of the running node.
+        sc, _ = prepare(base, seed=None if seed == -1 else seed,
+                        extra=scenario_overrides(self.given, self.table, base),
+                        allow_unstable=self.values['allow_unstable'])
         self.values['seed'] = sc.seed
         self.scenario = sc
         return sc
