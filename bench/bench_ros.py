@@ -169,9 +169,11 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
 
-    from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
-                                          LOCKSTEP_QOS, cmd_topic, odom_topic)
+    from flock_swarm import contract
+    from flock_swarm.contract import CLOCK, LEADER_ACCEL, LEADER_ODOM, cmd_topic, odom_topic
     from flock_swarm.nodes.stepper import RESEND_PERIOD, first_resend_wait, next_resend_wait
+    CLOCK_QOS, LOCKSTEP_QOS = (contract.qos_profile(q) for q in (contract.CLOCK_QOS,
+                                                                 contract.LOCKSTEP_QOS))
     nodes, state = [], {'step': 0, 'cmds': 0, 'leader': 0, 't0': None, 't1': None,
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
                         'began': 0.0, 'last_step_s': 0.0, 'resends': 0,
@@ -301,7 +303,7 @@ def run_floor_role(args) -> int:
     import rclpy
     from rclpy.context import Context
 
-    from flock_swarm.nodes.common import make_executor
+    from flock_swarm.nodes.spin import make_executor
     context = Context()
     rclpy.init(context=context, domain_id=args.domain)
     ids = list(range(args.n)) if args.agent_ids is None else args.agent_ids

@@ -1,13 +1,23 @@
-"""Presets (the scenario files of config/) and scenario files: lookup, YAML, ``--set``."""
+"""Presets (the scenario files of config/) and scenario files: lookup, YAML, ``--set``.
 
+:func:`prepare` is the one preparation of a run for every front end (``sim``, ``sweep`` and
+the reproduction call it): load, overrides, seed, validation, the law's output and the
+step-size check, each failure one :class:`ScenarioError` line.
+"""
+
+import copy
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Iterable
 
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import Scenario, apply_override, parse_scenario, parse_yaml
+from flock_swarm.core.laws.base import StepViolation
+from flock_swarm.core.run import check_law_output, check_step
+from flock_swarm.core.scenario import (Realization, Scenario, apply_override, parse_scenario,
+                                       parse_yaml, realize)
 
 PACKAGE = 'flock_swarm'
 
@@ -113,12 +123,87 @@ def load(name_or_path: str, overrides: Iterable[str] = (), seed: int | None = No
     :param seed: replaces the scenario's seed when given.
     :param extra: further ``{dotted.key: value}`` overrides (already parsed values).
     :return: the validated scenario.
+
+    Validation only: a front end about to run the scenario calls :func:`prepare`, which
+    adds the law-output and step-size checks.
     """
-    data = load_mapping(name_or_path)
+    return parse_scenario(_resolved(load_mapping(name_or_path), overrides, seed, extra))
+
+
+def _resolved(data: dict, overrides: Iterable[str], seed: int | None,
+              extra: Mapping[str, Any] | None) -> dict:
+    """Return ``data`` with the ``--set`` overrides, then ``extra``, then the seed applied."""
     for assignment in overrides:
         data = apply_override(data, assignment)
     for key, value in (extra or {}).items():
         data = apply_override(data, f'{key}={yaml.safe_dump(value, default_flow_style=True)}')
     if seed is not None:
         data['seed'] = seed
-    return parse_scenario(data)
+    return data
+
+
+class StepError(ScenarioError):
+    """A ``dt`` that violates a stability bound (:func:`prepare`); key ``dt``.
+
+    :ivar violations: every violated bound, the first one in the message.
+    """
+
+    def __init__(self, dt: float, violations: list[StepViolation]) -> None:
+        """Create the error from the violated bounds (at least one).
+
+        :param dt: the scenario's step.
+        :param violations: the bounds it violates.
+        """
+        super().__init__('dt', violations[0].message(dt).split(': ', 1)[1])
+        self.violations = violations
+
+
+def prepare(scenario: str | os.PathLike | Mapping[str, Any], overrides: Iterable[str] = (),
+            seed: int | None = None, *, extra: Mapping[str, Any] | None = None,
+            allow_unstable: bool = False) -> tuple[Scenario, Realization]:
+    """Load, override, validate and check a scenario: the preparation of every run.
+
+    In order: read the scenario (a preset name, a file, or a mapping already read from
+    YAML), apply the ``--set`` ``overrides``, then the ``extra`` values, then the ``seed``;
+    validate every value (:func:`~flock_swarm.core.scenario.parse_scenario`); draw the
+    realisation; evaluate the law once at the initial state
+    (:func:`~flock_swarm.core.run.check_law_output`: a plugin that raises or returns
+    unusable commands); check ``dt`` against the stability bounds
+    (:func:`~flock_swarm.core.run.check_step`). ``sim`` prints the error as
+    ``sim: error: <error>``; a node or another front end prints the same line after its own
+    prefix, so every front end refuses the same ``dt`` with the same words.
+
+    From a node: read the ``scenario`` parameter's file with :func:`load_mapping` (its
+    values tell how to read a parameter given as text), turn the node's parameters that
+    name scenario keys into ``{dotted.key: value}`` and pass both::
+
+        base = load_mapping(node.get_parameter('scenario').value)
+        sc, real = prepare(base, extra=scenario_overrides(node, own, base), seed=seed)
+
+    :param scenario: preset name, path of a YAML file, or the scenario mapping (not
+        modified: the overrides apply to a copy; a mapping without ``name`` is ``unnamed``).
+    :param overrides: ``key=value`` assignments (dotted keys, YAML values), in order.
+    :param seed: replaces the scenario's seed when given (a negative one is refused as the
+        ``seed`` key).
+    :param extra: further ``{dotted.key: value}`` overrides with values already parsed
+        (ROS parameters, a sweep's point), applied after ``overrides``.
+    :param allow_unstable: skip the step-size check (``--allow-unstable``).
+    :return: the validated scenario (``scenario.raw``: the mapping as run, to write to a
+        file) and its realisation.
+    :raises ScenarioError: naming the first invalid key; :class:`StepError` (key ``dt``)
+        for a ``dt`` beyond a stability bound; a
+        :class:`~flock_swarm.core.registry.PluginError` for a law that fails at the initial
+        state.
+    """
+    if isinstance(scenario, Mapping):
+        data = copy.deepcopy(dict(scenario))
+    else:
+        data = load_mapping(os.fspath(scenario))
+    sc = parse_scenario(_resolved(data, overrides, seed, extra))
+    real = realize(sc)
+    check_law_output(sc, real)
+    if not allow_unstable:
+        violations = check_step(sc, real)
+        if violations:
+            raise StepError(sc.dt, violations)
+    return sc, real

@@ -4,7 +4,7 @@
 shipped ``config/sros2_policy.xml`` is the one for the demo's 10); feed it to
 ``ros2 security generate_artifacts -k KEYSTORE -p POLICY`` (see ``docs/security.md``).
 
-The topic names come from the topic contract (:mod:`flock_swarm.contract`), as the nodes'; the
+The topic names come from :mod:`flock_swarm.contract`, the ones the nodes use; the
 policy format is SROS2's (version 0.2.0: enclaves, profiles, topics and services).
 """
 
@@ -12,8 +12,8 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (CLOCK, cmd_topic, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
-                                  odom_topic, STATUS)
+from flock_swarm.contract import (CLOCK, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS, STATUS,
+                                  cmd_topic, odom_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'

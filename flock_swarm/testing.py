@@ -33,6 +33,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 import pytest
 
+from flock_swarm.core.summary import sim_only_keys
 # The harness imports no rclpy, NumPy or YAML until a run starts (this plugin is loaded by
 # every pytest run of the environment).
 from flock_swarm.nodes.harness import (DOMAIN_SPAN, InProcessSwarm, RUN_TIMEOUT,  # noqa: F401
@@ -45,8 +46,9 @@ LOCALHOST = 'LOCALHOST'
 #: The poll interval [s] of :func:`wait_for`.
 POLL = 0.05
 #: Keys of ``sim``'s summary that are not the swarm's but the simulator's own: its wall time,
-#: and its count of pseudo-leader reselections (the world does not keep one).
-SIM_ONLY = ('wall_time_s', 'pseudo_leader_reselections')
+#: and its count of pseudo-leader reselections (the world does not keep one); from the table
+#: of summary keys (:mod:`flock_swarm.core.summary`, which imports no NumPy).
+SIM_ONLY = sim_only_keys()
 
 
 def wait_for(condition: Callable[[], Any], timeout: float, what: str = 'the condition',

@@ -10,7 +10,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 
-from flock_swarm.nodes.common import FRAME
+from flock_swarm.contract import FRAME
 
 
 def make_odometry(q: Sequence[float], p: Sequence[float], stamp: Time, child: str,

@@ -31,7 +31,8 @@ from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.laws.base import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
-from flock_swarm.nodes.common import LOCKSTEP_QOS, StepClock
+from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
+from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
 from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, stop
@@ -70,9 +71,10 @@ class FaultyPublisher(Node):
         super().__init__('faulty', **kwargs)
         self.world = world
         self.clock = world.clock
-        self.odom = self.create_publisher(Odometry, 'agent_0/odom', LOCKSTEP_QOS)
-        self.leader = self.create_publisher(Odometry, 'leader/odom', LOCKSTEP_QOS)
-        self.cmd = self.create_publisher(AccelStamped, 'agent_1/cmd_accel', LOCKSTEP_QOS)
+        qos = qos_profile(LOCKSTEP_QOS)
+        self.odom = self.create_publisher(Odometry, 'agent_0/odom', qos)
+        self.leader = self.create_publisher(Odometry, 'leader/odom', qos)
+        self.cmd = self.create_publisher(AccelStamped, 'agent_1/cmd_accel', qos)
         self.sent = 0
         self.create_timer(0.01, self.publish_faults)
 

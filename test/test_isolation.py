@@ -62,8 +62,11 @@ class Intruder:
         from rclpy.node import Node
         from rosgraph_msgs.msg import Clock
 
-        from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM,
-                                              LOCKSTEP_QOS, StepClock, cmd_topic, odom_topic)
+        from flock_swarm import contract
+        from flock_swarm.contract import CLOCK, LEADER_ACCEL, LEADER_ODOM, cmd_topic, odom_topic
+        from flock_swarm.nodes.clock import StepClock
+        CLOCK_QOS, LOCKSTEP_QOS = (contract.qos_profile(q) for q in (contract.CLOCK_QOS,
+                                                                     contract.LOCKSTEP_QOS))
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = Node('intruder', context=self.context)

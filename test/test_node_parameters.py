@@ -2,10 +2,13 @@
 read-only ROS parameter with its effective value, read through the real parameter services;
 the parameters dumped from running nodes reproduce their run."""
 
+import importlib
 import json
 import os
+import re
 import signal
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,3 +204,113 @@ def test_dumped_parameters_reproduce_the_run(tmp_path, ros_domain, ros_context, 
     assert a['seed'] == 7 and a['steps'] == 30
     with np.load(first / 'timeseries.npz') as qa, np.load(second / 'timeseries.npz') as qb:
         assert_array_equal(qa['q'], qb['q'])
+
+
+#: Each node kind: its module, class and parameter table.
+NODE_KINDS = {'world': ('world', 'WorldNode', 'WORLD_PARAMS'),
+              'leader': ('leader', 'LeaderNode', 'LEADER_PARAMS'),
+              'agent': ('agent', 'AgentNode', 'AGENT_PARAMS'),
+              'foxglove_server': ('foxglove_server', 'LiveBridge', 'BRIDGE_PARAMS')}
+
+
+@pytest.mark.parametrize('kind', sorted(NODE_KINDS))
+def test_each_node_declares_exactly_its_table_and_the_scenario(kind, tmp_path, ros_context):
+    """A node's parameters are its table's (each once, the common ones first, read-only,
+    with the table's description) and the scenario keys; nothing else given stays declared
+    (a section given as YAML text, ``qos_overrides``)."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.parameters import COMMON_PARAMS, ROS_PARAMS, scenario_parameters
+    module, class_name, table_name = NODE_KINDS[kind]
+    module = importlib.import_module(f'flock_swarm.nodes.{module}')
+    table = getattr(module, table_name)
+    names = [param.name for param in table]
+    assert len(set(names)) == len(names) and table[:len(COMMON_PARAMS)] == COMMON_PARAMS
+    path = tmp_path / 'small.yaml'
+    path.write_text(yaml.safe_dump(SCENARIO))
+    own = {'out_dir': str(tmp_path / 'out'), 'port': 0}
+    given = {'scenario': str(path), 'qos_overrides./clock.publisher.depth': 3,
+             'metrics': '{eta_tolerance: 0.2}'}
+    given.update((key, value) for key, value in own.items() if key in names)
+    node = getattr(module, class_name)(context=ros_context, parameter_overrides=[
+        Parameter(key, value=value) for key, value in given.items()])
+    try:
+        declared = set(node.list_parameters([], 0).names) - ROS_PARAMS
+        assert declared == set(names) | set(scenario_parameters(node.params.scenario))
+        assert node.get_parameter('metrics.eta_tolerance').value == 0.2
+        for param in table:
+            descriptor = node.describe_parameter(param.name)
+            assert descriptor.read_only and descriptor.description == param.description
+    finally:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        node.destroy_node()
+
+
+def test_the_container_reads_back_the_agents_it_hosts(tmp_path, ros_context):
+    """``agent_ids`` reads back the ids a node hosts, given as ids and ranges, as ``all`` (the
+    container's default) or through ``agent_id`` alone, and given back they host the same."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.agent import AgentNode
+    path = tmp_path / 'small.yaml'
+    path.write_text(yaml.safe_dump(SCENARIO))
+    for default, given, ids in (('all', {}, [0, 1, 2]), ('', {'agent_ids': '0,2'}, [0, 2]),
+                                ('', {'agent_id': 1}, [1]), ('', {'agent_ids': [2, 0]}, [0, 2])):
+        params = [Parameter('scenario', value=str(path))]
+        params += [Parameter(k, value=v) for k, v in given.items()]
+        node = AgentNode(default_agent_ids=default, context=ros_context,
+                         parameter_overrides=params)
+        try:
+            assert list(node.get_parameter('agent_ids').value) == ids
+            assert node.controller.ids.tolist() == ids
+        finally:
+            node.destroy_node()
+        again = AgentNode(context=ros_context, parameter_overrides=[
+            Parameter('scenario', value=str(path)), Parameter('agent_ids', value=ids)])
+        try:
+            assert again.controller.ids.tolist() == ids
+        finally:
+            again.destroy_node()
+
+
+def test_a_parameter_without_a_type_is_one_line(tmp_path, ros_context, ros_domain, monkeypatch,
+                                                capfd):
+    """An empty array has no ROS type, so rclpy cannot declare it: through the Python API
+    the error names the parameter; on the command line (``-p key:=[]``), ``--ros-args``."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.nodes.leader import LeaderNode, main
+    path = tmp_path / 'small.yaml'
+    path.write_text(yaml.safe_dump(SCENARIO))
+    with pytest.raises(ScenarioError) as err:
+        LeaderNode(context=ros_context, parameter_overrides=[
+            Parameter('scenario', value=str(path)), Parameter('informed.ids')])
+    assert err.value.key == 'informed.ids'
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+    status = main(['leader', '--ros-args', '-p', f'scenario:={path}', '-p', 'informed.ids:=[]'])
+    out, err_text = capfd.readouterr()
+    assert status == 2 and out == ''
+    assert err_text.startswith('leader: error: --ros-args: a parameter has no value of any '
+                               'type') and err_text.count('\n') == 1
+
+
+def test_the_parameter_tables_are_documented():
+    """docs/ros.md's parameter table has a row for every parameter of the world's, the
+    leader's and the agents' tables, naming the node kinds that have it."""
+    from flock_swarm.nodes.parameters import COMMON_PARAMS
+    text = (Path(__file__).resolve().parent.parent / 'docs' / 'ros.md').read_text()
+    documented: dict[str, set[str]] = {}
+    for kinds, names in re.findall(r'^\| ([a-z, ]+) \| ((?:`[a-z_]+`(?:, )?)+) \|', text, re.M):
+        for name in re.findall(r'`([a-z_]+)`', names):
+            documented.setdefault(name, set()).update(
+                {'world', 'leader', 'agent'} if kinds == 'every node' else kinds.split(', '))
+    common = {param.name for param in COMMON_PARAMS} - {'realtime_factor'}
+    for kind in ('world', 'leader', 'agent'):
+        module, _, table_name = NODE_KINDS[kind]
+        table = getattr(importlib.import_module(f'flock_swarm.nodes.{module}'), table_name)
+        for param in table:
+            if param.name not in common:
+                assert kind in documented.get(param.name, ()), (kind, param.name)

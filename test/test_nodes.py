@@ -22,7 +22,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from flock_swarm.bag import BagReader
 from flock_swarm.core.scenario import parse_scenario
-from flock_swarm.nodes.common import StepClock
+from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.harness import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
                                        process_environment, resolve_scenario, run_in_process,
                                        run_processes, stop)
@@ -102,7 +102,7 @@ def test_the_world_waits_for_its_telemetry_subscribers(tmp_path, ros_domain):
     from diagnostic_msgs.msg import DiagnosticArray
     from visualization_msgs.msg import MarkerArray
 
-    from flock_swarm.nodes.common import TELEMETRY_QOS
+    from flock_swarm.contract import TELEMETRY_QOS, qos_profile
 
     def stamp_ns(header) -> int:
         return header.stamp.sec * 10**9 + header.stamp.nanosec
@@ -121,7 +121,7 @@ def test_the_world_waits_for_its_telemetry_subscribers(tmp_path, ros_domain):
         for topic, kind in [('/swarm/markers', MarkerArray), ('/swarm/metrics', DiagnosticArray)]:
             monitor.create_subscription(kind, topic, lambda msg, t=topic: received[t].append(
                 stamp_ns(msg.markers[0].header if t == '/swarm/markers' else msg.header)),
-                TELEMETRY_QOS)
+                qos_profile(TELEMETRY_QOS))
         # The run's last markers and metrics (at t = 1 s) may still be on their way.
         last = world.clock.ns(int(round(1.0 / world.scenario.dt)))
         spin_until(swarm.executor, lambda: world.done and all(

@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +25,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.plugin import LeaderModel, Law, require
+from flock_swarm.plugin import (LeaderModel, Law, LawSetup, StepViolation, pd_dt_max,
+                                require)
 
 
 @dataclass(frozen=True)
@@ -91,6 +93,46 @@ class Raises(Damped):
 @dataclass(frozen=True)
 class Misnamed(Damped):
     name: ClassVar[str] = 'something_else'
+
+
+@dataclass(frozen=True)
+class Gained(Damped):
+    """Damped, with a per-agent gain from the setup and a step bound (the LawSetup hooks)."""
+
+    name: ClassVar[str] = 'gained'
+
+    def agent_data(self, setup: LawSetup):
+        # Informed agents pull twice as hard: read from the setup, not the scenario.
+        return {'gain': np.where(setup.informed, 2.0 * self.k, self.k)}
+
+    def combine(self, q, p, s, leader, agents, dt):
+        if leader is None:
+            return s
+        return s - agents.data['gain'][:, None] * ((q - leader.q) + (p - leader.p))
+
+    def step_bounds(self, setup: LawSetup):
+        bound = pd_dt_max(2.0 * self.k, 2.0 * self.k)
+        if setup.dt < bound:
+            return []
+        return [StepViolation('gained pull', bound, f'{setup.n_agents} agents')]
+
+
+@dataclass(frozen=True)
+class OldAgentData(Damped):
+    """Written for the hooks that took the scenario (before LawSetup)."""
+
+    name: ClassVar[str] = 'old_agent_data'
+
+    def agent_data(self, sc, informed):
+        return {'gain': np.full(sc.n_agents, self.k)}
+
+
+@dataclass(frozen=True)
+class OldStepBounds(Damped):
+    name: ClassVar[str] = 'old_step_bounds'
+
+    def step_bounds(self, sc, real):
+        return []
 
 
 class NotALaw:
@@ -251,3 +293,154 @@ def test_two_packages_registering_one_name_is_an_error(tmp_path):
                     module='other_plugins')
     proc = sim(site, scenario(tmp_path, {'name': 'damped'}))
     assert_one_line_error(proc, 'flock_swarm.laws:damped', 'also registered by package')
+
+
+def test_a_plugin_law_reads_its_setup_in_agent_data_and_step_bounds(tmp_path):
+    """The LawSetup hooks: per-agent data from the informed set, a step bound from dt."""
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('gained', 'Gained'), ('damped', 'Damped')])
+    protocol = {'name': 'gained', 'k': 2.0}
+    path = scenario(tmp_path, protocol)
+    path.write_text(path.read_text().replace('{select: all}', '{select: first, count: 4}'))
+    proc = sim(site, path, '--set', 'record_every=1', out=tmp_path / 'out')
+    assert proc.returncode == 0, proc.stderr
+    series = np.load(tmp_path / 'out' / 'timeseries.npz')
+    # Alone with the leader at t = 0 (pair sums aside), an informed agent's pull is twice an
+    # uninformed one's: u = s - gain ((q - q_l) + (p - p_l)) with the gains of agent_data.
+    law_u = series['u'][0]
+    q, p = series['q'][0], series['p'][0]
+    lq, lp = series['leader_q'][0], series['leader_p'][0]
+    damped = sim(site, path, '--set', 'protocol.name=damped', '--set', 'record_every=1',
+                 out=tmp_path / 'damped')
+    assert damped.returncode == 0, damped.stderr
+    base_u = np.load(tmp_path / 'damped' / 'timeseries.npz')['u'][0]
+    pull = (q - lq) + (p - lp)
+    gain = np.where(np.arange(12) < 4, 4.0, 2.0)[:, None]
+    # Damped pulls with k on each term: u_damped = s - k pull; so u_gained = u_damped
+    # - (gain - k) pull.
+    np.testing.assert_allclose(law_u, base_u - (gain - 2.0) * pull, rtol=0, atol=1e-12)
+    # dt = 0.05 is within the bound 2 / (2 k) = 0.5; dt = 0.5 is not: the same one line as
+    # for a built-in law.
+    proc = sim(site, path, '--set', 'dt=0.5')
+    assert_one_line_error(proc, 'dt: 0.5 exceeds the stability bound 0.5 of the gained pull '
+                          '(12 agents); use dt < 0.5')
+    # --allow-unstable runs it anyway (to its end or to divergence, but it runs).
+    sim(site, path, '--set', 'dt=0.5', '--allow-unstable', out=tmp_path / 'unstable')
+    assert json.loads((tmp_path / 'unstable' / 'summary.json').read_text())['dt'] == 0.5
+
+
+@pytest.mark.parametrize('name, target, old', [
+    ('old_agent_data', 'OldAgentData', 'agent_data(self, sc, informed)'),
+    ('old_step_bounds', 'OldStepBounds', 'step_bounds(self, sc, real)'),
+])
+def test_a_law_written_for_the_scenario_hooks_gets_one_line_saying_what_to_change(
+        tmp_path, name, target, old):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[(name, target)])
+    proc = sim(site, scenario(tmp_path, {'name': name}), out=tmp_path / 'out')
+    hook = old.split('(')[0]
+    assert_one_line_error(proc, f'protocol.name: flock_swarm.laws:{name} ', 'LawSetup',
+                          f'change {old} to {hook}(self, setup)', 'docs/extending.md')
+    assert not (tmp_path / 'out' / 'summary.json').exists()
+    # Listing the plugins names it the same way, with exit status 2.
+    assert_one_line_error(sim(site, '--list'), f'flock_swarm.laws:{name}', f'change {old}')
+
+
+def test_the_plugin_facade_exports_every_type_its_hooks_mention():
+    """Every class in the annotations of Law's and LeaderModel's hooks is in plugin.__all__."""
+    import typing
+
+    from flock_swarm import plugin
+    exported = {getattr(plugin, name) for name in plugin.__all__}
+    seen = set()
+    for base in (plugin.Law, plugin.LeaderModel, plugin.LawSetup, plugin.AgentData):
+        for attr in vars(base).values():
+            func = attr.fget if isinstance(attr, property) else getattr(attr, '__func__', attr)
+            if not callable(func):
+                continue
+            for hint in typing.get_type_hints(func).values():
+                stack = [hint]
+                while stack:
+                    t = stack.pop()
+                    stack.extend(typing.get_args(t))
+                    if isinstance(t, type) and t.__module__.startswith('flock_swarm'):
+                        seen.add(t)
+    assert {plugin.LawContext, plugin.LawSetup, plugin.LeaderState, plugin.AgentData,
+            plugin.StepViolation} <= seen
+    assert seen <= exported, sorted(t.__name__ for t in seen - exported)
+    for name in ('LawSetup', 'ObserverGroup', 'StepViolation'):
+        assert typing.get_type_hints(getattr(plugin, name))  # each a typed dataclass
+    # Nothing else public: what plugin.py imports it exports (pytest's rewriting adds '@' names).
+    assert set(plugin.__all__) == {n for n in vars(plugin) if n[0].isalpha()}
+
+
+def test_py_typed_ships_with_the_package():
+    from importlib.resources import files
+    assert files('flock_swarm').joinpath('py.typed').is_file()
+    setup_py = (Path(__file__).resolve().parents[1] / 'setup.py').read_text()
+    assert "package_data={package_name: ['py.typed']}" in setup_py
+
+
+#: What core/laws/base.py may import: leaves of the core (the laws' base builds on nothing else).
+CORE_LEAF_IMPORTS = {'flock_swarm.core.graphs', 'flock_swarm.core.leaders.base',
+                     'flock_swarm.core.checks', 'flock_swarm.core.errors'}
+
+
+def test_the_law_base_module_imports_nothing_above_it():
+    """core/laws/base.py imports (also under TYPE_CHECKING) only leaves of the core."""
+    import flock_swarm.core.laws.base as base
+    ours = {m for m in _imports(Path(base.__file__).read_text()) if m.startswith('flock_swarm')}
+    assert ours <= CORE_LEAF_IMPORTS, ours - CORE_LEAF_IMPORTS
+    assert 'TYPE_CHECKING' not in Path(base.__file__).read_text()
+    # And the leaves themselves import no other flock_swarm module than errors/checks.
+    for leaf in CORE_LEAF_IMPORTS:
+        module = __import__(leaf, fromlist=['_'])
+        text = Path(module.__file__).read_text()
+        others = {m for m in _imports(text) if m.startswith('flock_swarm')}
+        assert others <= {'flock_swarm.core.errors', 'flock_swarm.core.checks'}, (leaf, others)
+
+
+def _imports(text: str) -> set[str]:
+    import ast
+    out = set()
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            out.add(node.module)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return out
+
+
+def test_no_import_cycle_among_the_core_modules():
+    """The graph of flock_swarm.core imports (type-only ones included) has no cycle."""
+    import flock_swarm.core as core
+    root = Path(core.__file__).resolve().parent
+    modules = {}
+    for path in root.rglob('*.py'):
+        rel = path.relative_to(root.parent.parent).with_suffix('')
+        name = '.'.join(rel.parts).removesuffix('.__init__')
+        modules[name] = {m for m in _imports(path.read_text())
+                         if m.startswith('flock_swarm.core')}
+    state = {}
+
+    def visit(name, trail):
+        if state.get(name) == 'done':
+            return
+        assert state.get(name) != 'open', ' -> '.join(trail + [name])
+        state[name] = 'open'
+        for dep in sorted(modules.get(name, ())):
+            if dep in modules and dep != name:
+                visit(dep, trail + [name])
+        state[name] = 'done'
+    for name in sorted(modules):
+        visit(name, [])
+
+
+@pytest.mark.parametrize('module', ['flock_swarm.core.laws.base', 'flock_swarm.core.stability',
+                                    'flock_swarm.core.registry', 'flock_swarm.core.scenario',
+                                    'flock_swarm.core.run', 'flock_swarm.core.summary',
+                                    'flock_swarm.plugin'])
+def test_each_core_module_imports_alone_in_a_fresh_interpreter(module):
+    proc = subprocess.run([sys.executable, '-c', f'import {module}'], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr

@@ -8,8 +8,9 @@ import pytest
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.run import check_step
 from flock_swarm.core.scenario import apply_override, parse_scenario, parse_value, realize
-from flock_swarm.core.stability import check_step, packing_degree, pd_dt_max, pd_stable
+from flock_swarm.core.stability import packing_degree, pd_dt_max, pd_stable
 from flock_swarm.presets import load, load_mapping, preset_names
 
 BASE = {

@@ -1,6 +1,6 @@
 """The SROS2 policy (config/sros2_policy.xml): one enclave per node, exactly the node's topics.
 
-The expected topics are built here from the names in :mod:`flock_swarm.nodes.common`, and
+The expected topics are built here from the names in :mod:`flock_swarm.contract`, and
 checked once more against the ROS graph of live world, leader and agent nodes; the policy is
 read with an XML parser of its own, not with the generator that wrote it.
 """
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from flock_swarm.nodes import common
+from flock_swarm import contract
 from flock_swarm.security import main as security_main, policy
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -31,16 +31,16 @@ def absolute(name: str) -> str:
 
 
 def expected(n: int) -> dict[str, tuple[set, set]]:
-    """Return ``{node: (published, subscribed)}``, from the topic names of nodes/common.py."""
-    odom = {common.odom_topic(i) for i in range(n)}
-    cmds = {common.cmd_topic(i) for i in range(n)}
-    leader = {common.LEADER_ODOM, common.LEADER_ACCEL}
-    status = {common.STATUS}  # the world announces the end of its run to the others
-    nodes = {'world': ({common.CLOCK, common.MARKERS, common.METRICS} | odom | status,
+    """Return ``{node: (published, subscribed)}``, from the topic names of the contract."""
+    odom = {contract.odom_topic(i) for i in range(n)}
+    cmds = {contract.cmd_topic(i) for i in range(n)}
+    leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
+    status = {contract.STATUS}  # the world announces the end of its run to the others
+    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS} | odom | status,
                        cmds | leader),
-             'leader': (leader, {common.CLOCK} | status)}
+             'leader': (leader, {contract.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({common.cmd_topic(i)}, odom | leader | status)
+        nodes[f'agent_{i}'] = ({contract.cmd_topic(i)}, odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
 

@@ -218,3 +218,53 @@ def test_freed_arrays_are_kept_for_the_next_ones():
     for _ in range(50):
         step()
     assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before < 5000
+
+
+@pytest.mark.parametrize('preset, overrides', [
+    ('demo', ['dt=1.0', 'duration=2']),
+    ('zhou2012_sec51', ['dt=0.01']),
+    ('yu2010_sec41', ['dt=0.05', 'duration=1']),
+])
+def test_prepare_refuses_the_dt_sim_refuses_with_the_same_line(capsys, preset, overrides):
+    """The one scenario preparation: sim's error line is prepare's error, word for word."""
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.presets import StepError, load_mapping, prepare
+    args = [x for o in overrides for x in ('--set', o)]
+    assert main([preset, *args, '--quiet']) == 2
+    line = capsys.readouterr().err.strip()
+    assert line.startswith('sim: error: dt: ') and '\n' not in line
+    with pytest.raises(StepError) as refused:
+        prepare(preset, overrides)
+    assert f'sim: error: {refused.value}' == line
+    assert isinstance(refused.value, ScenarioError) and refused.value.key == 'dt'
+    assert refused.value.violations
+    # A node's way in: the mapping it read plus its parameters as parsed values.
+    base = load_mapping(preset)
+    kept = json.dumps(base, sort_keys=True)
+    extra = {k: yaml_value(v) for k, v in (o.split('=', 1) for o in overrides)}
+    with pytest.raises(ScenarioError) as from_mapping:
+        prepare(base, extra=extra)
+    assert str(from_mapping.value) == str(refused.value)
+    assert json.dumps(base, sort_keys=True) == kept, 'the given mapping is not modified'
+    # --allow-unstable: prepared all the same, realisation included.
+    sc, real = prepare(preset, overrides, allow_unstable=True)
+    assert sc.dt == extra['dt'] and real.q0.shape == (sc.n_agents, sc.dim)
+
+
+def yaml_value(text):
+    """Return a ``--set`` value as a node's parameter holds it (parsed)."""
+    from flock_swarm.core.scenario import parse_value
+    return parse_value(text)
+
+
+def test_prepare_returns_what_sim_runs():
+    """Overrides, the seed and the mapping's copy: the scenario sim runs and its draw."""
+    from flock_swarm.presets import load_mapping, prepare
+    sc, real = prepare('demo', ['n_agents=6', 'informed.count=2'], seed=11)
+    assert (sc.n_agents, sc.seed, sc.raw['seed']) == (6, 11, 11)
+    again = realize(load('demo', ['n_agents=6', 'informed.count=2'], seed=11))
+    np.testing.assert_array_equal(real.q0, again.q0)
+    np.testing.assert_array_equal(real.agents.informed, again.agents.informed)
+    from_mapping, _ = prepare(load_mapping('demo'), ['n_agents=6', 'informed.count=2'], 11)
+    assert from_mapping.raw == sc.raw
+    assert prepare({**load_mapping('demo'), 'name': 'x'})[0].name == 'x'

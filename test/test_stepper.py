@@ -17,7 +17,7 @@ from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.laws.base import swarm_control
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import realize
-from flock_swarm.nodes.common import StepClock
+from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.controller import AgentController
 from flock_swarm.nodes.guard import InputGuard, Limits
 from flock_swarm.nodes.leader_watch import LeaderWatch
@@ -57,9 +57,12 @@ def give_leader(st: WorldStepper, state: LeaderState, k: int, now: float) -> Non
 
 
 def test_the_decisions_import_without_rclpy():
-    """The stepper, the controller and the leader watch load in a process without rclpy."""
+    """The stepper, the controller, the leader watch, the inboxes, the input guard, the
+    clock, the wire codec and the parameter tables load in a process without rclpy."""
     code = ('import sys\n'
             'import flock_swarm.nodes.stepper, flock_swarm.nodes.controller\n'
+            'import flock_swarm.nodes.inbox, flock_swarm.nodes.guard, flock_swarm.nodes.clock\n'
+            'import flock_swarm.nodes.wire, flock_swarm.nodes.parameters\n'
             'print(sorted(m for m in sys.modules if m.split(".")[0] in '
             '("rclpy", "rosidl_runtime_py", "builtin_interfaces", "nav_msgs")))\n')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,

@@ -7,7 +7,7 @@ from pathlib import Path
 import yaml
 
 from flock_swarm.core.metrics import STEP_METRICS
-from flock_swarm.nodes.common import FRAME, MARKERS, METRICS
+from flock_swarm.contract import FRAME, MARKERS, METRICS
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 

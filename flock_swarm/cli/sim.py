@@ -13,9 +13,7 @@ from pathlib import Path
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
-from flock_swarm.core.run import check_law_output, simulate
-from flock_swarm.core.scenario import realize
-from flock_swarm.core.stability import check_step
+from flock_swarm.core.run import simulate
 from flock_swarm.outputs import ensure_writable, write_outputs
 
 #: Exit status when the state stopped being finite.
@@ -75,16 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         # --help, or an argument error already printed: the status, as for every other error.
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
-    from flock_swarm.presets import load
+    from flock_swarm.presets import prepare
     try:
-        sc = load(args.scenario, args.overrides, args.seed)
-        if args.seed is not None and args.seed < 0:
-            raise ScenarioError('--seed', f'must be >= 0, got {args.seed}')
-        real = realize(sc)
-        check_law_output(sc, real)
-        violations = check_step(sc, real)
-        if violations and not args.allow_unstable:
-            raise ScenarioError('dt', violations[0].message(sc.dt).split(': ', 1)[1])
+        sc, _ = prepare(args.scenario, args.overrides, args.seed,
+                        allow_unstable=args.allow_unstable)
     except ScenarioError as exc:
         print(f'sim: error: {exc}', file=sys.stderr)
         return EXIT_USAGE

@@ -12,6 +12,7 @@ exits with status 2), naming the entry point and the reason.
 """
 
 import dataclasses
+import inspect
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import metadata
@@ -28,6 +29,12 @@ LEADER_GROUP = 'flock_swarm.leaders'
 _BASES = {LAW_GROUP: Law, LEADER_GROUP: LeaderModel}
 #: What a plugin class must define itself (not inherit from the base class).
 _REQUIRED = {LAW_GROUP: ('radius', 'pair', 'combine'), LEADER_GROUP: ('acceleration',)}
+#: Law hooks that took the whole scenario before they took a
+#: :class:`~flock_swarm.core.laws.base.LawSetup`: ``{hook: (old signature, what to read)}``.
+_SETUP_HOOKS = {'agent_data': ('agent_data(self, sc, informed)',
+                               'setup.informed, setup.observers, setup.n_agents, setup.dim'),
+                'step_bounds': ('step_bounds(self, sc, real)',
+                                'setup.dt, setup.adjacency, setup.informed, setup.dim')}
 
 
 class PluginError(ScenarioError):
@@ -113,6 +120,35 @@ def _problem(group: str, name: str, cls) -> str | None:
             return f'does not define {attr}'
     if cls.name != name:
         return f'names itself {cls.name!r}, not {name!r} (set name: ClassVar[str] = {name!r})'
+    if group == LAW_GROUP:
+        return _old_hook(cls)
+    return None
+
+
+def _old_hook(cls: type) -> str | None:
+    """Return what to change in a law written for the hooks that took the scenario, if any.
+
+    ``agent_data`` and ``step_bounds`` take one :class:`~flock_swarm.core.laws.base.LawSetup`;
+    a law still defining them with two arguments (``sc, informed`` / ``sc, real``) is
+    refused when it is loaded, with the change to make, rather than failing in the middle of
+    a run with a ``TypeError``.
+    """
+    for hook, (old, reads) in _SETUP_HOOKS.items():
+        method = getattr(cls, hook)
+        if method is getattr(Law, hook):
+            continue
+        try:
+            params = list(inspect.signature(method).parameters.values())[1:]
+        except (TypeError, ValueError):
+            continue
+        if any(p.kind is p.VAR_POSITIONAL for p in params):
+            continue
+        required = [p for p in params if p.default is p.empty
+                    and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+        if len(required) != 1:
+            return (f'{hook} must take one argument, setup (a flock_swarm.plugin.LawSetup: '
+                    f'{reads}), not the scenario: change {old} to {hook}(self, setup) '
+                    '(docs/extending.md)')
     return None
 
 

@@ -3,8 +3,9 @@
 :func:`simulate` (and :func:`simulate_stack`, several realisations side by side) runs a scenario
 to its end; :class:`RunLog` is the bookkeeping of a run (whole-run metrics and the subsampled
 time series) shared by ``sim``, the world node and ``analyze``; :func:`build_summary` assembles
-``summary.json`` (see ``docs/outputs.md``). The step uses the same law functions as the agent
-node (:mod:`flock_swarm.core.laws`). No file I/O here: :mod:`flock_swarm.outputs` writes.
+``summary.json`` (see ``docs/outputs.md``); :func:`check_law_output` and :func:`check_step`
+are the checks before a run. The step uses the same law functions as the agent node
+(:mod:`flock_swarm.core.laws`). No file I/O here: :mod:`flock_swarm.outputs` writes.
 """
 
 import ctypes
@@ -14,16 +15,18 @@ from typing import Callable
 
 import numpy as np
 
-from flock_swarm import __version__
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
-from flock_swarm.core.laws.base import AgentData, advance_state, output_problem, swarm_control
+from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
+                                        swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
+from flock_swarm.core.stability import model_bounds
+from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
 
 #: glibc's mallopt() parameters (malloc.h) and the values simulate() sets: blocks below
 #: 32 MB come from the heap, and up to 64 MB freed at its top are kept (see keep_freed_memory).
@@ -179,6 +182,23 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
         raise PluginError('protocol.name', f'{label}: {problem}')
 
 
+def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
+    """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
+
+    The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`, given the
+    run's :class:`~flock_swarm.core.laws.base.LawSetup`), then RK4's for the leader model
+    and the intrinsic dynamics (:func:`~flock_swarm.core.stability.model_bounds`).
+
+    :param sc: the scenario.
+    :param real: its realisation (fixed graphs, informed set).
+    :return: the violations.
+    """
+    found = list(sc.law.step_bounds(real.setup))
+    for part, model in (('leader model', sc.leader.model), ('intrinsic dynamics', sc.intrinsic)):
+        found += model_bounds(part, model, sc.leader.velocity, sc.dim, sc.dt)
+    return found
+
+
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
              progress_every: float = 2.0) -> SimResult:
     """Run a scenario to its end and return the summary and the recorded time series.
@@ -231,10 +251,10 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
         status, step = stack.outcome[g]
         log = stack.logs[g]
         series = log.rec.arrays()
-        summary = build_summary(s, real, series, log.metrics, step, status)
-        summary['pseudo_leader_reselections'] = 0 if stack.reselector is None \
-            else stack.reselector.count
-        summary['wall_time_s'] = round(wall, 3)
+        summary = build_summary(
+            s, real, series, log.metrics, step, status,
+            pseudo_leader_reselections=0 if stack.reselector is None else stack.reselector.count,
+            wall_time_s=round(wall, 3))
         results.append(SimResult(summary, series))
     return results
 
@@ -423,8 +443,11 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
 
 
 def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics,
-                  step: int, status: str) -> dict:
+                  step: int, status: str, **given) -> dict:
     """Return the ``summary.json`` mapping from the last recorded instant and the run totals.
+
+    The keys, their order and their values are those of the table of summary keys
+    (:data:`flock_swarm.core.summary.SUMMARY_KEYS`).
 
     :param sc: the scenario.
     :param real: its realisation.
@@ -432,36 +455,17 @@ def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics
     :param run: the whole-run metrics.
     :param step: the last step reached.
     :param status: ``completed``, ``interrupted`` or ``diverged``.
+    :param given: the keys a front end gives (``wall_time_s``...), written in their place.
     :return: the summary (the keys of ``docs/outputs.md``, provenance included).
     """
-    last = {k: float(series[f'metric_{k}'][-1]) for k in STEP_METRICS}
-    summary = {
-        'n_agents': sc.n_agents,
-        't_final': float(series['t'][-1]),
-        'steps': int(step),
-        'eta': last['eta'],
-        'eta_tolerance': sc.eta_tolerance,
-        'velocity_mismatch_max': last['velocity_mismatch_max'],
-        'com_position_error': last['com_position_error'],
-        'com_velocity_error': last['com_velocity_error'],
-        'min_pair_distance': run.min_pair_distance,
-        'collisions': len(run.collision_pairs),
-        'collision_distance': sc.collision_distance,
-        'components_final': int(last['components']),
-        'informed': [int(i) for i in np.flatnonzero(series['informed'][0])],
-        'scenario': sc.name,
-        'seed': sc.seed,
-        'protocol': sc.law.name,
-        'dt': sc.dt,
-        'status': status,
-        'flock_swarm_version': __version__,
-    }
-    if real.selection is not None:
-        summary['pseudo_leader_certificate'] = {
-            'lambda_max': real.selection.lambda_max, 'alpha': real.selection.alpha,
-            'satisfied': real.selection.satisfied, 'components': real.selection.components}
-    for key, name in sc.law.state_summary.items():
-        # The world node does not see the agents' adaptive state: only sim records it.
-        if key in series:
-            summary[name] = [float(x) for x in series[key][-1]]
-    return summary
+    return summary_of(SummaryInputs(run_facts(sc, real), series, run, step, status), **given)
+
+
+def run_facts(sc: Scenario, real: Realization) -> RunFacts:
+    """Return what a summary says about a scenario's run besides its series (:class:`RunFacts`).
+
+    :param sc: the scenario.
+    :param real: its realisation (the pseudo-leader certificate).
+    """
+    return RunFacts(sc.n_agents, sc.dt, sc.eta_tolerance, sc.collision_distance, sc.name,
+                    sc.seed, sc.law.name, real.selection, sc.law.state_summary)

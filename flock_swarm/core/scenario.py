@@ -22,7 +22,7 @@ from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, o
                                      text, vector)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
-from flock_swarm.core.laws.base import AgentData, Law, LawContext
+from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
 
@@ -78,15 +78,6 @@ class InformedSpec:
 
 
 @dataclass(frozen=True)
-class ObserverSpec:
-    """One group of pinned observers of [Yu10] eq. (6)-(7): agents sharing ``H``, ``D``."""
-
-    ids: tuple[int, ...]
-    pos_gain: np.ndarray
-    vel_gain: np.ndarray
-
-
-@dataclass(frozen=True)
 class Scenario:
     """A validated scenario (see ``docs/scenarios.md`` for every key)."""
 
@@ -103,7 +94,7 @@ class Scenario:
     graph_type: str
     graph: dict
     informed: InformedSpec
-    observers: tuple[ObserverSpec, ...]
+    observers: tuple[ObserverGroup, ...]
     position_box: np.ndarray | None
     velocity_box: np.ndarray | None
     positions: np.ndarray | None
@@ -293,7 +284,7 @@ def _parse_informed(section: dict, n: int, law: Law) -> InformedSpec:
     return InformedSpec(select, count, fraction, ids, reselect)
 
 
-def _parse_observers(value: Any, n: int, dim: int, law: Law) -> tuple[ObserverSpec, ...]:
+def _parse_observers(value: Any, n: int, dim: int, law: Law) -> tuple[ObserverGroup, ...]:
     if value is None:
         return ()
     if not law.uses_observers:
@@ -328,7 +319,8 @@ def _parse_observers(value: Any, n: int, dim: int, law: Law) -> tuple[ObserverSp
                 'H_tilde': matrix(section['H_tilde'], f'{key}.H_tilde', m, dim),
                 'D': matrix(section['D'], f'{key}.D', dim, m),
                 'D_tilde': matrix(section['D_tilde'], f'{key}.D_tilde', dim, m)}
-        groups.append(ObserverSpec(ids, mats['D'] @ mats['H'], mats['D_tilde'] @ mats['H_tilde']))
+        groups.append(ObserverGroup(ids, mats['D'] @ mats['H'],
+                                    mats['D_tilde'] @ mats['H_tilde']))
     return tuple(groups)
 
 
@@ -453,6 +445,8 @@ class Realization:
     :ivar agents: per-agent law data (informed flags, gains, adaptive state).
     :ivar adjacency: the fixed weight matrix ``W`` (already scaled) or ``None`` (disk graph).
     :ivar selection: the pseudo-leader certificate when chosen by Theorem 1.
+    :ivar setup: what the law sees of the run (:meth:`Law.agent_data`,
+        :meth:`Law.step_bounds`).
     """
 
     q0: np.ndarray
@@ -460,6 +454,7 @@ class Realization:
     agents: AgentData
     adjacency: np.ndarray | None
     selection: PseudoLeaderSelection | None
+    setup: LawSetup
 
     @property
     def informed_ids(self) -> list[int]:
@@ -510,11 +505,31 @@ def realize(sc: Scenario) -> Realization:
         informed[list(selection.ids)] = True
     for group in sc.observers:
         informed[list(group.ids)] = True
-    agents = AgentData(informed, sc.law.agent_data(sc, informed), sc.law.initial_state(n))
+    setup = law_setup(sc, informed, unit_adj)
+    agents = AgentData(informed, sc.law.agent_data(setup), sc.law.initial_state(n))
     weights = None
     if unit_adj is not None:
         weights = unit_adj * sc.law.coupling_weight
-    return Realization(q0, p0, agents, weights, selection)
+    return Realization(q0, p0, agents, weights, selection, setup)
+
+
+def law_setup(sc: Scenario, informed: np.ndarray, adjacency: np.ndarray | None) -> LawSetup:
+    """Return what the scenario's law sees of a realised run (:class:`LawSetup`).
+
+    :param sc: the scenario.
+    :param informed: the informed agents at ``t = 0``.
+    :param adjacency: the graph's weights before the law's coupling weight, or ``None``.
+    :return: the setup, with read-only copies of the arrays.
+    """
+    def frozen(a: np.ndarray | None) -> np.ndarray | None:
+        if a is None:
+            return None
+        out = np.array(a, copy=True)
+        out.flags.writeable = False
+        return out
+    return LawSetup(dim=sc.dim, n_agents=sc.n_agents, graph_type=sc.graph_type,
+                    leader_model=sc.leader.model.name, dt=sc.dt, adjacency=frozen(adjacency),
+                    informed=frozen(informed), observers=sc.observers)
 
 
 def highest_degree(adjacency: np.ndarray, count: int) -> np.ndarray:

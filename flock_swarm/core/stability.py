@@ -16,32 +16,17 @@ explicit integrators and diverge when ``dt`` is too large:
 The gradient (spring) terms are not checked: their stiffness depends on the configuration.
 """
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from flock_swarm.core.graphs import diffusive_matrix
-
-if TYPE_CHECKING:  # pragma: no cover - types only: the laws import this module
-    from flock_swarm.core.scenario import Realization, Scenario
+from flock_swarm.core.laws.base import LawSetup, StepViolation
+from flock_swarm.core.leaders.base import LeaderModel
 
 #: RK4 is stable for ``dt lambda`` in ``[-2.785, 0]`` on the real axis.
 RK4_REAL_LIMIT = 2.78
 
-
-@dataclass(frozen=True)
-class StepViolation:
-    """One violated bound: what it protects, the largest stable ``dt``, and why."""
-
-    part: str
-    dt_max: float
-    detail: str
-
-    def message(self, dt: float) -> str:
-        """Return the one-line message for a run with step ``dt``."""
-        return (f'dt: {dt:g} exceeds the stability bound {self.dt_max:.4g} of the '
-                f'{self.part} ({self.detail}); use dt < {self.dt_max:.4g}')
+__all__ = ['RK4_REAL_LIMIT', 'StepViolation', 'consensus_bounds', 'model_bounds',
+           'packing_degree', 'pd_dt_max', 'pd_stable']
 
 
 def pd_stable(kp: float, kv: float, dt: float) -> bool:
@@ -73,7 +58,7 @@ def packing_degree(r: float, spacing: float, dim: int) -> int:
     return max(int(((r + 0.5 * spacing) / (0.5 * spacing)) ** dim) - 1, 1)
 
 
-def consensus_bounds(sc: 'Scenario', real: 'Realization', kp: float, kv: float,
+def consensus_bounds(setup: LawSetup, radius: float, kp: float, kv: float,
                      coupling: float, spacing: float) -> list[StepViolation]:
     """Return the violated bounds of a PD navigation term plus velocity consensus.
 
@@ -81,19 +66,19 @@ def consensus_bounds(sc: 'Scenario', real: 'Realization', kp: float, kv: float,
     r-disk graph by ``2 deg_max`` with ``deg_max`` from :func:`packing_degree` for agents at
     least ``spacing`` apart.
 
-    :param sc: the scenario.
-    :param real: its realisation (the fixed graph, if any).
+    :param setup: the run (its ``dt``, dimension and fixed graph, if any).
+    :param radius: the law's interaction radius (of the r-disk graph).
     :param kp: the position gain of the navigation term.
     :param kv: its velocity gain.
     :param coupling: the gain of the velocity consensus term.
     :param spacing: the law's desired distance between neighbours.
     :return: the violations (empty when ``dt`` is fine).
     """
-    if real.adjacency is not None:
-        lam = float(-np.linalg.eigvalsh(diffusive_matrix(real.adjacency))[0])
+    if setup.adjacency is not None:
+        lam = float(-np.linalg.eigvalsh(diffusive_matrix(setup.adjacency))[0])
         source = 'fixed graph Laplacian'
     else:
-        lam = 2.0 * packing_degree(sc.law.radius, spacing, sc.dim)
+        lam = 2.0 * packing_degree(radius, spacing, setup.dim)
         source = f'r-disk Laplacian <= {lam:g} for agents >= {spacing:.3g} apart'
     found = []
     for part, kv_total, detail in (
@@ -101,33 +86,33 @@ def consensus_bounds(sc: 'Scenario', real: 'Realization', kp: float, kv: float,
             ('velocity consensus', kv + coupling * lam,
              f'k_v = {kv:g} + {coupling:g} x {source}')):
         bound = pd_dt_max(kp, kv_total)
-        if sc.dt >= bound:
+        if setup.dt >= bound:
             found.append(StepViolation(part, bound, detail))
     return found
 
 
-def check_step(sc: 'Scenario', real: 'Realization') -> list[StepViolation]:
-    """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
+def model_bounds(part: str, model: LeaderModel | None, p0: np.ndarray, dim: int,
+                 dt: float) -> list[StepViolation]:
+    """Return RK4's violated bound for a leader model (or the intrinsic dynamics) at ``dt``.
 
-    The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`), then RK4's
-    for the leader model and the intrinsic dynamics.
+    ``dt max|lambda(J)| < 2.78`` with ``J`` the model's Jacobian at the velocity ``p0`` and at
+    rest; nothing for a model without a Jacobian.
 
-    :param sc: the scenario.
-    :param real: its realisation (fixed graphs, gains).
-    :return: the violations.
+    :param part: what the model is, for the message (``leader model``...).
+    :param model: the model, or ``None`` (nothing to check).
+    :param p0: the leader's initial velocity.
+    :param dim: the dimension.
+    :param dt: the step.
+    :return: the violation, if any.
     """
-    found = list(sc.law.step_bounds(sc, real))
-    for part, model, p0 in (('leader model', sc.leader.model, sc.leader.velocity),
-                            ('intrinsic dynamics', sc.intrinsic, sc.leader.velocity)):
-        if model is None:
-            continue
-        points = (np.asarray(p0, dtype=float), np.zeros(sc.dim))
-        jacobians = [model.jacobian(x) for x in points]
-        if any(j is None for j in jacobians):
-            continue
-        rate = max(float(np.max(np.abs(np.linalg.eigvals(j)))) for j in jacobians)
-        bound = RK4_REAL_LIMIT / rate if rate > 0 else float('inf')
-        if sc.dt >= bound:
-            found.append(StepViolation(part, bound,
-                                       f'RK4 with spectral radius {rate:.4g} of the Jacobian'))
-    return found
+    if model is None:
+        return []
+    points = (np.asarray(p0, dtype=float), np.zeros(dim))
+    jacobians = [model.jacobian(x) for x in points]
+    if any(j is None for j in jacobians):
+        return []
+    rate = max(float(np.max(np.abs(np.linalg.eigvals(j)))) for j in jacobians)
+    bound = RK4_REAL_LIMIT / rate if rate > 0 else float('inf')
+    if dt >= bound:
+        return [StepViolation(part, bound, f'RK4 with spectral radius {rate:.4g} of the Jacobian')]
+    return []

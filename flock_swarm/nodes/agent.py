@@ -15,6 +15,7 @@ a step costs ``N`` odometry deliveries per container instead of ``N`` per agent.
 agent still publishes on its own ``agent_<i>/cmd_accel``.
 """
 
+import dataclasses
 import re
 import sys
 import time
@@ -24,29 +25,38 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 
-from flock_swarm.core.errors import ScenarioError
-from flock_swarm.nodes.common import (COMMON_PARAMS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                      StepClock, cmd_topic, command_claims, declare,
-                                      declare_common, follow_world, load_scenario, odom_topic,
-                                      run_node,
-                                      timer_period)
-from flock_swarm.nodes.controller import AgentController, parse_agent_ids
-from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
-from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryBatch, decode_accel,
-                                    decode_odometry)
+from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
+                                  odom_topic, qos_profile)
+from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.controller import AgentController, OdometryInbox, parse_agent_ids
+from flock_swarm.nodes.graph import check_claims, follow_world
+from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
+from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
+                                          init_node)
+from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
 
-AGENT_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {'agent_id', 'agent_ids', 'leader_timeout',
-                                               'leader_start_timeout', 'keep_running'}
-#: The agents' timeouts [s] (each must be > 0): default and description.
-TIMEOUTS = {
-    'leader_timeout': (1.0, 'seconds without the leader state (lockstep: for a step whose '
-                       'odometry is complete) before the agents apply the uninformed law, '
-                       'until it returns; below the world step_timeout'),
-    'leader_start_timeout': (30.0, 'lockstep: seconds to wait for the leader\'s first state (it '
-                             'answers its first tick only once every node has matched its '
-                             'topics, up to its own start_timeout) before the agents apply the '
-                             'uninformed law'),
-}
+
+def _timeout(name: str, default: float, description: str) -> Param:
+    """Return one of the agents' timeouts [s], which must be > 0."""
+    return Param(name, default, description, lambda v: v > 0, 'must be > 0, got {value!r}')
+
+
+#: The ``agent_ids`` parameter (its default is the node's: ``all`` for the container).
+AGENT_IDS = Param('agent_ids', '', "agents this node hosts: '' (agent_id alone), 'all', ids "
+                  "and ranges such as '0-9,12', or an integer array (reads back as the ids "
+                  'hosted)', free_typed=True)
+#: The agents' parameters, in the order they are read and checked.
+AGENT_PARAMS = COMMON_PARAMS + (
+    Param('agent_id', 0, 'index i of this agent (0-based)'),
+    AGENT_IDS,
+    _timeout('leader_timeout', 1.0, 'seconds without the leader state (lockstep: for a step '
+             'whose odometry is complete) before the agents apply the uninformed law, until '
+             'it returns; below the world step_timeout'),
+    _timeout('leader_start_timeout', 30.0, 'lockstep: seconds to wait for the leader\'s first '
+             'state (it answers its first tick only once every node has matched its topics, up '
+             'to its own start_timeout) before the agents apply the uninformed law'),
+) + LIMIT_PARAMS + (KEEP_RUNNING,)
 
 
 class AgentNode(Node):
@@ -59,54 +69,45 @@ class AgentNode(Node):
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
         name = kwargs.pop('node_name', None)
-        super().__init__(name or 'agent', **kwargs)
-        declare_common(self)
-        agent_id = declare(self, 'agent_id', 0, 'index i of this agent (0-based)')
-        if not isinstance(agent_id, int) or isinstance(agent_id, bool):
-            raise ScenarioError('agent_id', f'expected an integer, got {agent_id!r}')
-        spec = declare(self, 'agent_ids', default_agent_ids,
-                       "agents this node hosts: '' (agent_id alone), 'all', ids and ranges "
-                       "such as '0-9,12', or an integer array")
-        sc = self.scenario = load_scenario(self, AGENT_PARAMS)
-        timeouts = {}
-        for key, (default, what) in TIMEOUTS.items():
-            value = timeouts[key] = declare(self, key, default, what)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-                raise ScenarioError(key, f'must be > 0, got {value!r}')
-        self.controller = AgentController(sc, parse_agent_ids(spec, agent_id, sc.n_agents),
-                                          self.get_logger(), **timeouts)
+        init_node(super().__init__, name or 'agent', kwargs)
+        table = tuple(dataclasses.replace(param, default=default_agent_ids)
+                      if param is AGENT_IDS else param for param in AGENT_PARAMS)
+        params = self.params = NodeParameters(self, table)
+        sc = self.scenario = params.load_scenario()
+        ids = parse_agent_ids(params['agent_ids'], params['agent_id'], sc.n_agents)
+        params.declare(agent_ids=ids.tolist())
+        self.controller = AgentController(sc, ids, self.get_logger(),
+                                          leader_timeout=params['leader_timeout'],
+                                          leader_start_timeout=params['leader_start_timeout'])
         self.clock = StepClock(sc.dt)
-        self.lockstep = self.get_parameter('mode').value == 'lockstep'
-        self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
-        self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), LOCKSTEP_QOS)
+        self.lockstep = params['mode'] == 'lockstep'
+        self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
+                                self.get_logger().warning)
+        qos = qos_profile(LOCKSTEP_QOS)
+        self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), qos)
                          for i in self.controller.ids]
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
         self.children = [f'agent_{j}' for j in range(sc.n_agents)]
         # Lockstep: a step's odometry, queued as it comes, then taken in one pass.
-        self.odom_queue: list[tuple[int, bytes]] = []
-        self.odom_queued = 0
-        self.odom_batch = OdometryBatch(self.children)
+        self.inbox = OdometryInbox(self.controller, self.guard, self.odom_topics, self.children)
         for j in range(sc.n_agents):
             self.create_subscription(Odometry, odom_topic(j),
-                                     lambda data, j=j: self.on_odom(j, data), LOCKSTEP_QOS,
-                                     raw=True)
-        self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, LOCKSTEP_QOS,
+                                     lambda data, j=j: self.on_odom(j, data), qos, raw=True)
+        self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, qos, raw=True)
+        self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel, qos,
                                  raw=True)
-        self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel,
-                                 LOCKSTEP_QOS, raw=True)
         self.encoder = AccelEncoder()
         self.outbox: list[tuple[int, bytes]] = []
         self.matched = [False] * len(self.cmd_pubs)
         self.sent: list[tuple[int, bytes]] = []
-        self.repeated = -1
         self.duplicates: set[int] = set()
         self.create_timer(1.0, self.check_claims)
-        self.world_finished = follow_world(self)
+        self.world_finished = follow_world(self, params['keep_running'])
         if self.lockstep:
             self.create_timer(0.01, self.on_lockstep_timer)
         else:
-            self.create_timer(timer_period(self, sc.dt), self.on_timer)
+            self.create_timer(params.timer_period(sc.dt), self.on_timer)
 
     leader_lost = property(lambda self: self.controller.leader.lost,
                            doc='Whether the agents apply the uninformed law (leader lost).')
@@ -118,38 +119,18 @@ class AgentNode(Node):
         is in (:meth:`take_odometry`), realtime handles it at once."""
         if not self.lockstep:
             self.on_one_odom(j, data)
-            return
-        queue = self.odom_queue
-        queue.append((j, data))
-        if len(queue) == self.scenario.n_agents:
+        elif self.inbox.put(j, data):
             self.take_odometry()
 
     def take_odometry(self) -> None:
-        """Lockstep: handle the queued odometry, in one pass when it is one step of every
-        agent in the world's layout, else message by message in the order it came.
-
-        The one pass decodes, checks and stores the step at once
-        (:class:`~flock_swarm.nodes.wire.OdometryBatch`, :meth:`InputGuard.pass_batch`):
-        about a microsecond an agent instead of ten. Whatever it does not accept whole goes
-        through :meth:`on_one_odom`, which judges, counts and logs each message.
-        """
-        queue, self.odom_queue = self.odom_queue, []
-        if len(queue) == self.scenario.n_agents:
-            buffers: list[bytes | None] = [None] * len(queue)
-            for j, data in queue:
-                buffers[j] = data
-            decoded = self.odom_batch.decode(buffers)
-            if decoded is not None:
-                ns, states = decoded
-                lim = self.guard.limits
-                k = self.guard.pass_batch(self.odom_topics, ns, ((states[:, 0], lim.position),
-                                                                 (states[:, 1], lim.velocity)))
-                box = None if k is None else self.controller.inputs(k)
-                if box is not None:
-                    self.controller.latest_step = k
-                    box.put_all(np.ascontiguousarray(states[:, :, :self.scenario.dim]))
-                    self.try_answer(k)
-                    return
+        """Lockstep: handle the queued odometry, at once when it is one step of every agent
+        (:meth:`OdometryInbox.take_step`), else message by message in the order it came
+        (:meth:`on_one_odom`, which judges, counts and logs each message)."""
+        queue = self.inbox.take()
+        k = self.inbox.take_step(queue)
+        if k is not None:
+            self.try_answer(k)
+            return
         for j, data in queue:
             self.on_one_odom(j, data)
 
@@ -220,14 +201,13 @@ class AgentNode(Node):
 
     def answered_again(self, k: int, topic: str) -> None:
         """An input for step ``k``, already answered: repeat the commands once if the world
-        offers that step again, else reject the input as stale."""
-        if k == self.controller.answered:
-            if self.repeated != k:
-                # The world offers a stalled step again: our commands may have been lost.
-                self.repeated = k
-                self.outbox.extend(self.sent)
-                self.flush()
-        else:
+        offers that step again, else reject the input as stale
+        (:meth:`AgentController.offered_again`)."""
+        action = self.controller.offered_again(k)
+        if action == 'repeat':
+            self.outbox.extend(self.sent)
+            self.flush()
+        elif action == 'stale':
             self.guard.reject(topic, 'stale_stamp',
                               f'stamp of step {k} after step {self.controller.answered} was '
                               'answered')
@@ -240,11 +220,8 @@ class AgentNode(Node):
     def on_lockstep_timer(self) -> None:
         """Take a step's odometry that stopped short of every agent's (one by one); answer a
         step that waits for the leader once its timeout is over; send the queue."""
-        # Only a queue that did not grow since the last tick: a step still arriving from
-        # another process (over tens of milliseconds at N = 1000) stays one pass.
-        if len(self.odom_queue) == self.odom_queued:
+        if self.inbox.stalled():
             self.take_odometry()
-        self.odom_queued = len(self.odom_queue)
         k = self.controller.waiting()
         if k is not None:
             self.try_answer(k)
@@ -288,15 +265,7 @@ class AgentNode(Node):
 
     def check_claims(self) -> None:
         """Report another node publishing commands for one of our agents (a duplicate id)."""
-        me = (self.get_namespace(), self.get_name())
-        claims = command_claims(self, self.scenario.n_agents)
-        for i in self.controller.ids:
-            others = [f'{ns.rstrip("/")}/{name}' for ns, name in claims.get(int(i), ())
-                      if (ns, name) != me]
-            if others and i not in self.duplicates:
-                self.duplicates.add(int(i))
-                self.get_logger().error(f'agent_id {i} is also claimed by {", ".join(others)}: '
-                                        'two nodes command the same agent')
+        check_claims(self, self.scenario.n_agents, self.duplicates, self.controller.ids)
 
     def close(self) -> None:
         """Log what was rejected and what was replaced by zero (called on shutdown)."""

@@ -27,12 +27,15 @@ from flock_swarm.contract import CLOCK_TYPE, contract_topics, qos_profile
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.foxglove_ws import (DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
                                      message_stamp_ns, start_live)
-from flock_swarm.nodes.common import (COMMON_PARAMS, declare, declare_common, load_scenario,
-                                      make_executor, run_node)
+from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
+from flock_swarm.nodes.spin import make_executor, run_node
 
 BRIDGE_QOS = qos_profile(contract.BRIDGE_QOS)
-#: The node's own parameters (the others override scenario keys, as in every node).
-BRIDGE_PARAMS = COMMON_PARAMS | {'host', 'port'}
+#: The node's parameters (the others override scenario keys, as in every node).
+BRIDGE_PARAMS = COMMON_PARAMS + (
+    Param('host', DEFAULT_HOST, 'address the server binds (127.0.0.1: this machine only)'),
+    Param('port', DEFAULT_PORT, 'TCP port of the server (0: any)'),
+)
 
 
 class LiveBridge(Node):
@@ -49,12 +52,11 @@ class LiveBridge(Node):
 
     def __init__(self, live: LiveServer | None = None, **kwargs) -> None:
         """Create the node, its server if needed, and its subscriptions."""
-        super().__init__(kwargs.pop('node_name', 'foxglove_server'), **kwargs)
-        declare_common(self)
-        host = declare(self, 'host', DEFAULT_HOST, 'address the server binds '
-                       '(127.0.0.1: this machine only)')
-        port = declare(self, 'port', DEFAULT_PORT, 'TCP port of the server (0: any)')
-        sc = load_scenario(self, BRIDGE_PARAMS)
+        init_node(super().__init__, kwargs.pop('node_name', 'foxglove_server'), kwargs)
+        params = self.params = NodeParameters(self, BRIDGE_PARAMS)
+        sc = params.load_scenario()
+        params.declare()
+        host, port = params['host'], params['port']
         self.owned = live is None
         if live is None:
             try:

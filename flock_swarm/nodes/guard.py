@@ -25,8 +25,9 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from flock_swarm.core.errors import ScenarioError
-from flock_swarm.nodes.common import FRAME, StepClock, declare
+from flock_swarm.contract import FRAME
+from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.parameters import Param
 
 
 @dataclass(frozen=True)
@@ -42,24 +43,23 @@ class Limits:
     velocity: float = 1e4
     accel: float = 1e6
 
-
-def declare_limits(node) -> Limits:
-    """Declare the ``max_abs_position``, ``max_abs_velocity``, ``max_abs_accel`` parameters."""
-    default = Limits()
-    values = {}
-    for key, field, what in (('max_abs_position', 'position', 'm'),
-                             ('max_abs_velocity', 'velocity', 'm/s'),
-                             ('max_abs_accel', 'accel', 'm/s^2')):
-        value = declare(node, key, getattr(default, field),
-                        f'inputs with a component beyond this [{what}] are rejected')
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value <= 0:
-            raise ScenarioError(key, f'must be a finite number > 0, got {value!r}')
-        values[field] = float(value)
-    return Limits(**values)
+    @classmethod
+    def from_parameters(cls, values: dict) -> 'Limits':
+        """Return the limits of the ``max_abs_*`` parameters (:data:`LIMIT_PARAMS`) read."""
+        return cls(**{field: float(values[f'max_abs_{field}']) for field in
+                      ('position', 'velocity', 'accel')})
 
 
-LIMIT_PARAMS = {'max_abs_position', 'max_abs_velocity', 'max_abs_accel'}
+def _limit(field: str, unit: str) -> Param:
+    """Return the ``max_abs_<field>`` parameter, defaulting to :class:`Limits`'s value."""
+    return Param(f'max_abs_{field}', getattr(Limits, field),
+                 f'inputs with a component beyond this [{unit}] are rejected',
+                 lambda v: math.isfinite(v) and v > 0,
+                 'must be a finite number > 0, got {value!r}')
+
+
+#: The input limits' parameters (the world's and the agents').
+LIMIT_PARAMS = (_limit('position', 'm'), _limit('velocity', 'm/s'), _limit('accel', 'm/s^2'))
 
 
 class InputGuard:

@@ -193,7 +193,7 @@ class InProcessSwarm:
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from flock_swarm.nodes.common import make_executor
+        from flock_swarm.nodes.spin import make_executor
         from flock_swarm.nodes.world import WorldNode
 
         self.out = Path(out)

@@ -14,15 +14,23 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
+from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
+                                  qos_profile)
 from flock_swarm.core.leaders.base import VirtualLeader
-from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
-                                      LEADER_ODOM, LOCKSTEP_QOS, StepClock, agent_hosts,
-                                      declare, declare_common, follow_world, load_scenario,
-                                      run_node, timer_period)
+from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.graph import agent_hosts, follow_world
+from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
+                                          init_node)
+from flock_swarm.nodes.spin import run_node
 from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
-
-LEADER_PARAMS = COMMON_PARAMS | {'expect_subscribers', 'start_timeout', 'keep_running'}
+#: The leader's parameters, in the order they are read and checked.
+LEADER_PARAMS = COMMON_PARAMS + (
+    Param('expect_subscribers', -1, 'subscribers each leader topic must have before the first '
+          'tick is answered (-1: the world plus one per node hosting agents)'),
+    Param('start_timeout', 30.0, 'seconds to wait for expect_subscribers'),
+    KEEP_RUNNING,
+)
 
 
 class LeaderNode(Node):
@@ -30,31 +38,30 @@ class LeaderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         """Create the node; ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace...)."""
-        super().__init__('leader', **kwargs)
-        declare_common(self)
-        self.scenario = sc = load_scenario(self, LEADER_PARAMS)
+        init_node(super().__init__, 'leader', kwargs)
+        params = self.params = NodeParameters(self, LEADER_PARAMS)
+        self.scenario = sc = params.load_scenario()
+        params.declare()
         self.clock = StepClock(sc.dt)
         self.model = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
         self.step = 0
         self.target = -1
         # Lockstep: hold the first tick until every agent and the world have matched the
         # leader's topics, so nobody misses step 0 (bounded by start_timeout).
-        self.expect = declare(self, 'expect_subscribers', -1,
-                              'subscribers each leader topic must have before the first tick '
-                              'is answered (-1: the world plus one per node hosting agents)')
-        self.start_timeout = declare(self, 'start_timeout', 30.0,
-                                     'seconds to wait for expect_subscribers')
+        self.expect = params['expect_subscribers']
+        self.start_timeout = params['start_timeout']
         self.matched = False
         self.t0 = time.monotonic()
-        self.world_finished = follow_world(self)
-        self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, LOCKSTEP_QOS)
-        self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, LOCKSTEP_QOS)
+        self.world_finished = follow_world(self, params['keep_running'])
+        qos = qos_profile(LOCKSTEP_QOS)
+        self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, qos)
+        self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, qos)
         self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
-        if self.get_parameter('mode').value == 'lockstep':
-            self.create_subscription(Clock, CLOCK, self.on_clock, CLOCK_QOS)
+        if params['mode'] == 'lockstep':
+            self.create_subscription(Clock, CLOCK, self.on_clock, qos_profile(CLOCK_QOS))
             self.retry = self.create_timer(0.01, self.flush)
         else:
-            self.create_timer(timer_period(self, sc.dt), self.on_timer)
+            self.create_timer(params.timer_period(sc.dt), self.on_timer)
 
     def on_clock(self, msg: Clock) -> None:
         """Advance to the tick's step and publish (a repeated tick republishes)."""

@@ -15,7 +15,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from flock_swarm.core.graphs import EdgeList
-from flock_swarm.nodes.common import FRAME, MARKERS, METRICS, TELEMETRY_QOS
+from flock_swarm.contract import FRAME, MARKERS, METRICS, TELEMETRY_QOS, qos_profile
 from flock_swarm.nodes.wire import CdrWriter
 
 UNINFORMED = ColorRGBA(r=0.2, g=0.45, b=0.9, a=1.0)
@@ -168,8 +168,9 @@ class Telemetry:
         :param informed: which agents are informed (their colour).
         """
         self.node, self.radius, self.informed = node, radius, informed
-        self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, TELEMETRY_QOS)
-        self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, TELEMETRY_QOS)
+        qos = qos_profile(TELEMETRY_QOS)
+        self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, qos)
+        self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, qos)
 
     def emit(self, obs, rejected: dict) -> None:
         """Publish the markers and metrics due for an observed step.

@@ -23,7 +23,7 @@ from visualization_msgs.msg import MarkerArray
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import Realization, Scenario
-from flock_swarm.nodes.common import LOCKSTEP_QOS
+from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
 from flock_swarm.nodes.wire import MalformedMessage
 from flock_swarm.outputs import json_text
 
@@ -159,7 +159,7 @@ class BagSink:
 class RecordedNode(Node):
     """A node whose publications and subscriptions also go to its sinks, as the same bytes.
 
-    A subclass sets ``clock`` (a :class:`~flock_swarm.nodes.common.StepClock`), ``guard``
+    A subclass sets ``clock`` (a :class:`~flock_swarm.nodes.clock.StepClock`), ``guard``
     (an :class:`~flock_swarm.nodes.guard.InputGuard`) and ``k`` (the open step) before it
     subscribes, and fills ``sinks`` before it creates its topics.
     """
@@ -202,12 +202,13 @@ class RecordedNode(Node):
             messages to handle them at once records them itself, and hands any it does not
             take at once to :meth:`take_recorded`.
         """
+        qos = qos_profile(LOCKSTEP_QOS)
         name = self.create_subscription(
             msg_type, topic,
             take or (lambda data: self.take_recorded(name, data, decode, handler)),
-            LOCKSTEP_QOS, raw=True).topic_name
+            qos, raw=True).topic_name
         for sink in self.sinks:
-            sink.add_topic(name, msg_type, LOCKSTEP_QOS)
+            sink.add_topic(name, msg_type, qos)
         return name
 
     def take_recorded(self, name: str, data: bytes, decode: Callable,

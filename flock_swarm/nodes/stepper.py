@@ -6,25 +6,29 @@ leader's buffered states and its loss (:class:`~flock_swarm.nodes.leader_watch.L
 the resend policy of a stalled step, the integration (the same
 :func:`~flock_swarm.core.dynamics.step_agents` as ``sim``), the run log and the summary. The
 node turns messages into its calls and its :class:`Observation` into messages; every time is
-passed in (seconds of a monotonic clock), so the stepper runs as well from a unit test.
+passed in (seconds of a monotonic clock), so the stepper runs as well from a unit test. In
+lockstep, a step's commands are queued as bytes and handed over at once (:class:`CommandInbox`).
 """
 
 import bisect
 import json
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState
-from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.run import Recorder, RunLog, SimResult, build_summary
 from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.nodes.guard import InputGuard
+from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
+from flock_swarm.nodes.parameters import Param
+from flock_swarm.nodes.wire import AccelBatch
 
 #: Seconds after which a stalled lockstep step is first offered again (see ``resent``).
 RESEND_PERIOD = 0.5
@@ -114,34 +118,32 @@ class WorldSettings:
     metrics_every: int = 10
 
     @classmethod
-    def declare(cls, ask: Callable[[str, Any, str], Any], lockstep: bool) -> 'WorldSettings':
-        """Return the settings read as parameters.
+    def from_parameters(cls, values: dict, lockstep: bool) -> 'WorldSettings':
+        """Return the settings of the parameters of :data:`SETTING_PARAMS` read.
 
-        :param ask: ``ask(key, default, description)`` returns a parameter's value (the
-            node declares it).
+        :param values: ``{name: value}``, every setting included.
         :param lockstep: the mode.
-        :raises ScenarioError: naming the key of an invalid value.
         """
-        values = {}
-        for key, (what, ok) in SETTING_RULES.items():
-            values[key] = value = ask(key, getattr(cls, key), what)
-            if not ok(value):
-                raise ScenarioError(key, f'invalid value {value!r}')
-        return cls(lockstep, **values)
+        return cls(lockstep, **{param.name: values[param.name] for param in SETTING_PARAMS})
 
 
-#: The description of each setting and the check its value must pass.
-SETTING_RULES = {
-    'step_timeout': ('lockstep: seconds to wait for commands before a missing agent gets a '
-                     'zero command', lambda v: v > 0),
-    'start_timeout': ('lockstep: seconds to wait for agents and leader to appear and answer '
-                      'step 0 before starting anyway', lambda v: v >= 0),
-    'marker_every': ('publish markers every N steps', lambda v: v >= 1),
-    'metrics_every': ('publish metrics every N steps', lambda v: v >= 1),
-    'staleness': ('realtime: seconds a held command (or the leader state) stays valid; an '
-                  'older command counts as missing (zero), an older leader state as lost',
-                  lambda v: v > 0),
-}
+def _setting(name: str, description: str, check: Callable[[Any], bool]) -> Param:
+    """Return the parameter of a setting, defaulting to :class:`WorldSettings`'s value."""
+    return Param(name, getattr(WorldSettings, name), description, check)
+
+
+#: The world's settings as parameters: description and the check each value must pass.
+SETTING_PARAMS = (
+    _setting('step_timeout', 'lockstep: seconds to wait for commands before a missing agent '
+             'gets a zero command', lambda v: v > 0),
+    _setting('start_timeout', 'lockstep: seconds to wait for agents and leader to appear and '
+             'answer step 0 before starting anyway', lambda v: v >= 0),
+    _setting('marker_every', 'publish markers every N steps', lambda v: v >= 1),
+    _setting('metrics_every', 'publish metrics every N steps', lambda v: v >= 1),
+    _setting('staleness', 'realtime: seconds a held command (or the leader state) stays valid; '
+             'an older command counts as missing (zero), an older leader state as lost',
+             lambda v: v > 0),
+)
 
 
 @dataclass
@@ -528,3 +530,51 @@ class WorldStepper:
             'bag': bag,
         })
         return SimResult(summary, series)
+
+
+class CommandInbox(StepInbox):
+    """Lockstep: the agents' commands of the open step, queued as serialised bytes and handed
+    to the stepper at once once every agent's is in (:mod:`flock_swarm.nodes.inbox`).
+
+    :ivar steps_at_once: steps whose commands were taken in one pass (the rest went one by
+        one, through the node's checks).
+    """
+
+    def __init__(self, stepper: WorldStepper, guard: InputGuard, topics: Sequence[str]) -> None:
+        """Create the inbox of ``stepper``'s commands.
+
+        :param stepper: the world's stepper (its scenario gives the agents).
+        :param guard: the world's input guard.
+        :param topics: every agent's command topic, by agent.
+        """
+        super().__init__(stepper.scenario.n_agents, AccelBatch(stepper.scenario.n_agents))
+        self.stepper, self.guard, self.topics = stepper, guard, topics
+        self.steps_at_once = 0
+
+    def put(self, sender: int, data: bytes) -> bool:
+        """Queue agent ``sender``'s command; return whether the queue, with the commands the
+        stepper holds, can complete the open step: then take it."""
+        super().put(sender, data)
+        return len(self.queue) + len(self.stepper.commands) >= self.size
+
+    def take_step(self, queue: Sequence[tuple[int, bytes]]) -> int | None:
+        """Hand the stepper the commands of ``queue`` at once when they are the open step's
+        command of every agent, none held yet, and the guard passes them all
+        (:meth:`WorldStepper.commands_all`); return the step, or ``None``: then the caller
+        handles them one by one.
+
+        :param queue: the commands taken (:meth:`take`).
+        """
+        st = self.stepper
+        if st.commands or not st.started or st.done:
+            return None
+        decoded = self.decode(queue)
+        if decoded is None or self.guard.clock.step_at(decoded[0]) != st.k:
+            return None
+        ns, lin = decoded
+        k = self.guard.pass_batch(self.topics, ns, ((lin, self.guard.limits.accel),))
+        if k is None:
+            return None
+        st.commands_all(k, lin[:, 0, :st.scenario.dim])
+        self.steps_at_once += 1
+        return k

@@ -24,7 +24,7 @@ from typing import Sequence
 
 import numpy as np
 
-from flock_swarm.nodes.common import FRAME
+from flock_swarm.contract import FRAME
 
 #: Encapsulation header of little-endian plain CDR.
 CDR_LE = b'\x00\x01\x00\x00'

@@ -26,24 +26,45 @@ from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
+from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
+                                  RUNNING, STATUS, STATUS_QOS, cmd_topic, odom_topic,
+                                  qos_profile)
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.nodes.common import (CLOCK, CLOCK_QOS, COMMON_PARAMS, LEADER_ACCEL,
-                                      LEADER_ODOM, LOCKSTEP_QOS, RUNNING, STATUS, STATUS_QOS,
-                                      StepClock, agent_hosts, cmd_topic, command_claims, declare,
-                                      declare_common, declare_value, given, load_scenario,
-                                      odom_topic, run_node, timer_period)
-from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, declare_limits
+from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.graph import agent_hosts, check_claims
+from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
+from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.recording import BagSink, RecordedNode
-from flock_swarm.nodes.stepper import Observation, WorldSettings, WorldStepper
-from flock_swarm.nodes.wire import (AccelBatch, OdometryBatchEncoder, decode_accel,
-                                    decode_odometry, encode_clock)
+from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
+                                       WorldSettings, WorldStepper)
+from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
+                                    encode_clock)
 from flock_swarm.outputs import SpooledRecorder, write_outputs
 
-WORLD_PARAMS = COMMON_PARAMS | LIMIT_PARAMS | {
-    'out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every', 'metrics_every',
-    'expect_subscribers', 'expect_telemetry_subscribers', 'staleness', 'bag_max_size',
-    'bag_max_duration'}
+
+def _split_bound(name: str, default: int | float, description: str) -> Param:
+    """Return a bag-splitting parameter: 0 (no split) or a finite bound."""
+    return Param(name, default, description, lambda v: 0 <= v < float('inf'))
+
+
+#: The world's parameters, in the order they are read and checked.
+WORLD_PARAMS = COMMON_PARAMS + (
+    Param('out_dir', '', 'directory for bag/, summary.json and timeseries.npz (given empty: '
+          'out/<scenario>_ros; reads back as the directory written)'),
+    Param('record', True, 'write the MCAP bag'),
+    _split_bound('bag_max_size', 0, 'split the bag into bag_0.mcap, bag_1.mcap, ... once a '
+                 'file is larger than this many bytes (0: no split)'),
+    _split_bound('bag_max_duration', 0.0, 'split the bag once a file spans more than this '
+                 'many seconds of simulation time (0: no split)'),
+) + SETTING_PARAMS + (
+    Param('expect_subscribers', -1, 'subscribers each odometry topic must have before the '
+          'start (-1: one per node hosting agents)'),
+    Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
+          'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
+          'must be 0 or more, not {value}'),
+) + LIMIT_PARAMS
 
 
 class WorldNode(RecordedNode):
@@ -56,48 +77,30 @@ class WorldNode(RecordedNode):
             it); ``None`` logs it instead.
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
-        super().__init__('world', **kwargs)
-        declare_common(self)
-        out_dir = given(self, 'out_dir', '')
-        self.record = declare(self, 'record', True, 'write the MCAP bag')
-        split = {
-            'max_bagfile_size': declare(
-                self, 'bag_max_size', 0, 'split the bag into bag_0.mcap, bag_1.mcap, ... '
-                'once a file is larger than this many bytes (0: no split)'),
-            'max_bagfile_duration': declare(
-                self, 'bag_max_duration', 0.0, 'split the bag once a file spans more than '
-                'this many seconds of simulation time (0: no split)')}
-        for key, value in zip(('bag_max_size', 'bag_max_duration'), split.values()):
-            if not 0 <= value < float('inf'):
-                raise ScenarioError(key, f'invalid value {value!r}')
-        settings = WorldSettings.declare(
-            lambda key, default, what: declare(self, key, default, what),
-            self.get_parameter('mode').value == 'lockstep')
-        self.expect_subscribers = declare(self, 'expect_subscribers', -1,
-                                          'subscribers each odometry topic must have before '
-                                          'the start (-1: one per node hosting agents)')
-        self.expect_telemetry = declare(self, 'expect_telemetry_subscribers', 0,
-                                        'subscribers /swarm/markers and /swarm/metrics must '
-                                        'have before the start (a live-view bridge: 1)')
-        if self.expect_telemetry < 0:
-            raise ScenarioError('expect_telemetry_subscribers',
-                                f'must be 0 or more, not {self.expect_telemetry}')
-        sc = self.scenario = load_scenario(self, WORLD_PARAMS)
+        init_node(super().__init__, 'world', kwargs)
+        params = self.params = NodeParameters(self, WORLD_PARAMS)
+        sc = self.scenario = params.load_scenario()
         self.progress = progress
-        self.mode = self.get_parameter('mode').value
+        self.mode = params['mode']
+        settings = WorldSettings.from_parameters(params.values, self.mode == 'lockstep')
         self.lockstep = settings.lockstep
+        self.record = params['record']
+        self.expect_subscribers = params['expect_subscribers']
+        self.expect_telemetry = params['expect_telemetry_subscribers']
+        out_dir = params['out_dir']
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
-        declare_value(self, 'out_dir', str(self.out), 'directory for bag/, summary.json and '
-                      'timeseries.npz (given empty: out/<scenario>_ros; reads back as the '
-                      'directory written)')
+        params.declare(out_dir=str(self.out))
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
         self.spool = SpooledRecorder(self.out, self.get_logger().warning)
         self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
         self.duplicates: set[int] = set()
-        self.guard = InputGuard(self.clock, declare_limits(self), self.get_logger().warning)
+        self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
+                                self.get_logger().warning)
         self.bag = BagSink(self.out / 'bag', sc, self.stepper.real, self.mode,
-                           self.recording_failed, **split) if self.record else None
+                           self.recording_failed, max_bagfile_size=params['bag_max_size'],
+                           max_bagfile_duration=params['bag_max_duration']) \
+            if self.record else None
         try:
             self.spool.open()
         except OSError as exc:
@@ -105,10 +108,11 @@ class WorldNode(RecordedNode):
                 from None
         self.sinks = [] if self.bag is None else [self.bag]
         # Not recorded: the bag's own end (and summary.json) tell a replay how the run ended.
-        self.status_pub = self.create_publisher(String, STATUS, STATUS_QOS)
+        self.status_pub = self.create_publisher(String, STATUS, qos_profile(STATUS_QOS))
         self.status_pub.publish(String(data=RUNNING))
-        self.clock_pub = self.recorded_publisher(Clock, CLOCK, CLOCK_QOS)
-        self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), LOCKSTEP_QOS)
+        lockstep_qos = qos_profile(LOCKSTEP_QOS)
+        self.clock_pub = self.recorded_publisher(Clock, CLOCK, qos_profile(CLOCK_QOS))
+        self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), lockstep_qos)
                           for i in range(sc.n_agents)]
         self.odom_encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)])
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
@@ -116,12 +120,6 @@ class WorldNode(RecordedNode):
         self.step_bytes: list[tuple] = []
         self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed)
         subscribe = self.recorded_subscription
-        # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
-        self.cmd_queue: list[tuple[int, bytes]] = []
-        self.cmd_queue_seen = 0
-        self.cmd_batch = AccelBatch(sc.n_agents)
-        #: Steps whose commands were taken in one pass (the rest went one by one).
-        self.steps_at_once = 0
         self.cmd_handlers = [lambda msg, i=i: self.on_command(i, msg)
                              for i in range(sc.n_agents)]
         self.cmd_topics = [subscribe(AccelStamped, cmd_topic(i), decode_accel,
@@ -129,13 +127,15 @@ class WorldNode(RecordedNode):
                                      (lambda data, i=i: self.queue_command(i, data))
                                      if self.lockstep else None)
                            for i in range(sc.n_agents)]
+        # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
+        self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
         self.create_timer(1.0, self.check_claims)
         self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
         self.timer = self.create_timer(0.01, self.on_lockstep_timer) if self.lockstep else \
-            self.create_timer(timer_period(self, sc.dt), self.on_realtime_timer)
+            self.create_timer(params.timer_period(sc.dt), self.on_realtime_timer)
 
     # The stepper's state, as the runner and the tests read it off the node.
     k = property(lambda self: self.stepper.k, doc='The open step.')
@@ -144,47 +144,32 @@ class WorldNode(RecordedNode):
     leader_lost = property(lambda self: self.stepper.leader.lost, doc='The leader is lost.')
     bag_error = property(lambda self: None if self.bag is None else self.bag.error,
                          doc='Why recording failed, or ``None``.')
+    steps_at_once = property(lambda self: self.inbox.steps_at_once,
+                             doc='Steps whose commands were taken in one pass.')
 
     # -- messages in and out ------------------------------------------------------------------
 
     def queue_command(self, i: int, data: bytes) -> None:
         """Lockstep: queue agent ``i``'s command (serialised); take the queue once it can
         complete the step."""
-        queue = self.cmd_queue
-        queue.append((i, data))
-        if len(queue) + len(self.stepper.commands) >= self.scenario.n_agents:
+        if self.inbox.put(i, data):
             self.take_commands()
 
     def take_commands(self) -> None:
-        """Lockstep: handle the queued commands, in one pass when they are the open step's
-        command of every agent in the agents' layout, else message by message in the order
-        they came (:meth:`~RecordedNode.take_recorded`, :meth:`on_command`: each judged,
-        counted and recorded as it would have been on arrival).
-
-        The one pass (:class:`~flock_swarm.nodes.wire.AccelBatch`,
-        :meth:`InputGuard.pass_batch`) records them in their order of arrival and hands
-        the step's commands to the stepper at once.
+        """Lockstep: handle the queued commands, at once when they are the open step's
+        command of every agent (:meth:`CommandInbox.take_step`: recorded here in their order
+        of arrival), else message by message in the order they came
+        (:meth:`~RecordedNode.take_recorded`, :meth:`on_command`: each judged, counted and
+        recorded as it would have been on arrival).
         """
-        queue, self.cmd_queue = self.cmd_queue, []
-        self.cmd_queue_seen = 0
-        st, n = self.stepper, self.scenario.n_agents
-        if len(queue) == n and not st.commands and st.started and not st.done:
-            buffers: list[bytes | None] = [None] * n
+        queue = self.inbox.take()
+        k = self.inbox.take_step(queue)
+        if k is not None:
+            t_ns, topics = self.clock.ns(k), self.cmd_topics
             for i, data in queue:
-                buffers[i] = data
-            decoded = self.cmd_batch.decode(buffers)
-            if decoded is not None and self.clock.step_at(decoded[0]) == st.k:
-                ns, lin = decoded
-                k = self.guard.pass_batch(self.cmd_topics, ns,
-                                          ((lin, self.guard.limits.accel),))
-                if k is not None:
-                    t_ns, topics = self.clock.ns(k), self.cmd_topics
-                    for i, data in queue:
-                        self.record_message(topics[i], data, t_ns)
-                    st.commands_all(k, lin[:, 0, :self.scenario.dim])
-                    self.steps_at_once += 1
-                    self._maybe_finish()
-                    return
+                self.record_message(topics[i], data, t_ns)
+            self._maybe_finish()
+            return
         for i, data in queue:
             self.take_recorded(self.cmd_topics[i], data, decode_accel, self.cmd_handlers[i])
 
@@ -225,12 +210,7 @@ class WorldNode(RecordedNode):
 
     def check_claims(self) -> None:
         """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
-        for i, nodes in sorted(command_claims(self, self.scenario.n_agents).items()):
-            if len(nodes) > 1 and i not in self.duplicates:
-                self.duplicates.add(i)
-                names = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
-                self.get_logger().error(f'agent {i} is claimed by {len(nodes)} nodes ({names}): '
-                                        'a duplicate agent_id')
+        check_claims(self, self.scenario.n_agents, self.duplicates)
 
     def publish_states(self, t_ns: int) -> None:
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
@@ -282,13 +262,11 @@ class WorldNode(RecordedNode):
         Queued commands are taken one by one once the queue stopped growing for a tick (an
         agent is missing, or a message was doubled), and before a step times out.
         """
-        queued = len(self.cmd_queue)
-        if queued and queued == self.cmd_queue_seen:
+        if self.inbox.stalled():
             self.take_commands()
             return
-        self.cmd_queue_seen = queued
         due = self.stepper.tick(time.monotonic(), self.ready_to_start)
-        if due == 'timeout' and self.cmd_queue:
+        if due == 'timeout' and len(self.inbox):
             k = self.k
             self.take_commands()
             if self.k != k or self.done:

@@ -11,11 +11,10 @@ from typing import Any, Callable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.run import simulate
-from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.core.stability import check_step
+from flock_swarm.core.run import check_step, simulate
+from flock_swarm.core.scenario import Scenario
 from flock_swarm.outputs import write_outputs
-from flock_swarm.presets import load
+from flock_swarm.presets import load, prepare
 from flock_swarm.reproduce import su2009
 from flock_swarm.reproduce.catalogue import ANALYSES, EXPERIMENTS, FIGURES
 from flock_swarm.reproduce.common import Experiment, fmt, set_args
@@ -62,7 +61,7 @@ def run_task(task: dict) -> dict:
 
     :return: its summary.
     """
-    sc = load(task['preset'], task['overrides'])
+    sc, _ = prepare(task['preset'], task['overrides'])
     result = simulate(sc)
     write_outputs(result, Path(task['out']), sc)
     return {'kind': 'preset', 'key': task['key'], 'summary': result.summary}
@@ -94,7 +93,7 @@ def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
         if exp.key == 'su2009_fig3':
             continue
         overrides = preset_overrides(exp, plan.quick)
-        sc = load(exp.key, overrides)
+        sc, _ = prepare(exp.key, overrides)
         run_dir = out / 'runs' / exp.key
         summary = None if fresh else cached_preset(run_dir, sc)
         if summary is not None:
@@ -221,7 +220,7 @@ def experiment_result(exp: Experiment, plan: Plan, summary: dict, out: Path,
     :return: the result mapping.
     """
     overrides = preset_overrides(exp, plan.quick)
-    sc = load(exp.key, overrides)
+    sc, real = prepare(exp.key, overrides, allow_unstable=True)
     with np.load(out / 'runs' / exp.key / 'timeseries.npz') as data:
         series = {k: data[k] for k in data.files}
     metrics = ANALYSES[exp.key](sc, summary, series)
@@ -229,5 +228,5 @@ def experiment_result(exp: Experiment, plan: Plan, summary: dict, out: Path,
     return {'key': exp.key, 'title': exp.title, 'preset': exp.key, 'overrides': overrides,
             'command': f'sim {exp.key}{set_args(overrides)}', 'seed': sc.seed,
             'n_agents': sc.n_agents, 'dt': sc.dt, 'duration': sc.duration,
-            'stability_violations': len(check_step(sc, realize(sc))),
+            'stability_violations': len(check_step(sc, real)),
             'summary': plain(summary), 'metrics': plain(metrics), 'figure': fig.name}

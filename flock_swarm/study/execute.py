@@ -23,10 +23,11 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from flock_swarm import __version__
+from flock_swarm.core import summary
 from flock_swarm.core.run import SimResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.study.cache import CacheWriter, read_cache
-from flock_swarm.study.spec import TIMED_METRICS, Run, plain, timed_column
+from flock_swarm.study.spec import Run, plain, timed_column
 
 #: Without a terminal, progress lines come at most this often [s] (on one, a live line).
 PROGRESS_EVERY = 30.0
@@ -109,14 +110,13 @@ class MetricRecorder:
         for name in self.metrics:
             record[name] = plain(s[name])
         if self.times:
-            t = series['t']
+            t, timed = series['t'], summary.timed_series()
             for when in self.times:
                 # The first recorded instant at or after `when` (half a step of slack).
                 k = min(int(np.searchsorted(t, when - 0.5 * sc.dt)), len(t) - 1)
                 for name in self.metrics:
-                    if name in TIMED_METRICS:
-                        record[timed_column(name, when)] = plain(
-                            series[TIMED_METRICS[name]][k])
+                    if name in timed:
+                        record[timed_column(name, when)] = plain(series[timed[name]][k])
         record.update(status=s['status'], wall_time_s=s['wall_time_s'],
                       flock_swarm_version=__version__)
         return record

@@ -18,27 +18,22 @@ from typing import Any
 import yaml
 
 from flock_swarm import __version__
+from flock_swarm.core import summary
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import stack_mismatch
-from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml, realize
-from flock_swarm.core.stability import check_step
+from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml
 from flock_swarm.study.expr import Expression, ExpressionError
 
 #: The keys of a spec file.
 SPEC_KEYS = ('name', 'description', 'scenario', 'set', 'grid', 'zip', 'derived', 'seeds',
              'metrics', 'times', 'plot', 'stack_agents')
-#: Scalar summary keys (``summary.json``) a sweep can collect.
-SUMMARY_METRICS = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
-                   'min_pair_distance', 'collisions', 'components_final', 'n_agents',
-                   't_final', 'steps', 'pseudo_leader_reselections')
+#: Scalar summary keys (``summary.json``) a sweep can collect: those of the table of summary
+#: keys marked for sweeps (:func:`flock_swarm.core.summary.sweep_metrics`).
+SUMMARY_METRICS = summary.sweep_metrics()
 #: Summary metrics that are also recorded over time (``timeseries.npz``), by series name.
-TIMED_METRICS = {'eta': 'metric_eta', 'velocity_mismatch_max': 'metric_velocity_mismatch_max',
-                 'com_position_error': 'metric_com_position_error',
-                 'com_velocity_error': 'metric_com_velocity_error',
-                 'min_pair_distance': 'metric_min_pair_distance',
-                 'components_final': 'metric_components'}
+TIMED_METRICS = summary.timed_series()
 #: Default metrics when a spec names none.
-DEFAULT_METRICS = ('eta', 'velocity_mismatch_max', 'collisions', 'components_final')
+DEFAULT_METRICS = summary.default_metrics()
 #: Runs of one stack hold about this many agents in all (see :mod:`flock_swarm.study.execute`).
 STACK_AGENTS = 3000
 
@@ -91,8 +86,9 @@ class SweepSpec:
 
     def columns(self) -> list[str]:
         """Return the metric columns of a run: the metrics, then each timed one per time."""
+        timed = summary.timed_series()
         return list(self.metrics) + [timed_column(m, t) for t in self.times
-                                     for m in self.metrics if m in TIMED_METRICS]
+                                     for m in self.metrics if m in timed]
 
 
 @dataclass(frozen=True)
@@ -229,7 +225,7 @@ def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
                                 f'{", ".join(sorted(known)) or "none"})')
         derived.append((key, expr))
         known.add(key)
-    metrics = _metrics(data.get('metrics', list(DEFAULT_METRICS)))
+    metrics = _metrics(data.get('metrics', list(summary.default_metrics())))
     times = _times(data.get('times', []))
     plot = data.get('plot') or {}
     if not isinstance(plot, dict):
@@ -310,10 +306,11 @@ def _metrics(value: Any) -> tuple[str, ...]:
     """Return the metrics, each a scalar summary key."""
     if not isinstance(value, list) or not value:
         raise ScenarioError('metrics', f'expected a non-empty list, got {value!r}')
+    known = summary.sweep_metrics()
     for k, name in enumerate(value):
-        if name not in SUMMARY_METRICS:
+        if name not in known:
             raise ScenarioError(f'metrics[{k}]', f'unknown metric {name!r} (known: '
-                                f'{", ".join(SUMMARY_METRICS)})')
+                                f'{", ".join(known)})')
     if len(set(value)) < len(value):
         raise ScenarioError('metrics', 'a metric is listed twice')
     return tuple(value)
@@ -377,22 +374,21 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
         ``sim --allow-unstable``).
     :raises ScenarioError: naming the point and the key a scenario rejects.
     """
-    from flock_swarm.presets import load
+    from flock_swarm.presets import StepError, prepare
     resolved = []
     for point in points(spec):
         values = resolve_point(spec, point)
+        where = ', '.join(f'{k}={v!r}' for k, v in point.items())
         try:
-            sc = load(spec.scenario, spec.overrides, spec.seeds[0], values)
+            sc, _ = prepare(spec.scenario, spec.overrides, spec.seeds[0], extra=values,
+                            allow_unstable=allow_unstable)
+        except StepError as exc:
+            raise ScenarioError(where or 'dt', f'dt: {exc.reason} (sweep --allow-unstable '
+                                'runs it anyway)') from None
         except ScenarioError as exc:
-            where = ', '.join(f'{k}={v!r}' for k, v in point.items())
             if exc.key in ('scenario', '--set'):
                 raise
             raise ScenarioError(where or 'set', str(exc)) from None
-        violations = [] if allow_unstable else check_step(sc, realize(sc))
-        if violations:
-            reason = violations[0].message(sc.dt).split(': ', 1)[1]
-            raise ScenarioError(', '.join(f'{k}={v!r}' for k, v in point.items()) or 'dt',
-                                f'dt: {reason} (sweep --allow-unstable runs it anyway)')
         for t in spec.times:
             if t > sc.duration + 0.5 * sc.dt:
                 raise ScenarioError('times', f'{t:g} s is after the end of the run '

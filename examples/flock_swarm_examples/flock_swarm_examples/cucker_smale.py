@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.plugin import Law, LawContext, require
+from flock_swarm.plugin import Law, LawContext, LawSetup, StepViolation, pd_dt_max, require
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,20 @@ class CuckerSmale(Law):
         require(self.beta >= 0, 'protocol.beta', f'must be >= 0, got {self.beta}')
         require(self.c1 >= 0, 'protocol.c1', f'must be >= 0, got {self.c1}')
         require(self.c2 >= 0, 'protocol.c2', f'must be >= 0, got {self.c2}')
+
+    def step_bounds(self, setup: LawSetup) -> list[StepViolation]:
+        """Bound ``dt`` by the leader tracking of an informed agent without neighbours.
+
+        Such an agent is the PD loop ``-c1 x - c2 x'`` under the zero-order hold of each
+        step, stable only for ``dt < min(2 c2 / c1, 2 / c2)`` (:func:`pd_dt_max`); the
+        alignment term only adds damping, which the bound leaves out (a necessary bound).
+        """
+        if not setup.informed.any():
+            return []
+        bound = pd_dt_max(self.c1, self.c2)
+        if setup.dt < bound:
+            return []
+        return [StepViolation('leader tracking', bound, f'c1 = {self.c1:g}, c2 = {self.c2:g}')]
 
     def psi(self, squared_distance: np.ndarray) -> np.ndarray:
         """Return ``psi = K / (1 + r^2)^beta`` from ``r^2`` ([CS07] eq. (1))."""

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from numpy.testing import assert_allclose
 
+from flock_swarm.plugin import LawSetup
 from flock_swarm.testing import assert_matches_sim
 from flock_swarm_examples.cucker_smale import CuckerSmale
 from flock_swarm_examples.figure_eight import FigureEight
@@ -62,3 +63,18 @@ def test_the_leader_model_is_time_dependent():
     t = np.pi / 2.0
     assert_allclose(model.acceleration(t, p, p),
                     [-2.0 * 0.25 * np.sin(0.5 * t), -4.0 * 0.25 * np.sin(t)], rtol=1e-15)
+
+
+def test_the_step_bound_of_the_leader_tracking():
+    """``dt`` at or beyond ``min(2 c2 / c1, 2 / c2)`` is refused, below it accepted."""
+    law = CuckerSmale(c1=1.0, c2=2.0)
+
+    def setup(dt, informed):
+        return LawSetup(dim=2, n_agents=3, graph_type='disk', dt=dt,
+                        informed=np.array(informed))
+    assert law.step_bounds(setup(0.99, [True, False, False])) == []
+    (violation,) = law.step_bounds(setup(1.0, [True, False, False]))
+    assert violation.part == 'leader tracking' and violation.dt_max == 1.0
+    assert 'use dt < 1' in violation.message(1.0)
+    # Without an informed agent nobody tracks the leader: nothing to bound.
+    assert law.step_bounds(setup(5.0, [False, False, False])) == []

@@ -1,11 +1,19 @@
-"""The base class of the flocking laws, their per-agent data, and their evaluation.
+"""The base class of the flocking laws, what they are given, and their evaluation.
 
 A law is one frozen dataclass: its parameters are the fields (read from the scenario's
 ``protocol:`` section), and everything specific to it travels with it: the validation of
-its parameters against the scenario, its explicit-step stability bound, its per-agent data
-and adaptive state, the graphs it supports. Laws are found by name through the entry-point
-group ``flock_swarm.laws`` (:mod:`flock_swarm.core.registry`); the built-in ones are
-registered the same way. docs/extending.md shows how to write one.
+its parameters, its explicit-step stability bound, its per-agent data and adaptive state,
+the graphs it supports. Laws are found by name through the entry-point group
+``flock_swarm.laws`` (:mod:`flock_swarm.core.registry`); the built-in ones are registered
+the same way. docs/extending.md shows how to write one.
+
+A law never sees the whole scenario. Its hooks receive two small frozen objects defined
+here: :class:`LawContext` (dimension, size, graph type, leader model: what ``validate``
+checks the parameters against) and :class:`LawSetup` (that plus the step, the fixed graph's
+adjacency, the informed set and the observer groups of the realised run: what
+``agent_data`` and ``step_bounds`` need). This module is a leaf of the core: it imports
+nothing above the graphs and the leader's state, so the scenario, the registry and the
+stability helpers import it and not the other way round.
 
 A law is split in two pure functions so that the same code serves a whole swarm (vectorised
 over edges) and a single agent that only knows its neighbours:
@@ -26,16 +34,12 @@ neighbours' states. All three call the same ``pair`` and ``combine``.
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
 from flock_swarm.core.graphs import EdgeList
 from flock_swarm.core.leaders.base import LeaderState
-
-if TYPE_CHECKING:  # pragma: no cover - types only: the scenario imports the laws
-    from flock_swarm.core.scenario import Realization, Scenario
-    from flock_swarm.core.stability import StepViolation
 
 
 @dataclass
@@ -85,11 +89,77 @@ class LawContext:
 
 
 @dataclass(frozen=True)
+class ObserverGroup:
+    """One group of pinned observers of [Yu10] eq. (6)-(7): agents sharing ``H``, ``D``.
+
+    :ivar ids: the agents of the group (0-based).
+    :ivar pos_gain: ``D H``, the gain on the position error, shape ``(dim, dim)``.
+    :ivar vel_gain: ``D~ H~``, the gain on the velocity error, shape ``(dim, dim)``.
+    """
+
+    ids: tuple[int, ...]
+    pos_gain: np.ndarray
+    vel_gain: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class LawSetup(LawContext):
+    """What a law sees of a realised run (:meth:`Law.agent_data`, :meth:`Law.step_bounds`).
+
+    Everything of :class:`LawContext`, plus what the scenario's seed drew. The arrays are
+    read-only copies: the run's own per-agent data may change (re-selected pseudo-leaders),
+    this stays as it was at ``t = 0``.
+
+    :ivar dt: the step [s].
+    :ivar adjacency: the weights of the fixed graph (``graph.type: fixed``, as given) or of
+        the drawn Barabasi-Albert graph (0/1), ``(n, n)`` with a zero diagonal, before the
+        law's :attr:`Law.coupling_weight`; ``None`` for the r-disk graph.
+    :ivar informed: ``h_i`` of [Su09] eq. (10): the informed agents at ``t = 0``, ``(n,)``.
+    :ivar observers: the scenario's ``observers`` groups (only for a law with
+        :attr:`Law.uses_observers`; empty otherwise).
+    """
+
+    dt: float
+    adjacency: np.ndarray | None = None
+    informed: np.ndarray
+    observers: tuple[ObserverGroup, ...] = ()
+
+
+@dataclass(frozen=True)
+class StepViolation:
+    """One violated bound: what it protects, the largest stable ``dt``, and why."""
+
+    part: str
+    dt_max: float
+    detail: str
+
+    def message(self, dt: float) -> str:
+        """Return the one-line message for a run with step ``dt``."""
+        return (f'dt: {dt:g} exceeds the stability bound {self.dt_max:.4g} of the '
+                f'{self.part} ({self.detail}); use dt < {self.dt_max:.4g}')
+
+
+@dataclass(frozen=True)
 class Law:
     """Base class of the laws: parameters as frozen dataclass fields, plus the law itself.
 
     Subclasses set :attr:`name` (equal to their entry-point name), implement
-    :attr:`radius`, :meth:`pair` and :meth:`combine`, and override what else applies.
+    :attr:`radius`, :meth:`pair` and :meth:`combine`, and override what else applies. The
+    optional hooks, each with the default that leaves it out:
+
+    - :meth:`validate` ``(ctx: LawContext)``: check the parameters;
+    - :meth:`agent_data` ``(setup: LawSetup)``: constant per-agent arrays;
+    - :meth:`initial_state` ``(n)`` and :meth:`state_rate`: adaptive per-agent state;
+    - :meth:`step_bounds` ``(setup: LawSetup)``: the explicit-step stability bound;
+    - :attr:`coupling_weight`: the factor of the graph's weights in ``pair``'s ``w``;
+    - :meth:`pseudo_leader_gains`: lets scenarios choose the informed agents by the
+      certificate of [Zhou12] Theorem 1 (``informed.select: pseudo_leaders``);
+    - :attr:`uses_observers`: lets scenarios give pinned observer groups (``observers:``,
+      read in :meth:`agent_data` from ``setup.observers``).
+
+    The last three are what the core itself needs from a law beyond evaluating it: how the
+    edges are weighted and which scenario sections (pseudo-leader selection, observers)
+    make sense for it; a law that has none of them leaves them alone.
     """
 
     #: Scenario name of the law (``protocol.name``).
@@ -118,7 +188,11 @@ class Law:
 
     @property
     def coupling_weight(self) -> float:
-        """Return the factor of a fixed graph's weights (``W = w B`` of [Zhou12] 4.2)."""
+        """Return the factor of the graph's weights in ``pair``'s ``w`` ([Zhou12] 4.2: ``w B``).
+
+        Applied to the fixed graph's adjacency (:attr:`LawSetup.adjacency`) and, for a law
+        acting on all pairs, to the r-disk graph's 0/1 adjacency.
+        """
         return 1.0
 
     def validate(self, ctx: LawContext) -> None:
@@ -143,11 +217,13 @@ class Law:
         """
         raise NotImplementedError
 
-    def agent_data(self, sc: 'Scenario', informed: np.ndarray) -> dict[str, np.ndarray]:
-        """Return the law's constant per-agent arrays for a scenario (``AgentData.data``).
+    def agent_data(self, setup: LawSetup) -> dict[str, np.ndarray]:
+        """Return the law's constant per-agent arrays of a run (``AgentData.data``).
 
-        :param sc: the scenario.
-        :param informed: the informed agents.
+        Called once the run's informed set is drawn; each array's first axis is the agents.
+
+        :param setup: the run's size, dimension, step, graph, informed set and observers.
+        :return: ``{key: array}``, e.g. ``{'nav_gains': (n, 2, dim, dim)}`` for [Yu10].
         """
         return {}
 
@@ -161,11 +237,23 @@ class Law:
         return {}
 
     def pseudo_leader_gains(self) -> tuple[float, float] | None:
-        """Return ``(w, alpha)`` for choosing pseudo-leaders by [Zhou12] Theorem 1, or ``None``."""
+        """Return ``(w, alpha)`` for choosing pseudo-leaders by [Zhou12] Theorem 1, or ``None``.
+
+        ``None`` (the default) refuses ``informed.select: pseudo_leaders`` for the law.
+        """
         return None
 
-    def step_bounds(self, sc: 'Scenario', real: 'Realization') -> list['StepViolation']:
-        """Return the explicit-step stability bounds the scenario's ``dt`` violates."""
+    def step_bounds(self, setup: LawSetup) -> list[StepViolation]:
+        """Return the explicit-step stability bounds the run's ``dt`` violates.
+
+        A run whose ``dt`` violates a bound is refused before it starts, unless told to
+        run anyway (``--allow-unstable``);
+        :func:`flock_swarm.core.stability.consensus_bounds` bounds a PD navigation term plus
+        velocity consensus.
+
+        :param setup: the run's size, dimension, step (``setup.dt``), graph and informed set.
+        :return: the violations, empty when ``setup.dt`` is fine.
+        """
         return []
 
 

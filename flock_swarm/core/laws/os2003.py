@@ -80,6 +80,6 @@ class OlfatiSaber2003Sink(Law):
             return s
         return s - self.c1 * (q - leader.q) - self.c2 * (p - leader.p)
 
-    def step_bounds(self, sc, real):
+    def step_bounds(self, setup):
         """Bound ``dt`` by the PD feedback ``(c1, c2)`` plus ``c_d`` times the Laplacian."""
-        return consensus_bounds(sc, real, self.c1, self.c2, self.c_d, self.d)
+        return consensus_bounds(setup, self.radius, self.c1, self.c2, self.c_d, self.d)

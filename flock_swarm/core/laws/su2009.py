@@ -133,9 +133,9 @@ class SuParams(Law):
             nav = nav + leader.a
         return s + nav
 
-    def step_bounds(self, sc, real):
+    def step_bounds(self, setup):
         """Bound ``dt`` by the PD feedback ``(c1, c2)`` plus the consensus Laplacian."""
-        return consensus_bounds(sc, real, self.c1, self.c2, 1.0, self.d)
+        return consensus_bounds(setup, self.radius, self.c1, self.c2, 1.0, self.d)
 
 
 @dataclass(frozen=True)

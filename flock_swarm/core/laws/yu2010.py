@@ -79,22 +79,22 @@ class YuPinningObserver(Law):
         vel = np.einsum('nab,nb->na', gains[:, 1], p - leader.p)
         return s - pos - vel
 
-    def agent_data(self, sc, informed):
+    def agent_data(self, setup):
         """Return ``'nav_gains'``: ``D_i H_i`` and ``D~_i H~_i`` of each observer group."""
-        if not sc.observers:
+        if not setup.observers:
             return {}
-        gains = np.zeros((sc.n_agents, 2, sc.dim, sc.dim))
-        for group in sc.observers:
+        gains = np.zeros((setup.n_agents, 2, setup.dim, setup.dim))
+        for group in setup.observers:
             for i in group.ids:
                 gains[i, 0] = group.pos_gain
                 gains[i, 1] = group.vel_gain
         return {'nav_gains': gains}
 
-    def step_bounds(self, sc, real):
+    def step_bounds(self, setup):
         """Bound ``dt`` by the observers' gains plus ``c`` times the consensus Laplacian."""
         kp = kv = 0.0
-        gains = real.agents.data.get('nav_gains')
+        gains = self.agent_data(setup).get('nav_gains')
         if gains is not None and gains.size:
             kp = float(np.max(np.abs(np.linalg.eigvals(gains[:, 0]))))
             kv = float(np.max(np.abs(np.linalg.eigvals(gains[:, 1]))))
-        return consensus_bounds(sc, real, kp, kv, self.c, self.d)
+        return consensus_bounds(setup, self.radius, kp, kv, self.c, self.d)

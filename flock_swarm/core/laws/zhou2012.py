@@ -12,8 +12,7 @@ import numpy as np
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.checks import require
 from flock_swarm.core.graphs import diffusive_matrix
-from flock_swarm.core.laws.base import Law
-from flock_swarm.core.stability import StepViolation
+from flock_swarm.core.laws.base import Law, StepViolation
 
 
 @dataclass(frozen=True)
@@ -102,15 +101,15 @@ class ZhouPseudoLeader(Law):
         """Return ``(w, alpha)`` of Theorem 1."""
         return self.w, self.alpha
 
-    def step_bounds(self, sc, real):
+    def step_bounds(self, setup):
         """Bound ``dt`` by the spectrum of ``W - H`` on a fixed graph (explicit update)."""
-        weights = real.adjacency
-        if weights is None:
+        if setup.adjacency is None:
             return []
-        gain = np.where(real.agents.informed, self.h0, 0.0)
+        weights = setup.adjacency * self.coupling_weight
+        gain = np.where(setup.informed, self.h0, 0.0)
         lam = float(-np.linalg.eigvalsh(diffusive_matrix(weights) - np.diag(gain))[0])
         bound = 2.0 / lam if lam > 0 else float('inf')
-        if sc.dt < bound:
+        if setup.dt < bound:
             return []
         return [StepViolation(
             'velocity coupling', bound,
