@@ -6,7 +6,12 @@ it (``python -m flock_swarm.reproduce``'s ``__main__`` is itself a way in to a c
 """
 
 import ast
+import json
 from pathlib import Path
+import subprocess
+import sys
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / 'flock_swarm'
@@ -15,6 +20,11 @@ COMMANDS = {name: f'flock_swarm.cli.{name}:main'
             for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
 #: Modules that run a command when executed (``python -m``): entry points, not libraries.
 ENTRY_MODULES = {PACKAGE / 'reproduce' / '__main__.py'}
+#: A small demo whose dt (0.2 s) is beyond its velocity-consensus bound (about 0.098 s).
+UNSTABLE = ['--set', 'n_agents=3', '--set', 'informed.count=1', '--set', 'duration=1',
+            '--set', 'dt=0.2']
+#: Wall-clock bound of one command.
+TIMEOUT = 120.0
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -70,3 +80,33 @@ def test_the_commands_share_the_console_plumbing():
         imported = imported_modules(path)
         assert 'flock_swarm.console' in imported, path.name
         assert not any(name.startswith('flock_swarm.cli.') for name in imported), path.name
+
+
+def command(name: str, args: list[str]) -> subprocess.CompletedProcess:
+    """Run ``python -m flock_swarm.cli.NAME ARGS``."""
+    return subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{name}', *args],
+                          capture_output=True, text=True, timeout=TIMEOUT)
+
+
+def test_swarm_refuses_the_dt_sim_refuses_with_the_same_line(tmp_path):
+    sim = command('sim', ['demo', *UNSTABLE, '--out', str(tmp_path / 'sim'), '--quiet'])
+    swarm = command('swarm', ['demo', *UNSTABLE, '--out', str(tmp_path / 'swarm')])
+    assert sim.returncode == swarm.returncode == 2
+    assert sim.stderr.startswith('sim: error: dt: 0.2 exceeds the stability bound')
+    assert swarm.stderr == sim.stderr.replace('sim: ', 'swarm: ', 1)
+    assert not (tmp_path / 'swarm' / 'bag').exists()
+
+
+@pytest.mark.ros
+def test_swarm_allow_unstable_runs_it_as_sim_allow_unstable_does(tmp_path, ros_domain):
+    out = tmp_path / 'swarm'
+    run = command('swarm', ['demo', *UNSTABLE, '--allow-unstable', '--no-plots', '--no-record',
+                            '--out', str(out), '--domain-id', str(ros_domain)])
+    assert run.returncode == 0, run.stderr[-2000:]
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    sim = command('sim', ['demo', *UNSTABLE, '--allow-unstable', '--out', str(tmp_path / 'sim'),
+                          '--quiet'])
+    assert sim.returncode == 0, sim.stderr
+    want = json.loads((tmp_path / 'sim' / 'summary.json').read_text())
+    assert summary['steps'] == want['steps'] and summary['eta'] == want['eta']

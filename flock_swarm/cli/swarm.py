@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--executor', choices=('single', 'events'), default='events',
                         help='executor of the one-process run (events: rclpy.experimental.'
                         'EventsExecutor, about twice as fast here)')
+    parser.add_argument('--allow-unstable', action='store_true',
+                        help='run even when dt violates a stability bound (as sim)')
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
     parser.add_argument('--no-record', action='store_true',
                         help='do not write the bag (summary and time series are still written)')
@@ -88,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         if (out / 'bag').exists() and any((out / 'bag').iterdir()):
             raise ScenarioError('--out', f'{out / "bag"} already holds a bag; choose another '
                                 '--out')
-        scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out)
+        scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out,
+                                    args.allow_unstable)
         # Bound before the nodes start, so a port in use is a usage error, not a failed run.
         live = (None if args.foxglove is None
                 else start_live(args.foxglove_host, args.foxglove, '--foxglove'))
@@ -131,12 +134,13 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
                                 container=args.container, world_params=world_params,
-                                live=live)
+                                live=live, allow_unstable=args.allow_unstable)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                  args.executor, progress=say,
                                  realtime_factor=args.realtime_factor,
-                                 world_params=world_params, live=live)
+                                 world_params=world_params, live=live,
+                                 allow_unstable=args.allow_unstable)
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
         return 1

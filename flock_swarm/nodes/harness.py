@@ -61,34 +61,33 @@ def unique_domain() -> int:
     return 1 + (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
 
 
-def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path) -> Path:
-    """Validate the scenario with its overrides and write it to ``out/scenario.yaml``.
+def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
+                     allow_unstable: bool = False) -> Path:
+    """Prepare the scenario as ``sim`` does and write it to ``out/scenario.yaml``.
+
+    The one preparation of every front end (:func:`flock_swarm.presets.prepare`): overrides,
+    seed, validation, the law-output check and, unless ``allow_unstable``, the step-size
+    bound, refused with the line ``sim`` prints. The nodes started on the file prepare it
+    again, with the same result.
 
     :param name: preset name or path.
     :param overrides: ``key=value`` assignments.
     :param seed: seed replacing the scenario's, or ``None``.
     :param out: the output directory (created).
+    :param allow_unstable: accept a ``dt`` beyond a stability bound (``--allow-unstable``).
     :return: the path every node is started with.
     :raises ScenarioError: on invalid input.
     """
     import yaml
 
-    from flock_swarm.core.run import check_law_output
-    from flock_swarm.core.scenario import apply_override, parse_scenario, realize
-    from flock_swarm.presets import load_mapping
+    from flock_swarm.presets import prepare
 
-    data = load_mapping(name)
-    for assignment in overrides:
-        data = apply_override(data, assignment)
-    if seed is not None:
-        if seed < 0:
-            raise ScenarioError('--seed', f'must be >= 0, got {seed}')
-        data['seed'] = seed
-    sc = parse_scenario(data)
-    check_law_output(sc, realize(sc))
+    if seed is not None and seed < 0:
+        raise ScenarioError('--seed', f'must be >= 0, got {seed}')
+    sc, _ = prepare(name, overrides, seed, allow_unstable=allow_unstable)
     out.mkdir(parents=True, exist_ok=True)
     path = out / 'scenario.yaml'
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    path.write_text(yaml.safe_dump(sc.raw, sort_keys=False))
     return path
 
 
@@ -98,9 +97,13 @@ def read_scenario(path: Path) -> Scenario:
     return parse_scenario(parse_yaml(Path(path).read_text()))
 
 
-def node_parameters(scenario: Path, mode: str, realtime_factor: float) -> dict:
-    """Return the parameters every node gets."""
-    return {'scenario': str(scenario), 'mode': mode, 'realtime_factor': float(realtime_factor)}
+def node_parameters(scenario: Path, mode: str, realtime_factor: float,
+                    allow_unstable: bool = False) -> dict:
+    """Return the parameters every node gets (``allow_unstable`` only when set)."""
+    params = {'scenario': str(scenario), 'mode': mode, 'realtime_factor': float(realtime_factor)}
+    if allow_unstable:
+        params['allow_unstable'] = True
+    return params
 
 
 class SwarmRun:
@@ -178,6 +181,7 @@ class InProcessSwarm:
     :param agent_params: further parameters of the agents' node.
     :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` to serve the run on (see
         :meth:`serve`), or None.
+    :param allow_unstable: accept a ``dt`` beyond a stability bound (every node is told so).
     :raises ScenarioError: for an invalid scenario, before any node exists.
     """
 
@@ -187,7 +191,7 @@ class InProcessSwarm:
                  progress: Callable[[str], None] | None = None,
                  agents: Iterable[int] | None = None, world_params: dict | None = None,
                  realtime_factor: float = 1.0, agent_params: dict | None = None,
-                 live: LiveServer | None = None) -> None:
+                 live: LiveServer | None = None, allow_unstable: bool = False) -> None:
         """Resolve the scenario; create the context, the nodes and the executor."""
         import rclpy
         from rclpy.context import Context
@@ -199,9 +203,10 @@ class InProcessSwarm:
         self.out = Path(out)
         self.domain_id = unique_domain() if domain_id is None else domain_id
         #: The resolved scenario file every node runs on.
-        self.scenario_path = resolve_scenario(str(scenario), list(overrides), seed, self.out)
+        self.scenario_path = resolve_scenario(str(scenario), list(overrides), seed, self.out,
+                                              allow_unstable)
         self.scenario = read_scenario(self.scenario_path)
-        self.base = node_parameters(self.scenario_path, mode, realtime_factor)
+        self.base = node_parameters(self.scenario_path, mode, realtime_factor, allow_unstable)
         self.closed = False
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
@@ -345,7 +350,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                    progress: Callable[[str], None] | None = None,
                    timeout: float | None = None, agents: Iterable[int] | None = None,
                    world_params: dict | None = None, realtime_factor: float = 1.0,
-                   live: LiveServer | None = None) -> dict:
+                   live: LiveServer | None = None, allow_unstable: bool = False) -> dict:
     """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
 
     Ctrl-C ends the run early; the world still writes what it recorded.
@@ -361,7 +366,8 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
     with InProcessSwarm(scenario, out, domain_id=domain_id, mode=mode,
                         step_timeout=step_timeout, executor=executor, progress=progress,
                         agents=agents, world_params=world_params,
-                        realtime_factor=realtime_factor, live=live) as swarm:
+                        realtime_factor=realtime_factor, live=live,
+                        allow_unstable=allow_unstable) as swarm:
         try:
             swarm.spin_to_end(timeout)
         except KeyboardInterrupt:
@@ -431,7 +437,8 @@ def process_environment(n_agents: int, domain_id: int, base: dict | None = None)
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   log=None, realtime_factor: float = 1.0, container: bool = False,
-                  world_params: dict | None = None, live: LiveServer | None = None) -> dict:
+                  world_params: dict | None = None, live: LiveServer | None = None,
+                  allow_unstable: bool = False) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
@@ -450,6 +457,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` to serve the run on, through a
         bridge node spun by a thread of this process
         (:class:`~flock_swarm.nodes.foxglove_server.BackgroundBridge`), or None.
+    :param allow_unstable: tell every node to accept a ``dt`` beyond a stability bound.
     :return: the summary.
     """
     sc = read_scenario(scenario)
@@ -461,7 +469,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
             out_args += ['-p', f'{k}:={v}']
         return out_args
 
-    base = node_parameters(scenario, mode, realtime_factor)
+    base = node_parameters(scenario, mode, realtime_factor, allow_unstable)
     sink = log if log is not None else subprocess.DEVNULL
     others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
                                stderr=sink)]
