@@ -264,12 +264,13 @@ def section(exp, res: dict) -> list[str]:
         lines.append(f'| {cell(s["label"])} | '
                      + ' | '.join(cell(_stat(s['stats'][key])) for _, key, _ in exp.columns)
                      + ' |')
+    whats = '; '.join(what for what, _ in exp.per_seed)
     for s in res['setups']:
-        for what, key in exp.per_seed:
-            if s['per_seed']:
-                lines += ['', f'*{s["label"]}*, {what} by seed: ' + '; '.join(
-                    f'{r["seed"]}: {"-" if r[key] is None else fmt(r[key])}'
-                    for r in s['per_seed']) + '.']
+        if s['per_seed']:
+            lines += ['', f'*{s["label"]}*, seed by seed ({whats}): ' + '; '.join(
+                f'{r["seed"]}: ' + ', '.join('-' if r[key] is None else fmt(r[key])
+                                             for _, key in exp.per_seed)
+                for r in s['per_seed']) + '.']
     if res.get('paired'):
         lines += ['', res['paired']]
     seeds = sorted({x for s in res['setups'] for x in s['seed_list']})

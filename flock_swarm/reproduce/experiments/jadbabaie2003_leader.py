@@ -185,8 +185,8 @@ class Leader(Experiment):
                 lines += ['', f'*{s["label"]}*: {plural(len(short), "seed")} linked '
                           'throughout still miss the bar at t_final, with largest heading '
                           f'errors of {fmt(min(errors))} .. {fmt(max(errors))} rad (seeds '
-                          f'{", ".join(str(r["seed"]) for r in short)}): Theorem 4 is a '
-                          'limit, and these are still converging when the run ends.']
+                          f'{", ".join(str(r["seed"]) for r in short)}). Theorem 4 is a '
+                          'limit; a finite run shows only how far the decay has got.']
         return lines
 
     def headline(self, res: dict) -> tuple[str, str]:

@@ -158,10 +158,10 @@ class Sec41(Experiment):
                ('|r_a1 - r_o1| at t_final [m]', 'ra_error_component1', '-> 0'),
                ('|r_a2 - r_o2| at t_final [m]', 'ra_error_component2', '-> 0'),
                ('max |r_a - r_o| over the last 5 s [m]', 'ra_error_max_late', '-> 0'))
-    per_seed = (('settling time [s] (-: not settled by t_final)', 'settling_time'),
-                ('first split of the graph [s] (-: connected throughout)',
+    per_seed = (('settling time [s], -: not settled by t_final', 'settling_time'),
+                ('first split of the graph [s], -: connected throughout',
                  'connectivity_lost_t'),
-                ('agents cut off from the largest group at that split', 'cut_off_agents'))
+                ('agents cut off from the largest group then', 'cut_off_agents'))
     misprints = (
         'Yu, Chen, Cao 2010, Section 4.1 prints d = sqrt(c ln(b/a)) = 0.7740; with c = 5 that '
         'would be 3.87. The value 0.7740 is sqrt(c_bar ln(b/a)) with c_bar = 0.2 (noticed while '
