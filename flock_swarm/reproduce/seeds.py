@@ -292,6 +292,8 @@ def _seed_text(seeds: list[int]) -> str:
     """Return ``seeds 1 .. 20`` or the list."""
     if not seeds:
         return 'none yet'
+    if len(seeds) == 1:
+        return f'seed {seeds[0]}'
     if seeds == list(range(seeds[0], seeds[-1] + 1)):
         return f'seeds {seeds[0]} .. {seeds[-1]}'
     return 'seeds ' + ', '.join(map(str, seeds))

@@ -1,5 +1,5 @@
 """Jadbabaie, Lin, Morse 2003, Section III: leader following, eq. (38), Theorem 4, on the
-preset (followers around the leader, the premise of Theorem 4 failing for most draws)."""
+preset (followers around the leader, the premise of Theorem 4 failing for many draws)."""
 
 from pathlib import Path
 
@@ -160,8 +160,7 @@ class Leader(Experiment):
         all_aligned, 'all followers aligned', premise=linked_throughout,
         premise_text='every follower linked to the leader at every recorded instant (the '
         'premise of Theorem 4 as far as a finite run can show it)')
-    setups = (SetUp('reproduce_jadbabaie2003_leader', 'the preset (premise failing for most '
-                    'draws)'),)
+    setups = (SetUp('reproduce_jadbabaie2003_leader', 'the preset (jadbabaie2003_leader)'),)
     columns = (('followers aligned', 'followers_aligned', 'all'),
                ('fraction of steps with every follower linked', 'linked_fraction_of_steps',
                 'premise'),

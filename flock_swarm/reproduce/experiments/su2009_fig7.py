@@ -5,6 +5,7 @@ from flock_swarm.reproduce.common import fmt
 from flock_swarm.reproduce.experiment import ETA_MARGIN, MeanClaim, SetUp
 from flock_swarm.reproduce.experiments.su2009_fig2 import SU09, Fig2
 
+FGAMMA_TO_ALL = 'f_gamma to all (= Fig. 2 in the leader\'s frame)'
 #: test/test_reproduce.py checks this on fresh seeds (relative trajectories equal to 1e-6).
 ALL_IS_FIG2 = (
     'equivalent to Su Fig. 2 (the study above): when every agent receives f_gamma, each '
@@ -38,10 +39,10 @@ class Fig7(Fig2):
     setups = (SetUp(
         'reproduce_su2009_fig7',
         labels={('informed', 'linear'): 'as printed (f_gamma to the informed, linear)',
-                ('all', 'linear'): 'f_gamma to all',
+                ('all', 'linear'): FGAMMA_TO_ALL,
                 ('informed', 'bounded'): 'bounded navigation (Olfati-Saber 2006)',
                 ('all', 'bounded'): 'f_gamma to all, bounded navigation'},
-        notes={'f_gamma to all': ALL_IS_FIG2}),)
+        notes={FGAMMA_TO_ALL: ALL_IS_FIG2}),)
     columns = (('eta at t_final', 'eta', '0.89'),) + Fig2.columns[1:] + (
         ('max ‖p_i - p_gamma‖ at t_final [m/s]', 'velocity_mismatch_max', '-'),)
     misprints = ()

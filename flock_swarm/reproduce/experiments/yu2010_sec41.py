@@ -7,7 +7,7 @@ import numpy as np
 
 from flock_swarm.core.graphs import components, disk_graph
 from flock_swarm.core.scenario import Scenario
-from flock_swarm.reproduce.common import FIG_SIZE, fmt, late, pyplot, save_figure
+from flock_swarm.reproduce.common import FIG_SIZE, fmt, late, plural, pyplot, save_figure
 from flock_swarm.reproduce.experiment import Experiment, FractionClaim, SetUp
 
 
@@ -161,7 +161,8 @@ class Sec41(Experiment):
     per_seed = (('settling time [s], -: not settled by t_final', 'settling_time'),
                 ('first split of the graph [s], -: connected throughout',
                  'connectivity_lost_t'),
-                ('agents cut off from the largest group then', 'cut_off_agents'))
+                ('agents cut off from the largest group then', 'cut_off_agents'),
+                ('max ‖v_i - v_o‖ at t_final [m/s]', 'velocity_mismatch_max'))
     misprints = (
         'Yu, Chen, Cao 2010, Section 4.1 prints d = sqrt(c ln(b/a)) = 0.7740; with c = 5 that '
         'would be 3.87. The value 0.7740 is sqrt(c_bar ln(b/a)) with c_bar = 0.2 (noticed while '
@@ -169,6 +170,29 @@ class Sec41(Experiment):
     analyse = staticmethod(analyse_yu)
     discuss = staticmethod(discuss_yu)
     figure = staticmethod(figure_yu)
+
+    def seeds_section(self, res: dict, figures: Path) -> list[str]:
+        """Return the study's lines, and the seeds on which Assumption 2 fails (when, and how
+        many agents are cut off) or the claim is missed."""
+        lines = super().seeds_section(res, figures)
+        for s in res['setups']:
+            split = [r for r in s['per_seed'] if r['connectivity_lost_t'] is not None]
+            missed = [r for r in s['per_seed'] if r['connectivity_lost_t'] is None
+                      and r['settling_time'] is None]
+            text = []
+            if split:
+                text.append('Assumption 2 fails on ' + '; '.join(
+                    f'seed {r["seed"]} (the graph splits at t = {fmt(r["connectivity_lost_t"])} '
+                    f's, {plural(r["cut_off_agents"], "agent")} cut off from the group; settled: '
+                    f'{"no" if r["settling_time"] is None else fmt(r["settling_time"]) + " s"})'
+                    for r in split))
+            if missed:
+                text.append('Connected throughout but not settled by t_final: ' + '; '.join(
+                    f'seed {r["seed"]} (max ‖v_i - v_o‖ = {fmt(r["velocity_mismatch_max"])} '
+                    'm/s)' for r in missed))
+            if text:
+                lines += ['', f'*{s["label"]}*: ' + '. '.join(text) + '.']
+        return lines
 
     def headline(self, res: dict) -> tuple[str, str]:
         """Return the paper's claims and our final errors."""
