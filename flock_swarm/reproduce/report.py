@@ -210,8 +210,9 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
             f'{", ".join(f"{x:.2f}" for x in item["load_average"])} |')
     lines += [
         '',
-        '- Caches: presets in `OUT/runs/`, the Fig. 3 sweep in `OUT/fig3_runs.jsonl` (one JSON '
-        'line per run, keyed by a hash of the scenario and package version), the ROS runs in '
+        '- Caches: presets in `OUT/runs/`, the sweeps some experiments run beside their preset '
+        'in `OUT/*.jsonl` (one JSON line per run, keyed by a hash of the scenario and package '
+        'version), the ROS runs in '
         '`OUT/ros/`. Re-running the command resumes; a larger `--realisations` adds only the '
         'missing runs.',
         f'- ROS runs: {meta["ros_note"]}',
