@@ -11,6 +11,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flock_swarm import __version__
+from flock_swarm.core.summary import compared_metrics
 from flock_swarm.core.run import simulate
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.outputs import write_outputs
@@ -211,5 +212,4 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
 
 
 #: The summary metrics compared between the ROS run and sim.
-COMPARED = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
-            'min_pair_distance', 'collisions', 'components_final')
+COMPARED = compared_metrics()
