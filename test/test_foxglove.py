@@ -23,6 +23,7 @@ import pytest
 from flock_swarm.testing import wait_for
 from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.contract import contract_topics
 from flock_swarm.foxglove_ws import CLOSE_TIMEOUT, LiveServer, message_stamp_ns, start_live
 from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
@@ -216,7 +217,7 @@ def test_replay_serves_the_bag(recorded, ros_domain):
         check_received(client, bag, decoders)
         proc.send_signal(signal.SIGINT)
         proc.stderr.read()
-        assert proc.wait(timeout=TIMEOUT) == 0
+        assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -250,7 +251,7 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
         decoders = check_advertised(client, bag_messages(bag)[1])
         check_received(client, bag, decoders, wire=True)
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=TIMEOUT) == 0
+        assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
         assert 'Traceback' not in proc.stderr.read()
     finally:
         if proc.poll() is None:

@@ -15,6 +15,7 @@ import pytest
 import yaml
 from numpy.testing import assert_array_equal
 
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.harness import executable
 
 RUN_TIMEOUT = 240.0
@@ -172,7 +173,7 @@ def test_dumped_parameters_reproduce_the_run(tmp_path, ros_domain, ros_context, 
                 dumps[target] = read_parameters(node, executor, target)
             for proc in others:
                 proc.send_signal(signal.SIGINT)
-                assert proc.wait(timeout=60) == 0
+                assert proc.wait(timeout=60) == EXIT_INTERRUPTED
             # The file changes; the dumps hold every key, so they do not depend on it.
             changed = dict(SCENARIO, seed=11, dt=0.1, n_agents=5,
                            protocol=dict(SCENARIO['protocol'], c1=0.3))
