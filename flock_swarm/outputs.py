@@ -164,12 +164,16 @@ class SpooledRecorder(Recorder):
 def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
     """Write ``summary.json``, ``timeseries.npz`` and the scenario used, into ``out``.
 
+    A run that recorded no instant (stopped before its first step) has no time series: no
+    ``timeseries.npz`` is written, rather than an archive without arrays.
+
     :param result: the run.
     :param out: the output directory (created).
     :param sc: the scenario (its mapping is written as ``scenario.json`` for provenance).
     """
     out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out / 'timeseries.npz', **result.series)
+    if result.series:
+        np.savez_compressed(out / 'timeseries.npz', **result.series)
     (out / 'scenario.json').write_text(json_text(sc.raw))
     # summary.json last: its presence means the other files are complete.
     tmp = out / 'summary.json.tmp'

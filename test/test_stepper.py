@@ -227,7 +227,12 @@ def test_the_summary_of_a_run_to_its_end():
     the series every step from the initial state."""
     sc = small()
     st = started(sc)
-    assert st.result(0.0, {}, [], None, None) is None
+    # Before anything was recorded (a world stopped before its first step): no time series,
+    # and no measure in the summary, but everything the run knows (issue 23).
+    empty = st.result(0.0, {}, [], None, None)
+    assert empty.series == {} and empty.summary['steps'] == 0
+    assert empty.summary['t_final'] is None and empty.summary['eta'] is None
+    assert empty.summary['n_agents'] == 4 and empty.summary['missed_commands'] == 0
     real = realize(sc)
     for k in range(sc.steps + 1):
         for i in range(4 if k != 1 else 3):

@@ -127,12 +127,15 @@ class SummaryKey:
 
 
 def _final(series: str, cast: type = float) -> Callable[[SummaryInputs], Any]:
-    """Return the value function of a metric at the last recorded instant."""
-    return lambda x: cast(x.series[series][-1])
+    """Return the value function of a metric at the last recorded instant (null when the
+    run recorded none: a world stopped before its first step)."""
+    return lambda x: cast(x.series[series][-1]) if x.series else None
 
 
-def _informed(x: SummaryInputs) -> list[int]:
+def _informed(x: SummaryInputs) -> list[int] | None:
     import numpy as np
+    if not x.series:
+        return None
     return [int(i) for i in np.flatnonzero(x.series['informed'][0])]
 
 
@@ -178,10 +181,11 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('seed', PROVENANCE, 'the seed', lambda x: x.facts.seed),
     _K('protocol', PROVENANCE, 'the law (`protocol.name`)', lambda x: x.facts.protocol),
     _K('dt', RUN_SETTING, 'the step [s]', lambda x: x.facts.dt),
-    _K('status', PROVENANCE, '`completed`, `interrupted` (Ctrl-C: everything up to then is '
-       'written) or `diverged` (the state stopped being finite; the last finite recorded '
-       'state is written, exit status 1); a ROS run also `recording_failed`, its analysis '
-       '`truncated`', lambda x: x.status),
+    _K('status', PROVENANCE, '`completed`, `interrupted` (a stop signal: everything up to '
+       'then is written; stopped before the first step, the measures are null) or `diverged` '
+       '(the state stopped being finite; the last finite recorded state is written, exit '
+       'status 1); a ROS run also `recording_failed` and `failed` (another process of the '
+       'run died), its analysis `truncated`', lambda x: x.status),
     _K('flock_swarm_version', PROVENANCE, 'the package version that ran it',
        lambda x: __version__),
     _K('pseudo_leader_certificate', PROVENANCE, 'Zhou\'s Theorem 1 certificate '

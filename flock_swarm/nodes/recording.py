@@ -7,6 +7,7 @@ step); :class:`BagSink` queues them and writes them to the MCAP bag once a step.
 
 import json
 import os
+import shutil
 from itertools import groupby
 from operator import itemgetter
 from pathlib import Path
@@ -139,6 +140,24 @@ class BagSink:
         except OSError:
             pass
         self.failed(self.error)
+
+    @property
+    def empty(self) -> bool:
+        """Whether the bag is open and no message was written or queued to it (the run was
+        stopped before it began)."""
+        return (not self.records and self.bag is not None
+                and not any(self.bag.message_counts.values()))
+
+    def discard(self) -> None:
+        """Remove the bag directory: a run stopped before anything was recorded leaves no
+        empty bag to look like a recording (and ``swarm --out`` can be used again)."""
+        self.records = []
+        bag, self.bag = self.bag, None
+        try:
+            if bag is not None:
+                bag.abandon()
+        finally:
+            shutil.rmtree(self.path, ignore_errors=True)
 
     def close(self) -> None:
         """Write what is queued, finalise the bag (MCAP summary and ``metadata.yaml``).

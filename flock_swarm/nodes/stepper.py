@@ -499,8 +499,9 @@ class WorldStepper:
         return True
 
     def result(self, now: float, rejected: dict, duplicates: list[int],
-               bag_error: str | None, bag: str | None) -> SimResult | None:
-        """Return the run so far (``None`` before anything was recorded).
+               bag_error: str | None, bag: str | None) -> SimResult:
+        """Return the run so far (no time series, and no measures in the summary, when it
+        ended before anything was recorded: stopped before its first step).
 
         :param now: the time (for the wall time).
         :param rejected: the rejected messages by reason (the node's input guard).
@@ -510,8 +511,6 @@ class WorldStepper:
         :return: the summary (``docs/outputs.md``) and the recorded time series.
         """
         log = self.run_log
-        if not log.rec.count:
-            return None
         series = log.rec.arrays()
         summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
                                 self.status)

@@ -330,18 +330,24 @@ class WorldNode(RecordedNode):
         # Commands that came but were still queued are judged, counted and recorded too.
         self.take_commands()
         self.status_pub.publish(String(data=self.stepper.status))
+        recorded = self.bag is not None
+        if recorded and self.bag.empty:
+            # Stopped before the first step (a signal in the start wait): no empty bag.
+            self.bag.discard()
+            self.sinks.remove(self.bag)
+            recorded = False
+            self.get_logger().warning(
+                f'the run ended ({self.stepper.status}) before its first step: nothing was '
+                f'recorded, no bag written; {self.out / "summary.json"} says so')
         result = self.stepper.result(time.monotonic(), self.guard.counts(),
                                      sorted(self.duplicates), self.bag_error,
-                                     str(self.out / 'bag') if self.record else None)
+                                     str(self.out / 'bag') if recorded else None)
         for sink in self.sinks:
             try:
                 sink.close()
             except OSError as exc:
                 self.get_logger().error(f'cannot finalise {sink}: {exc.strerror or exc}; its '
                                         'complete chunks stay readable')
-        if result is None:
-            self.spool.discard()
-            return
         self.result = result
         try:
             write_outputs(result, self.out, self.scenario)
@@ -352,6 +358,14 @@ class WorldNode(RecordedNode):
             self.spool.close()
         else:
             self.spool.discard()
+
+    def peer_died(self) -> None:
+        """End the run with status ``failed``: a supervisor saw another process of the run
+        die (:data:`~flock_swarm.console.FAIL_SIGNAL`); keep what was recorded."""
+        if not self.done:
+            self.get_logger().error(f'another process of the run died (the supervisor said '
+                                    f'so at step {self.k}); ending the run as failed')
+        self.finish('failed')
 
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
@@ -364,11 +378,14 @@ class WorldNode(RecordedNode):
 def main(args: list[str] | None = None) -> int:
     """Run the world node (``ros2 run flock_swarm world``); it exits after the last step.
 
-    The exit status is 2 for invalid configuration, 1 when recording failed, else 0.
+    The exit status is 2 for invalid configuration, 1 when recording failed or a supervisor
+    reported a dead process (:data:`~flock_swarm.console.FAIL_SIGNAL`: the run ends with
+    status ``failed``), that of the signal after a stop signal
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`: the run ends ``interrupted``), else 0.
     """
     built: list[WorldNode] = []
     status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
-                      until=lambda node: node.done)
+                      until=lambda node: node.done, on_fail=WorldNode.peer_died)
     failed = built and (built[0].status == 'recording_failed' or built[0].bag_error)
     return 1 if status == 0 and failed else status
 
