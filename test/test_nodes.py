@@ -21,11 +21,13 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 
 from flock_swarm.bag import BagReader
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_SIGNAL
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.harness import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
                                        process_environment, resolve_scenario, run_in_process,
-                                       run_processes, stop)
+                                       run_processes)
+from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import simulate
 from flock_swarm.testing import Swarm, spin_until, wait_for
 from conftest import start_nodes
@@ -243,14 +245,18 @@ def test_a_large_container_run_flies_with_the_profile(tmp_path, ros_domain):
     scenario = resolve_scenario('su2009_fig3', [
         f'n_agents={n}', f'initial.position_box=[[0, {side}], [0, {side}]]', 'duration=0.2',
         'record_every=1'], None, out)
-    with open(tmp_path / 'nodes.log', 'w') as log:
-        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
-                                log=log, container=True, world_params={'record': False})
-    assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
+    summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                            container=True, world_params={'record': False})
+    assert summary['status'] == 'completed', process_logs(out)[-2000:]
     assert summary['missed_commands'] == 0
     ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
     with np.load(out / 'timeseries.npz') as ros:
         assert ros['q'].tobytes() == ref['q'].tobytes()
+
+
+def process_logs(out: Path) -> str:
+    """Return the logs of a run's processes (``out/logs/*.log``: world, leader, agents)."""
+    return ''.join(path.read_text() for path in sorted((out / 'logs').glob('*.log')))
 
 
 @pytest.mark.parametrize('container', [False, True], ids=['agent-per-process', 'container'])
@@ -264,10 +270,9 @@ def test_separate_processes(tmp_path, ros_domain, container):
         'n_agents=3', 'protocol.name=su_accel', 'informed={select: all}',
         'initial.position_box=[[0, 5], [0, 5]]', 'dt=0.05', 'duration=15', 'record_every=10'],
         None, out)
-    with open(tmp_path / 'nodes.log', 'w') as log:
-        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
-                                log=log, container=container)
-    logged = (tmp_path / 'nodes.log').read_text()
+    summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                            container=container)
+    logged = process_logs(out)
     assert summary['status'] == 'completed', logged[-2000:]
     # The leader and agents end with the run (swarm/status): no FATAL, no traceback.
     assert 'FATAL' not in logged and 'Traceback' not in logged, logged[-2000:]
@@ -312,7 +317,7 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
             if proc.poll() is None:
                 proc.kill()
             proc.wait()
-    assert world.returncode == 0, err
+    assert world.returncode == EXIT_SIGNAL[sig], err
     assert 'Traceback' not in err
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'interrupted' and summary['steps'] > 100
@@ -356,7 +361,7 @@ def test_sigint_stops_a_world_started_with_sigint_ignored(tmp_path, ros_domain):
         if world.poll() is None:
             world.kill()
             world.wait()
-    assert world.returncode == 0, err
+    assert world.returncode == EXIT_INTERRUPTED, err
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'interrupted'
     assert not BagReader(out / 'bag').recovered  # finalised: summary section and index

@@ -15,7 +15,8 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import (EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals,
+                                 measure, signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
@@ -66,10 +67,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``swarm`` from the command line; return the exit status."""
-    accept_sigint()
+    """Run ``swarm`` from the command line; return the exit status.
+
+    0 when the run completed, 1 when it did not (diverged, failed, recording failed),
+    2 for invalid input, and after a stop signal that signal's status
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`): the world finalises its bag and summary
+    first, whatever the layout.
+    """
+    with StopSignals() as stop:
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals caught (``stop``)."""
     args = build_parser().parse_args(argv)
-    say = (lambda line: print(line, file=sys.stderr, flush=True))
+    say = _say
     try:
         if not 0 <= args.domain_id <= 232:
             raise ScenarioError('--domain-id', f'must be in [0, 232], got {args.domain_id}')
@@ -102,14 +114,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f'swarm: error: --out: {exc}', file=sys.stderr)
         return EXIT_USAGE
     try:
-        return _run(args, scenario, out, live, say)
+        return _run(args, scenario, out, live, say, stop)
     finally:
         if live is not None:
             live.close()
 
 
-def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
-    """Run the resolved scenario as ``args`` say (serving it on ``live``); return the status."""
+def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
+         stop: StopSignals) -> int:
+    """Run the resolved scenario as ``args`` say (serving it on ``live``); return the status
+    (a stop signal's, when one ended the run)."""
     sc = read_scenario(scenario)
     if not args.processes:
         layout = 'one process (agents in one container node)'
@@ -134,29 +148,45 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
                                 container=args.container, world_params=world_params,
-                                live=live, allow_unstable=args.allow_unstable)
+                                live=live, allow_unstable=args.allow_unstable,
+                                stop=lambda: stop.first, say=say)
     else:
         summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                  args.executor, progress=say,
                                  realtime_factor=args.realtime_factor,
                                  world_params=world_params, live=live,
-                                 allow_unstable=args.allow_unstable)
+                                 allow_unstable=args.allow_unstable,
+                                 stop=lambda: stop.stopped)
+    if stop.stopped:
+        say(f'[swarm] stopped by {signal_name(stop.first)}')
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
-        return 1
-    if not args.no_plots and (out / 'timeseries.npz').is_file():
-        import numpy as np
-        from flock_swarm.plots import plot_timeseries
-        with np.load(out / 'timeseries.npz') as data:
-            plot_timeseries(dict(data), out, sc.name)
-    say(f'[swarm] {summary["status"]} at t = {summary["t_final"]:g} s: eta = '
-        f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
+        return stop.status(EXIT_FAILURE)
+    written = [out / 'timeseries.npz']
+    with stop.held():
+        if not args.no_plots and written[0].is_file():
+            import numpy as np
+            from flock_swarm.plots import plot_timeseries
+            with np.load(written[0]) as data:
+                written += plot_timeseries(dict(data), out, sc.name)
+    say(f'[swarm] {summary["status"]} at t = {measure(summary["t_final"], "g")} s: eta = '
+        f'{measure(summary["eta"], ".3f")}, velocity mismatch = '
+        f'{measure(summary["velocity_mismatch_max"], ".3g")}, '
         f'collisions = {summary["collisions"]}, missed commands = '
         f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
-    say('[swarm] wrote ' + ('' if args.no_record else f'{out}/bag, ')
-        + f'{out}/summary.json, {out}/timeseries.npz'
-        + ('' if args.no_plots else f', {out}/trajectories.png, {out}/metrics.png'))
-    return 0 if summary['status'] == 'completed' else 1
+    # Only what is there: a run stopped before its first step has no bag and no time series.
+    written = [path for path in [out / 'bag', out / 'summary.json', *written] if path.exists()]
+    say('[swarm] wrote ' + ', '.join(str(path) for path in written))
+    return stop.status(0 if summary['status'] == 'completed' else EXIT_FAILURE)
+
+
+def _say(line: str) -> None:
+    """Print a progress or result line on stderr."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except OSError:
+        # The terminal went away (SIGHUP): the run still finalises and exits as it should.
+        pass
 
 
 if __name__ == '__main__':

@@ -9,8 +9,8 @@ reproduction runs through the nodes (:mod:`flock_swarm.reproduce.execution`):
 - :class:`InProcessSwarm` and :func:`run_in_process`: every node in this process on one
   executor (the agents in one container node);
 - :func:`run_processes`: every node as its own process (the ``ros2 run`` executables,
-  :func:`executable`), in the environment of :func:`process_environment`, ended by
-  :func:`stop`;
+  :func:`executable`), in the environment of :func:`process_environment`, supervised by
+  :class:`~flock_swarm.nodes.supervisor.Supervisor` (logs, watching, stopping in order);
 - :class:`SwarmRun`: what a finished run left in its output directory.
 
 The run ends when the world has recorded its last step: ``DIR/bag/`` (rosbag2 MCAP),
@@ -27,14 +27,13 @@ import json
 import os
 from pathlib import Path
 import shutil
-import signal
-import subprocess
 import sys
 import time
 from typing import Any, Callable, Iterable, TYPE_CHECKING
 
 from flock_swarm import contract
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.nodes.supervisor import LOG_DIR, Supervisor, report_death
 
 if TYPE_CHECKING:
     import numpy as np
@@ -291,14 +290,17 @@ class InProcessSwarm:
                                      f'(the world is at step {world.k})')
             self.executor.spin_once(timeout_sec=0.1)
 
-    def spin_to_end(self, timeout: float | None = None) -> None:
+    def spin_to_end(self, timeout: float | None = None,
+                    stop: Callable[[], Any] | None = None) -> None:
         """Spin until the world is done (or the context is shut down, by Ctrl-C).
 
         :param timeout: wall-clock bound [s] (``None``: no limit).
+        :param stop: ends the spin early when it returns a true value (a stop signal came:
+            :class:`~flock_swarm.console.StopSignals`), checked every 0.1 s at most.
         :raises TimeoutError: after ``timeout`` seconds.
         """
         started = time.monotonic()
-        while self.context.ok() and not self.world.done:
+        while self.context.ok() and not self.world.done and not (stop and stop()):
             self.executor.spin_once(timeout_sec=0.1)
             if timeout is not None and time.monotonic() - started > timeout:
                 raise TimeoutError(f'the run did not finish within {timeout:g} s')
@@ -351,14 +353,18 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                    progress: Callable[[str], None] | None = None,
                    timeout: float | None = None, agents: Iterable[int] | None = None,
                    world_params: dict | None = None, realtime_factor: float = 1.0,
-                   live: LiveServer | None = None, allow_unstable: bool = False) -> dict:
+                   live: LiveServer | None = None, allow_unstable: bool = False,
+                   stop: Callable[[], Any] | None = None) -> dict:
     """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
 
-    Ctrl-C ends the run early; the world still writes what it recorded.
+    Ctrl-C, or ``stop`` returning a true value, ends the run early; the world still writes
+    what it recorded (status ``interrupted``).
 
     :param scenario: the resolved scenario file (or a preset name or a file: it is resolved
         into ``out/scenario.yaml``).
     :param timeout: wall-clock limit [s] of the whole run (``None``: none).
+    :param stop: polled while the run goes on: a stop signal came
+        (:class:`~flock_swarm.console.StopSignals`).
     :return: the summary.
     :raises TimeoutError: after ``timeout`` seconds.
 
@@ -370,7 +376,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                         realtime_factor=realtime_factor, live=live,
                         allow_unstable=allow_unstable) as swarm:
         try:
-            swarm.spin_to_end(timeout)
+            swarm.spin_to_end(timeout, stop)
         except KeyboardInterrupt:
             pass
         swarm.world.close()
@@ -391,24 +397,6 @@ def executable(name: str) -> list[str]:
     if found:
         return [found]
     return [sys.executable, '-m', MODULES.get(name, f'flock_swarm.nodes.{name}')]
-
-
-def stop(procs: list, timeout: float = 10.0) -> None:
-    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``.
-
-    One deadline for all: a hundred agent processes that ignore SIGINT are killed after
-    ``timeout``, not after ``timeout`` each.
-    """
-    for proc in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + timeout
-    for proc in procs:
-        try:
-            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 #: Fast DDS profile of swarms of several hundred agents across processes (docs/ros.md).
@@ -437,13 +425,18 @@ def process_environment(n_agents: int, domain_id: int, base: dict | None = None)
 
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
-                  log=None, realtime_factor: float = 1.0, container: bool = False,
+                  realtime_factor: float = 1.0, container: bool = False,
                   world_params: dict | None = None, live: LiveServer | None = None,
-                  allow_unstable: bool = False) -> dict:
+                  allow_unstable: bool = False, stop: Callable[[], int | None] | None = None,
+                  say: Callable[[str], None] | None = None) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
-    all agents share one (``agents``).
+    all agents share one (``agents``). The processes are supervised as ``ros2 launch`` does
+    (:mod:`flock_swarm.nodes.supervisor`): their output goes to ``out/logs/<name>.log``; a
+    process that dies ends the run (the world finalises with status ``failed``, and the dead
+    process and the tail of its log are printed); a stop signal is forwarded to the world
+    first, then the others are stopped. No child outlives the call.
 
     :param scenario: the resolved scenario file.
     :param out: the output directory.
@@ -451,7 +444,6 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param domain_id: ``ROS_DOMAIN_ID`` of every process.
     :param step_timeout: the world's per-step timeout [s].
     :param timeout: wall-clock limit [s] of the whole run.
-    :param log: file object receiving the agents' and leader's output (default: discarded).
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :param container: host every agent in one ``agents`` process.
     :param world_params: further parameters of the world node.
@@ -459,10 +451,13 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         bridge node spun by a thread of this process
         (:class:`~flock_swarm.nodes.foxglove_server.BackgroundBridge`), or None.
     :param allow_unstable: tell every node to accept a ``dt`` beyond a stability bound.
-    :return: the summary.
+    :param stop: returns the stop signal this process received (``None``: none yet), polled
+        while the run goes on (:class:`~flock_swarm.console.StopSignals`).
+    :param say: where the report of a dead process goes (default: stderr).
+    :return: the summary the world wrote (empty when it wrote none).
+    :raises TimeoutError: after ``timeout`` seconds (the world is stopped first).
     """
     sc = read_scenario(scenario)
-    env = process_environment(sc.n_agents, domain_id)
 
     def ros_args(values: dict) -> list[str]:
         out_args = ['--ros-args']
@@ -471,41 +466,45 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         return out_args
 
     base = node_parameters(scenario, mode, realtime_factor, allow_unstable)
-    sink = log if log is not None else subprocess.DEVNULL
-    others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
-                               stderr=sink)]
-    hosts = [executable('agents') + ros_args(base)] if container else [
-        executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
-    for command in hosts:
-        others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
+    children = Supervisor(out / LOG_DIR, process_environment(sc.n_agents, domain_id))
     bridge = None
-    if live is not None:
-        from flock_swarm.nodes.foxglove_server import BackgroundBridge
-        bridge = BackgroundBridge(live, domain_id, base)
-        # The bridge's subscriptions are best effort: it must have matched the leader's and
-        # the agents' publishers before the first step, and the world waits for it as one
-        # more subscriber of every odometry topic and for its markers' and metrics' one.
-        bridge.wait_matched([contract.absolute(name) for name in (
-            contract.LEADER_ODOM, contract.LEADER_ACCEL,
-            *(contract.cmd_topic(i) for i in range(sc.n_agents)))], 30.0)
-        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1,
-                            expect_telemetry_subscribers=1)
-    world = subprocess.Popen(executable('world') + ros_args(
-        dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
-        env=env)
     try:
-        world.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        world.send_signal(signal.SIGINT)
-        world.wait(timeout=30)
-        raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
+        children.start('leader', executable('leader') + ros_args(base))
+        if container:
+            children.start('agents', executable('agents') + ros_args(base))
+        else:
+            for i in range(sc.n_agents):
+                children.start(f'agent_{i}',
+                               executable('agent') + ros_args(dict(base, agent_id=i)))
+        if live is not None:
+            from flock_swarm.nodes.foxglove_server import BackgroundBridge
+            bridge = BackgroundBridge(live, domain_id, base)
+            # The bridge's subscriptions are best effort: it must have matched the leader's
+            # and the agents' publishers before the first step, and the world waits for it
+            # as one more subscriber of every odometry topic and for its markers' and
+            # metrics' one.
+            bridge.wait_matched([contract.absolute(name) for name in (
+                contract.LEADER_ODOM, contract.LEADER_ACCEL,
+                *(contract.cmd_topic(i) for i in range(sc.n_agents)))], 30.0)
+            # One subscriber per agent host (every child so far but the leader), and the bridge.
+            world_params = dict(world_params or {}, expect_subscribers=len(children.children),
+                                expect_telemetry_subscribers=1)
+        world = children.start('world', executable('world') + ros_args(
+            dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
+            echo=sys.stderr)
+        outcome = children.watch(world, stop or (lambda: None), timeout)
     finally:
-        stop(others)
+        children.stop_all()
         if bridge is not None:
             silent = bridge.node.silent()
             if silent:
                 print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
                       file=sys.stderr, flush=True)
             bridge.close()
-    summary = out / 'summary.json'
-    return json.loads(summary.read_text()) if summary.is_file() else {}
+    path = out / 'summary.json'
+    summary = json.loads(path.read_text()) if path.is_file() else {}
+    if outcome.dead is not None:
+        report_death(outcome.dead, summary.get('steps'), say)
+    if outcome.timed_out:
+        raise TimeoutError(f'the run did not finish within {timeout:g} s')
+    return summary
