@@ -28,6 +28,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from flock_swarm.bag import BagReader, BagWriter
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.player import (
     CLOCK_TOPIC, format_ns, Player, REPLAY_DEPTH, replay_qos, ReplayError, select_topics)
 from flock_swarm.nodes.harness import resolve_scenario, run_in_process
@@ -511,6 +512,6 @@ def test_ctrl_c_stops_a_loop_cleanly(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 0, stderr
+    assert proc.returncode == EXIT_INTERRUPTED, stderr
     assert 'Traceback' not in stderr
     assert stderr.splitlines()[-1].startswith('[replay] stopped: ')

@@ -7,10 +7,12 @@ A thin command over :mod:`flock_swarm.core.run` (the run) and :mod:`flock_swarm.
 """
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
+                                 measure, signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.run import simulate
@@ -57,7 +59,25 @@ def listing() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``sim`` from the command line; return the exit status."""
+    """Run ``sim`` from the command line; return the exit status.
+
+    0 when the run completed, 1 when it diverged, 2 for invalid input, and after a stop
+    signal (SIGINT, SIGTERM, SIGHUP) that signal's status
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`), with everything recorded until then written.
+    """
+    with StopSignals(interrupt=True) as stop:
+        try:
+            return _main(argv, stop)
+        except KeyboardInterrupt:
+            # A stop signal before the run began (the run itself catches it and ends
+            # 'interrupted'; its outputs are written with the signals held).
+            print(f'sim: stopped by {signal_name(stop.first or signal.SIGINT)} before the run '
+                  'began; nothing written', file=sys.stderr)
+            return stop.status(EXIT_INTERRUPTED)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals turned into ``KeyboardInterrupt`` (``stop``)."""
     parser = build_parser()
     if argv is None:
         argv = sys.argv[1:]
@@ -91,9 +111,15 @@ def main(argv: list[str] | None = None) -> int:
         say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
             f'of {sc.dt:g} s, seed {sc.seed}')
     result = simulate(sc, progress=say)
+    with stop.held():
+        return _finish(result, sc, out, args, say, stop)
+
+
+def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSignals) -> int:
+    """Write the outputs of ``result`` and say how the run ended; return the exit status."""
     try:
         write_outputs(result, out, sc)
-        if args.plots:
+        if args.plots and result.series:
             from flock_swarm.plots import plot_timeseries
             for path in plot_timeseries(result.series, out, sc.name):
                 if say:
@@ -103,16 +129,22 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     s = result.summary
     if say:
-        say(f'[sim] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
-            f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
-            f'collisions = {s["collisions"]}, components = {s["components_final"]} '
+        if stop.stopped:
+            say(f'[sim] stopped by {signal_name(stop.first)}')
+        say(f'[sim] {s["status"]} at t = {measure(s["t_final"], "g")} s: eta = '
+            f'{measure(s["eta"], ".3f")}, '
+            f'velocity mismatch = {measure(s["velocity_mismatch_max"], ".3g")}, '
+            f'collisions = {s["collisions"]}, components = {measure(s["components_final"], "")} '
             f'({s["wall_time_s"]:.1f} s wall)')
-        say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
+        if result.series:
+            say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
+        else:
+            say(f'[sim] wrote {out / "summary.json"} (nothing was recorded: no time series)')
     if s['status'] == 'diverged':
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)
         return EXIT_DIVERGED
-    return EXIT_INTERRUPTED if s['status'] == 'interrupted' else 0
+    return stop.status(EXIT_INTERRUPTED) if s['status'] == 'interrupted' else 0
 
 
 if __name__ == '__main__':

@@ -13,7 +13,7 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals
 from flock_swarm.core.errors import ScenarioError
 
 
@@ -53,8 +53,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``sweep`` from the command line; return the exit status."""
-    accept_sigint()
+    """Run ``sweep`` from the command line; return the exit status (after a stop signal,
+    that signal's: :data:`~flock_swarm.console.EXIT_SIGNAL`)."""
+    # SIGTERM and SIGHUP stop the sweep as Ctrl-C does: every finished run stays cached.
+    with StopSignals(interrupt=True) as stop:
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals turned into ``KeyboardInterrupt`` (``stop``)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -105,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f'sweep: interrupted; every finished run is kept in {out / "runs.jsonl"} '
               '(run the same command again to go on)', file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return stop.status(EXIT_INTERRUPTED)
     except ex.SweepError as exc:
         return fail(str(exc))
     finally:
