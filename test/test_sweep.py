@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 
 from flock_swarm.testing import wait_for
+from flock_swarm.console import EXIT_SIGNAL
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.reproduce.experiments.su2009_fig3_sweep import fig3_tasks
 from flock_swarm.reproduce.plan import Plan
@@ -376,6 +377,18 @@ def test_a_killed_worker_process_has_its_runs_redone(long_serial):
     assert len(read_cache(out / 'runs.jsonl')) == 16
     assert cache_lines(out / 'runs.jsonl') == 16
     assert read_csv(out / 'runs.csv') == read_csv(long_serial / 'serial' / 'runs.csv')
+
+
+def test_sigterm_stops_a_sweep_as_ctrl_c_does(long_serial):
+    """SIGTERM to sweep: the finished runs are kept, one line says so, exit status 143."""
+    out = long_serial / 'terminated'
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 2,
+                                lambda proc: proc.send_signal(signal.SIGTERM))
+    assert status == EXIT_SIGNAL[signal.SIGTERM], err
+    assert err.rstrip().splitlines()[-1].startswith('sweep: interrupted; every finished run')
+    problems = []
+    kept = read_cache(out / 'runs.jsonl', report=problems.append)
+    assert problems == [] and 2 <= len(kept) < 16
 
 
 def test_an_interrupted_sweep_resumes_to_the_same_table(long_serial):
