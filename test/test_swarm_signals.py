@@ -120,6 +120,25 @@ def test_swarm_processes_logs_every_child(tmp_path, ros_domain, container):
     assert json.loads((out / 'summary.json').read_text())['status'] == 'completed'
 
 
+def swarm_under_way(out: Path, domain: int, container: bool
+                    ) -> tuple[subprocess.Popen, set[int]]:
+    """Start ``swarm demo --processes`` (LONG, two agents) into ``out``; return it and the
+    pids of its process group once every child runs and the world steps."""
+    proc = start(executable('swarm') + [
+        'demo', *sets(LONG), '--processes', '--out', str(out), '--no-plots',
+        '--domain-id', str(domain)] + (['--container'] if container else []))
+    children = 3 if container else 4
+    try:
+        wait_for(lambda: len(group_pids(proc.pid)) == 1 + children, TIMEOUT,
+                 f'swarm and its {children} children')
+        wait_for(lambda: stepping(out), TIMEOUT, 'the world to step')
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
+    return proc, group_pids(proc.pid)
+
+
 @pytest.mark.parametrize('sig, group', [
     (signal.SIGINT, False), (signal.SIGTERM, False), (signal.SIGINT, True),
     (signal.SIGHUP, False)],
@@ -129,13 +148,8 @@ def test_swarm_processes_signal_stops_every_child(tmp_path, ros_domain, sig, gro
     the world finalises bag and summary, swarm prints the summary and exits with the
     signal's status, and every child's pid is gone."""
     out = tmp_path / 'run'
-    proc = start(executable('swarm') + [
-        'demo', *sets(LONG), '--processes', '--container', '--out', str(out), '--no-plots',
-        '--domain-id', str(ros_domain)])
+    proc, pids = swarm_under_way(out, ros_domain, container=True)
     try:
-        wait_for(lambda: len(group_pids(proc.pid)) == 4, TIMEOUT, 'swarm and its 3 children')
-        wait_for(lambda: stepping(out), TIMEOUT, 'the world to step')
-        pids = group_pids(proc.pid)
         (os.killpg if group else os.kill)(proc.pid, sig)
     finally:
         err = finish(proc)
@@ -149,13 +163,8 @@ def test_swarm_processes_signal_stops_every_child(tmp_path, ros_domain, sig, gro
 def test_swarm_agent_processes_sigterm_stops_every_child(tmp_path, ros_domain):
     """The same with a process per agent (no --container), SIGTERM to swarm alone."""
     out = tmp_path / 'run'
-    proc = start(executable('swarm') + [
-        'demo', *sets(LONG), '--processes', '--out', str(out), '--no-plots',
-        '--domain-id', str(ros_domain)])
+    proc, pids = swarm_under_way(out, ros_domain, container=False)
     try:
-        wait_for(lambda: len(group_pids(proc.pid)) == 5, TIMEOUT, 'swarm and its 4 children')
-        wait_for(lambda: stepping(out), TIMEOUT, 'the world to step')
-        pids = group_pids(proc.pid)
         os.kill(proc.pid, signal.SIGTERM)
     finally:
         err = finish(proc)
@@ -169,16 +178,10 @@ def test_swarm_processes_killed_child_fails_the_run(tmp_path, ros_domain):
     with the bag and summary finalised; the first error line names the dead child and the
     step; no child survives."""
     out = tmp_path / 'run'
-    proc = start(executable('swarm') + [
-        'demo', *sets(LONG), '--processes', '--container', '--out', str(out), '--no-plots',
-        '--domain-id', str(ros_domain)])
+    proc, pids = swarm_under_way(out, ros_domain, container=True)
     try:
-        wait_for(lambda: len(group_pids(proc.pid)) == 4, TIMEOUT, 'swarm and its 3 children')
-        wait_for(lambda: stepping(out), TIMEOUT, 'the world to step')
-        pids = group_pids(proc.pid)
         agents = [pid for pid in pids
-                  if b'/agents\0' in Path(f'/proc/{pid}/cmdline').read_bytes()
-                  or b'nodes.agent' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+                  if b'/agents\0' in Path(f'/proc/{pid}/cmdline').read_bytes()]
         assert len(agents) == 1, agents
         os.kill(agents[0], signal.SIGKILL)
     finally:
