@@ -7,6 +7,7 @@ it (``python -m flock_swarm.reproduce``'s ``__main__`` is itself a way in to a c
 
 import ast
 import json
+import os
 from pathlib import Path
 import subprocess
 import sys
@@ -110,3 +111,18 @@ def test_swarm_allow_unstable_runs_it_as_sim_allow_unstable_does(tmp_path, ros_d
     assert sim.returncode == 0, sim.stderr
     want = json.loads((tmp_path / 'sim' / 'summary.json').read_text())
     assert summary['steps'] == want['steps'] and summary['eta'] == want['eta']
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('node', ['world', 'leader', 'agent', 'agents'])
+def test_every_node_refuses_the_dt_sim_refuses_with_the_same_line(tmp_path, node, ros_domain):
+    sim = command('sim', ['demo', *UNSTABLE, '--out', str(tmp_path / 'sim'), '--quiet'])
+    params = ['-p', 'scenario:=demo', '-p', 'n_agents:=3', '-p', 'informed.count:=1',
+              '-p', 'duration:=1.0', '-p', 'dt:=0.2']
+    if node == 'world':
+        params += ['-p', f'out_dir:={tmp_path / "world"}']
+    run = subprocess.run([node, '--ros-args', *params], capture_output=True, text=True,
+                         timeout=TIMEOUT, env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)))
+    assert sim.returncode == run.returncode == 2, run.stderr
+    assert run.stderr == sim.stderr.replace('sim: ', f'{node}: ', 1)
+    assert not (tmp_path / 'world').exists()
