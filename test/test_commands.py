@@ -14,6 +14,8 @@ import sys
 
 import pytest
 
+from conftest import imported_modules
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / 'flock_swarm'
 #: The commands and their modules.
@@ -26,18 +28,6 @@ UNSTABLE = ['--set', 'n_agents=3', '--set', 'informed.count=1', '--set', 'durati
             '--set', 'dt=0.2']
 #: Wall-clock bound of one command.
 TIMEOUT = 120.0
-
-
-def imported_modules(path: Path) -> set[str]:
-    """Return every module ``path`` imports (at any depth of the file, absolute names)."""
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            found.update(f'{node.module}.{alias.name}' for alias in node.names)
-    return found
 
 
 def console_scripts() -> dict[str, str]:
