@@ -169,6 +169,23 @@ def whole_run_pairs(sc: Scenario, q: np.ndarray, static: EdgeList | None,
     return edges, np.inf if sc.law.all_pairs else sc.law.radius
 
 
+def observed_pairs(sc: Scenario, real: Realization, q: np.ndarray, static: EdgeList | None,
+                   disk: EdgeList) -> tuple[EdgeList, float]:
+    """Return :func:`whole_run_pairs` for an observer of a run that has the step's r-disk
+    graph rather than its interaction graph (the world node, ``analyze``).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param q: positions.
+    :param static: the fixed graph (:func:`static_graph`), or ``None``.
+    :param disk: the r-disk graph at ``q`` (``r``, ``strict_radius`` of the law).
+    :return: ``(pairs, radius)``.
+    """
+    graph = interaction_graph(sc, real, q, None) if sc.law.all_pairs and static is None \
+        else disk
+    return whole_run_pairs(sc, q, static, graph)
+
+
 def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
     """Return the time-invariant edge list of a fixed-graph scenario, or ``None``."""
     if real.adjacency is None:

@@ -24,8 +24,8 @@ from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.metrics import step_metrics
-from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
-                                  interaction_graph, static_graph, whole_run_pairs)
+from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary, observed_pairs,
+                                  static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
@@ -487,10 +487,7 @@ class WorldStepper:
         leader = self.last_leader
         edges = disk_graph(self.q, law.radius, law.strict_radius)
         last = k >= sc.steps
-        # The whole-run metrics from the pairs sim's come from (a law on all pairs: all).
-        graph = interaction_graph(sc, self.real, self.q, None) \
-            if law.all_pairs and self.static is None else edges
-        covered, radius = whole_run_pairs(sc, self.q, self.static, graph)
+        covered, radius = observed_pairs(sc, self.real, self.q, self.static, edges)
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
                                    **self.state)
