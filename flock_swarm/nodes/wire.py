@@ -147,7 +147,8 @@ def decode_state(data: bytes) -> tuple[int, str, tuple[str, ...], tuple[float, .
     _need(data, count_at + 4, 'JointState')
     (count,) = lay.u32.unpack_from(data, count_at)
     values = _align(count_at + 4, 8) if count else count_at + 4
-    _need(data, values + 8 * count, 'JointState')
+    # The values, then at least the counts of velocity and effort.
+    _need(data, values + 8 * count + 8, 'JointState')
     positions = struct.unpack_from(f'{lay.order}{count}d', data, values)
     return ns, frame, tuple(names), positions
 
