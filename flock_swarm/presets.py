@@ -16,8 +16,8 @@ import yaml
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import StepViolation
 from flock_swarm.core.run import check_law_output, check_step
-from flock_swarm.core.scenario import (Realization, Scenario, apply_override, parse_scenario,
-                                       parse_yaml, realize)
+from flock_swarm.core.scenario import Realization, Scenario, parse_scenario, realize
+from flock_swarm.scenario_yaml import apply_override, parse_yaml
 
 PACKAGE = 'flock_swarm'
 

@@ -36,7 +36,8 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from flock_swarm.cli import sim
 from flock_swarm.core.errors import ScenarioError, one_line
-from flock_swarm.core.scenario import TOP_KEYS, apply_override, parse_yaml
+from flock_swarm.core.scenario import TOP_KEYS
+from flock_swarm.scenario_yaml import apply_override, parse_yaml
 from flock_swarm.presets import load_mapping, preset_names
 
 #: Steps every generated run is cut to (the property is about input, not long runs).

@@ -9,7 +9,8 @@ import yaml
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import check_step
-from flock_swarm.core.scenario import apply_override, parse_scenario, parse_value, realize
+from flock_swarm.core.scenario import parse_scenario, realize
+from flock_swarm.scenario_yaml import apply_override, parse_value
 from flock_swarm.core.stability import packing_degree, pd_dt_max, pd_stable
 from flock_swarm.presets import load, load_mapping, preset_names
 

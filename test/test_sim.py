@@ -253,7 +253,7 @@ def test_prepare_refuses_the_dt_sim_refuses_with_the_same_line(capsys, preset, o
 
 def yaml_value(text):
     """Return a ``--set`` value as a node's parameter holds it (parsed)."""
-    from flock_swarm.core.scenario import parse_value
+    from flock_swarm.scenario_yaml import parse_value
     return parse_value(text)
 
 

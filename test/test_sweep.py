@@ -26,7 +26,8 @@ import pytest
 
 from flock_swarm.testing import wait_for
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.reproduce.su2009 import Plan, fig3_tasks
+from flock_swarm.reproduce.experiments.su2009_fig3_sweep import fig3_tasks
+from flock_swarm.reproduce.plan import Plan
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 from flock_swarm.study.cache import cache_line, read_cache

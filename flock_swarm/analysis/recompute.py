@@ -8,13 +8,13 @@
 
 import numpy as np
 
-from flock_swarm import __version__
 from flock_swarm.analysis.bagrun import Progress, RunData, Ticker
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.leaders.base import LeaderState
-from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
-from flock_swarm.core.run import RunLog, build_summary, observed_pairs, static_graph
+from flock_swarm.core.metrics import RunMetrics
+from flock_swarm.core.run import RunLog, observed_pairs, run_facts, static_graph
 from flock_swarm.core.scenario import realize
+from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
 
 
 def recompute(run: RunData, record_every: int | None = None,
@@ -71,34 +71,11 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
         missed-command counts, and where the data came from (``bag``, ``complete_steps``,
         ``bag_warning``).
     """
-    status = _status(run)
-    last_step = int(run.steps[-1])
-    if run.scenario is not None:
-        summary = build_summary(run.scenario, realize(run.scenario), series, metrics,
-                                last_step, status)
-    else:
-        final = {name: float(series[f'metric_{name}'][-1]) for name in STEP_METRICS}
-        summary = {
-            'n_agents': run.n_agents, 't_final': float(series['t'][-1]), 'steps': last_step,
-            'eta': final['eta'], 'eta_tolerance': run.eta_tolerance,
-            'velocity_mismatch_max': final['velocity_mismatch_max'],
-            'com_position_error': final['com_position_error'],
-            'com_velocity_error': final['com_velocity_error'],
-            'min_pair_distance': metrics.min_pair_distance,
-            'collisions': len(metrics.collision_pairs),
-            'collision_distance': run.collision_distance,
-            'components_final': int(final['components']),
-            'informed': [int(i) for i in np.flatnonzero(run.informed)],
-            'scenario': None, 'seed': None, 'protocol': None, 'dt': run.dt, 'status': status,
-            'flock_swarm_version': __version__,
-        }
-    summary.update({
-        'mode': run.mode,
-        'missed_commands': int(sum(run.missed_commands_per_agent)),
-        'missed_commands_per_agent': run.missed_commands_per_agent,
-        'leader_missed': run.leader_missed,
-        'bag': str(run.bag),
-        'complete_steps': int(len(run.steps)),
-        'bag_warning': run.warning,
-    })
-    return summary
+    facts = (run_facts(run.scenario, realize(run.scenario)) if run.scenario is not None
+             else RunFacts(run.n_agents, run.dt, run.eta_tolerance, run.collision_distance))
+    return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), _status(run)),
+                      mode=run.mode,
+                      missed_commands=int(sum(run.missed_commands_per_agent)),
+                      missed_commands_per_agent=run.missed_commands_per_agent,
+                      leader_missed=run.leader_missed, bag=str(run.bag),
+                      complete_steps=int(len(run.steps)), bag_warning=run.warning)

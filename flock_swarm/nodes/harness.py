@@ -93,7 +93,8 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
 
 def read_scenario(path: Path) -> Scenario:
     """Return the validated scenario of a resolved scenario file."""
-    from flock_swarm.core.scenario import parse_scenario, parse_yaml
+    from flock_swarm.core.scenario import parse_scenario
+    from flock_swarm.scenario_yaml import parse_yaml
     return parse_scenario(parse_yaml(Path(path).read_text()))
 
 

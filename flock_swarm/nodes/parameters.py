@@ -30,7 +30,8 @@ import numpy as np
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import Scenario, parse_yaml
+from flock_swarm.core.scenario import Scenario
+from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.presets import load_mapping, prepare
 
 #: Parameters every rclpy node has; they are not scenario overrides.

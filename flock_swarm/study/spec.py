@@ -21,7 +21,8 @@ from flock_swarm import __version__
 from flock_swarm.core import summary
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import stack_mismatch
-from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml
+from flock_swarm.core.scenario import Scenario, parse_scenario
+from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.study.expr import Expression, ExpressionError
 
 #: The keys of a spec file.
