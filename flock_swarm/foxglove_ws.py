@@ -52,7 +52,8 @@ def message_stamp_ns(type_name: str, data: bytes) -> int | None:
 
     ``Clock``, ``Odometry``, ``AccelStamped``, ``JointState`` (the agents' adaptive state)
     and ``DiagnosticArray`` begin with their time (the clock, or the header's stamp); a
-    ``MarkerArray`` with its length and then the first marker's header. The world records each message at that stamp.
+    ``MarkerArray`` with its length and then the first marker's header. The world records
+    each message at that stamp.
 
     :param type_name: ``pkg/msg/Type`` of the message.
     :param data: the CDR bytes.
