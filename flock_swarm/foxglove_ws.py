@@ -50,9 +50,10 @@ _TIME = {0: struct.Struct('>iI'), 1: struct.Struct('<iI')}
 def message_stamp_ns(type_name: str, data: bytes) -> int | None:
     """Return the simulation-time stamp [ns] of a serialised contract message.
 
-    ``Clock``, ``Odometry``, ``AccelStamped`` and ``DiagnosticArray`` begin with their time
-    (the clock, or the header's stamp); a ``MarkerArray`` with its length and then the first
-    marker's header. The world records each message at that stamp.
+    ``Clock``, ``Odometry``, ``AccelStamped``, ``JointState`` (the agents' adaptive state)
+    and ``DiagnosticArray`` begin with their time (the clock, or the header's stamp); a
+    ``MarkerArray`` with its length and then the first marker's header. The world records
+    each message at that stamp.
 
     :param type_name: ``pkg/msg/Type`` of the message.
     :param data: the CDR bytes.

@@ -135,15 +135,22 @@ def compare_runs(want: dict, want_series: dict, got: dict, got_series: dict,
 def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str] = (),
                        seed: int | None = None, atol: float = 0.0,
                        domain_id: int | None = None, timeout: float = RUN_TIMEOUT,
+                       processes: bool = False, container: bool = False,
                        **swarm_args) -> SwarmRun:
     """Run a scenario through the nodes (lockstep) and assert it equals ``sim``'s run.
 
-    The summary (every key ``sim`` writes but :data:`SIM_ONLY`) and every recorded time series
-    must agree to ``atol``; ``atol=0`` demands bit for bit. The ROS run must be complete:
-    every agent answered every step and the leader was never missed (otherwise it is not the
-    run ``sim`` computes, and the comparison would say nothing).
+    The summary (every key ``sim`` writes but :data:`SIM_ONLY`, the law's adaptive state
+    included) and every recorded time series must agree to ``atol``; ``atol=0`` demands bit
+    for bit. The ROS run must be complete: every agent answered every step and the leader
+    was never missed (otherwise it is not the run ``sim`` computes, and the comparison would
+    say nothing).
 
     :param atol: the absolute tolerance.
+    :param processes: run every node as its own process, as ``swarm --processes`` does
+        (:func:`~flock_swarm.nodes.harness.run_processes`; ``swarm_args`` are then its
+        keyword arguments), instead of in this process.
+    :param container: with ``processes``, host every agent in one process (``swarm
+        --processes --container``) instead of one process per agent.
     :return: the ROS run's outputs.
     :raises AssertionError: listing every difference.
 
@@ -152,8 +159,17 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
     from flock_swarm.core.run import simulate
     from flock_swarm.outputs import json_text
 
-    run = run_swarm(scenario, out, overrides, seed, domain_id, timeout, mode='lockstep',
-                    **swarm_args)
+    if processes:
+        from flock_swarm.nodes.harness import resolve_scenario, run_processes
+
+        path = resolve_scenario(str(scenario), list(overrides), seed, Path(out))
+        run_processes(path, Path(out), mode='lockstep',
+                      domain_id=unique_domain() if domain_id is None else domain_id,
+                      timeout=timeout, container=container, **swarm_args)
+        run = SwarmRun(out)
+    else:
+        run = run_swarm(scenario, out, overrides, seed, domain_id, timeout, mode='lockstep',
+                        **swarm_args)
     summary = run.summary
     incomplete = {key: summary.get(key) for key in ('missed_commands', 'leader_missed')
                   if summary.get(key)}

@@ -12,7 +12,7 @@ from flock_swarm.analysis.bagrun import Progress, RunData, Ticker
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import RunMetrics
-from flock_swarm.core.run import RunLog, run_facts
+from flock_swarm.core.run import RunLog, observed_pairs, run_facts, static_graph
 from flock_swarm.core.scenario import realize
 from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
 
@@ -21,10 +21,12 @@ def recompute(run: RunData, record_every: int | None = None,
               progress: Progress | None = None) -> tuple[dict[str, np.ndarray], RunMetrics]:
     """Recompute the metrics of every step as the world node does, and the time series.
 
-    Every complete step updates the whole-run metrics from its r-disk edges
-    (:meth:`RunMetrics.update_from_edges`: minimum distance, collision pairs); every
-    ``record_every``-th step and the last are recorded with :func:`step_metrics`, exactly as
-    in ``WorldStepper.observe`` (and ``sim`` for r-disk scenarios).
+    Every complete step updates the whole-run metrics from the pairs ``sim`` and the world
+    take them from (:func:`~flock_swarm.core.run.observed_pairs`; the r-disk edges for a bag
+    without a scenario) (:meth:`RunMetrics.update_from_edges`: minimum distance, collision
+    pairs); every ``record_every``-th step and the last are recorded with
+    :func:`step_metrics`, with the law's adaptive state, exactly as in
+    ``WorldStepper.observe`` (and ``sim``).
 
     :param run: the run.
     :param record_every: subsampling of the series (default: the scenario's).
@@ -35,11 +37,18 @@ def recompute(run: RunData, record_every: int | None = None,
                  record_every or run.record_every)
     last = len(run.steps) - 1
     tick = Ticker(progress)
+    sc = run.scenario
+    real = realize(sc) if sc is not None else None
+    static = static_graph(sc, real) if sc is not None else None
     for row, k in enumerate(run.steps):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
+        covered, radius = disk_graph(q, run.radius, run.strict_radius), run.radius
+        if sc is not None:
+            covered, radius = observed_pairs(sc, real, q, static, covered)
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
-                    disk_graph(q, run.radius, run.strict_radius), run.radius, row == last)
+                    covered, radius, row == last,
+                    **{key: values[row] for key, values in run.state.items()})
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
     return log.rec.arrays(), log.metrics
 

@@ -146,6 +146,46 @@ def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
     return disk_graph(q, sc.law.radius, sc.law.strict_radius)
 
 
+def whole_run_pairs(sc: Scenario, q: np.ndarray, static: EdgeList | None,
+                    edges: EdgeList) -> tuple[EdgeList, float]:
+    """Return the pairs a step's whole-run metrics are folded from, and the radius they cover
+    completely (:meth:`~flock_swarm.core.metrics.RunMetrics.update_from_edges`).
+
+    ``sim``'s rule, which the world node and ``analyze`` follow so that their
+    ``min_pair_distance`` and ``collisions`` are ``sim``'s: on a fixed graph, the pairs
+    closer than ``collision_distance`` (its edges say nothing of distances); otherwise the
+    step's interaction graph, which covers every pair within ``r`` (r-disk edges) or every
+    pair (a law acting on all pairs).
+
+    :param sc: the scenario.
+    :param q: positions.
+    :param static: the fixed graph (:func:`static_graph`), or ``None``.
+    :param edges: the step's interaction graph (:func:`interaction_graph`); unused on a
+        fixed graph.
+    :return: ``(pairs, radius)``.
+    """
+    if static is not None:
+        return disk_graph(q, sc.collision_distance), sc.collision_distance
+    return edges, np.inf if sc.law.all_pairs else sc.law.radius
+
+
+def observed_pairs(sc: Scenario, real: Realization, q: np.ndarray, static: EdgeList | None,
+                   disk: EdgeList) -> tuple[EdgeList, float]:
+    """Return :func:`whole_run_pairs` for an observer of a run that has the step's r-disk
+    graph rather than its interaction graph (the world node, ``analyze``).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param q: positions.
+    :param static: the fixed graph (:func:`static_graph`), or ``None``.
+    :param disk: the r-disk graph at ``q`` (``r``, ``strict_radius`` of the law).
+    :return: ``(pairs, radius)``.
+    """
+    graph = interaction_graph(sc, real, q, None) if sc.law.all_pairs and static is None \
+        else disk
+    return whole_run_pairs(sc, q, static, graph)
+
+
 def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
     """Return the time-invariant edge list of a fixed-graph scenario, or ``None``."""
     if real.adjacency is None:
@@ -406,12 +446,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                     return
                 edges = stack.edges()
             q, p, m = stack.q, stack.p, stack.size
-            if stack.static is None:
-                # r-disk edges cover every pair within the radius; all-pairs edges every pair.
-                covered, radius = edges, np.inf if law.all_pairs else law.radius
-            else:
-                covered = disk_graph(q, sc.collision_distance)
-                radius = sc.collision_distance
+            covered, radius = whole_run_pairs(sc, q, stack.static, edges)
             logs = [stack.logs[g] for g in stack.active]
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)

@@ -166,8 +166,9 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('com_velocity_error', FINAL, '`||mean p - p_gamma||` at `t_final`',
        _final('metric_com_velocity_error'), sweep=True, series='metric_com_velocity_error'),
     _K('min_pair_distance', WHOLE_RUN, 'smallest distance between two agents over the whole '
-       'run (exact whenever it is below the interaction radius; above it, over the recorded '
-       'steps)', lambda x: x.run.min_pair_distance, sweep=True,
+       'run (exact whenever it is below the interaction radius, on a fixed graph below '
+       '`collision_distance`, for a law acting on all pairs of an r-disk graph always; '
+       'above it, over the recorded steps)', lambda x: x.run.min_pair_distance, sweep=True,
        series='metric_min_pair_distance'),
     _K('collisions', WHOLE_RUN, 'distinct pairs ever closer than `collision_distance`',
        lambda x: len(x.run.collision_pairs), sweep=True, default=True),
@@ -192,8 +193,7 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
        '`lambda_max(W_{N-m})`, `alpha`, `satisfied`, `components` (when chosen by '
        '`select: pseudo_leaders`)', _certificate),
     _K('adaptive_gain_final', LAW_STATE, 'Zhou\'s adaptive gains `h_i` at `t_final` '
-       '(`zhou_pseudo_leader`; `sim` only: the world does not see the agents\' state)',
-       writers=(SIM,)),
+       '(`zhou_pseudo_leader`; a ROS run records them from the agents\' `/agent_<i>/state`)'),
     _K('pseudo_leader_reselections', WHOLE_RUN, 'how often `sim` re-selected the '
        'pseudo-leaders (`reselect: true`)', sweep=True, sim_only=True, writers=(SIM,)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
@@ -258,7 +258,8 @@ def summary_of(inputs: SummaryInputs, **given: Any) -> dict:
             if not state_done:
                 state_done = True
                 for state, name in inputs.facts.law_state.items():
-                    # The world node does not see the agents' adaptive state: only sim records it.
+                    # A bag recorded without the agents' state (/agent_<i>/state) gives its
+                    # analysis no series of it.
                     if state in inputs.series:
                         out[name] = [float(x) for x in inputs.series[state][-1]]
             continue

@@ -3,8 +3,10 @@
 :class:`AgentController` is what an agent node (one agent, or a container of many) decides:
 which inputs belong to which step, when a step can be answered (the leader's state or its
 timeout), the commands (the same law functions as ``sim``,
-:func:`flock_swarm.core.laws.base.group_control`) and the adaptive state. The node turns
-messages into its calls and its commands into messages. In lockstep, a step's odometry is
+:func:`flock_swarm.core.laws.base.group_control`) and the adaptive state, advanced as ``sim``
+advances it and told with each step's commands (:meth:`AgentController.state_values`, the
+state they were computed with: what ``sim`` records at that step). The node turns messages
+into its calls and its commands into messages. In lockstep, a step's odometry is
 queued as bytes and stored at once (:class:`OdometryInbox`).
 """
 
@@ -17,6 +19,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from flock_swarm.contract import state_labels
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import advance_state, group_control
@@ -134,6 +137,8 @@ class AgentController:
     zero (counted per agent in ``non_finite``, the first of each agent logged).
 
     :ivar answered: the last step answered (``-1`` before the first).
+    :ivar state: the hosted agents' adaptive state the last commands were computed with
+        (before it advanced), ``{key: (m, ...)}``; empty for a law without.
     """
 
     def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
@@ -167,6 +172,10 @@ class AgentController:
         self.latest = StepInputs()
         self.latest_step: int | None = None
         self.non_finite: Counter = Counter()
+        self.state = self.swarm.subset(self.ids).state
+        shapes = {key: value.shape[1:] for key, value in self.state.items()}
+        #: The labels of one agent's state (:func:`flock_swarm.contract.state_labels`).
+        self.state_labels = state_labels(shapes)
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered).
@@ -270,6 +279,7 @@ class AgentController:
         group = self.swarm.subset(ids)
         u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
         if group.state:
+            self.state = {key: value.copy() for key, value in group.state.items()}
             advance_state(law, q[ids], p[ids], leader, group, self.sc.dt)
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
@@ -282,6 +292,14 @@ class AgentController:
                                  'command is published instead (further ones are counted)')
             self.non_finite[i] += 1
         return np.where(bad[:, None], 0.0, u)
+
+    def state_values(self) -> np.ndarray:
+        """Return :attr:`state` one row per hosted agent, the values of :attr:`state_labels`.
+
+        :return: shape ``(m, len(state_labels))``.
+        """
+        m = len(self.ids)
+        return np.concatenate([value.reshape(m, -1) for value in self.state.values()], axis=1)
 
 
 class OdometryInbox(StepInbox):

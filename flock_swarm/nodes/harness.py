@@ -236,7 +236,8 @@ class InProcessSwarm:
         """
         from flock_swarm.contract import contract_topics
         from flock_swarm.foxglove_ws import LiveSink
-        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace()))
+        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace(),
+                                        bool(self.world.stepper.state)))
         self.world.sinks.append(LiveSink(live))
 
     def parameters(self, **values) -> list:
@@ -480,12 +481,14 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
             from flock_swarm.nodes.foxglove_server import BackgroundBridge
             bridge = BackgroundBridge(live, domain_id, base)
             # The bridge's subscriptions are best effort: it must have matched the leader's
-            # and the agents' publishers before the first step, and the world waits for it
-            # as one more subscriber of every odometry topic and for its markers' and
-            # metrics' one.
+            # and the agents' publishers (their adaptive state's too, for a law with one)
+            # before the first step, and the world waits for it as one more subscriber of
+            # every odometry topic and for its markers' and metrics' one.
+            adaptive = range(sc.n_agents) if sc.law.initial_state(1) else ()
             bridge.wait_matched([contract.absolute(name) for name in (
                 contract.LEADER_ODOM, contract.LEADER_ACCEL,
-                *(contract.cmd_topic(i) for i in range(sc.n_agents)))], 30.0)
+                *(contract.cmd_topic(i) for i in range(sc.n_agents)),
+                *(contract.state_topic(i) for i in adaptive))], 30.0)
             # One subscriber per agent host (every child so far but the leader), and the bridge.
             world_params = dict(world_params or {}, expect_subscribers=len(children.children),
                                 expect_telemetry_subscribers=1)

@@ -19,6 +19,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from flock_swarm import __version__
@@ -71,7 +72,10 @@ class BagSink:
         if path.exists() and any(path.iterdir()):
             raise ScenarioError('out_dir', f'{path} already holds a bag; choose another out_dir')
         # Every schema is found before the bag file exists: a failure leaves nothing behind.
-        for msg_type in (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray):
+        # The agents' adaptive state is a topic only for a law that has one.
+        types = (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray) \
+            + ((JointState,) if real.agents.state else ())
+        for msg_type in types:
             try:
                 message_definition(type_name_of(msg_type))
             except DefinitionNotFoundError as exc:

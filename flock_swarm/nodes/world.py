@@ -2,11 +2,11 @@
 
 Lockstep mode (default, deterministic): for step ``k`` the world publishes ``/clock`` ``t_k``
 and every ``/agent_<i>/odom`` stamped ``t_k``, then waits until every agent's
-``cmd_accel`` and the leader's state for ``t_k`` are in, or the per-step timeout expires (a
-late or missing agent gets a zero command: counted, logged, published on ``/swarm/metrics``
-and recorded). It then integrates exactly (the same :func:`step_agents` as ``sim``) to
-``t_{k+1}``. Realtime mode: a wall-clock timer steps with the latest commands (zero-order
-hold).
+``cmd_accel`` and the leader's state for ``t_k`` are in (and, for a law with adaptive state,
+every ``/agent_<i>/state`` of ``t_k``), or the per-step timeout expires (a late or missing
+agent gets a zero command: counted, logged, published on ``/swarm/metrics`` and recorded).
+It then integrates exactly (the same :func:`step_agents` as ``sim``) to ``t_{k+1}``.
+Realtime mode: a wall-clock timer steps with the latest commands (zero-order hold).
 
 Every message the world publishes or receives is written to a rosbag2-compatible MCAP bag
 in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; the run's
@@ -24,11 +24,12 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                   RUNNING, STATUS, STATUS_QOS, cmd_topic, odom_topic,
-                                  qos_profile)
+                                  qos_profile, state_topic)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.graph import agent_hosts, check_claims
@@ -40,8 +41,11 @@ from flock_swarm.nodes.spin import run_node
 from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
                                        WorldSettings, WorldStepper)
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
-                                    encode_clock)
+                                    decode_state, encode_clock)
 from flock_swarm.outputs import SpooledRecorder, write_outputs
+
+#: A law's adaptive state may take any finite value: only a non-finite one is rejected.
+STATE_LIMIT = sys.float_info.max
 
 
 def _split_bound(name: str, default: int | float, description: str) -> Param:
@@ -127,6 +131,11 @@ class WorldNode(RecordedNode):
                                      (lambda data, i=i: self.queue_command(i, data))
                                      if self.lockstep else None)
                            for i in range(sc.n_agents)]
+        # A law's adaptive state (none: no topic), recorded and checked like the commands.
+        self.agent_state_topics = [subscribe(JointState, state_topic(i), decode_state,
+                                             lambda msg, i=i: self.on_agent_state(i, msg))
+                                   for i in range(sc.n_agents)] \
+            if self.stepper.state else []
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
         self.create_timer(1.0, self.check_claims)
@@ -184,6 +193,21 @@ class WorldNode(RecordedNode):
         if self.stepper.command(i, k, lin[:self.scenario.dim], time.monotonic()):
             self.guard.reject(topic, 'late', f'a command for step {k} at step {self.k}')
         self._maybe_finish()
+
+    def on_agent_state(self, i: int, msg: tuple) -> None:
+        """Check agent ``i``'s adaptive state ``(stamp_ns, frame_id, labels, values)`` and
+        hand it on (its labels must be the law's)."""
+        ns, frame, labels, values = msg
+        topic, expected = self.agent_state_topics[i], self.stepper.state_labels
+        if labels != expected:
+            self.guard.reject(topic, 'malformed', f'state labels {list(labels)}, not the '
+                              f'law\'s {list(expected)}')
+            return
+        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
+                             window=self.stepper.window())
+        if k is not None:
+            self.stepper.agent_state(i, k, values)
+            self._maybe_finish()
 
     def on_leader_odom(self, msg: tuple) -> None:
         """Check the leader's position and velocity of its step (``msg``: see
