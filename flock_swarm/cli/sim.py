@@ -13,6 +13,7 @@ from pathlib import Path
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
+from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
 from flock_swarm.outputs import ensure_writable, write_outputs
 
@@ -103,10 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     s = result.summary
     if say:
-        say(f'[sim] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
-            f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
-            f'collisions = {s["collisions"]}, components = {s["components_final"]} '
-            f'({s["wall_time_s"]:.1f} s wall)')
+        say('[sim] ' + result_line(s, sc.headline, ('collisions', 'components_final')))
         say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
     if s['status'] == 'diverged':
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from flock_swarm.console import EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.headline import result_line
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
                                        run_processes)
@@ -149,10 +150,7 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         from flock_swarm.plots import plot_timeseries
         with np.load(out / 'timeseries.npz') as data:
             plot_timeseries(dict(data), out, sc.name)
-    say(f'[swarm] {summary["status"]} at t = {summary["t_final"]:g} s: eta = '
-        f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
-        f'collisions = {summary["collisions"]}, missed commands = '
-        f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
+    say('[swarm] ' + result_line(summary, sc.headline, ('collisions', 'missed_commands')))
     say('[swarm] wrote ' + ('' if args.no_record else f'{out}/bag, ')
         + f'{out}/summary.json, {out}/timeseries.npz'
         + ('' if args.no_plots else f', {out}/trajectories.png, {out}/metrics.png'))
