@@ -71,12 +71,6 @@ def accept_sigint() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def measure(value: float | None, spec: str) -> str:
-    """Return a summary's ``value`` formatted by ``spec``, or ``n/a`` for a measure the run
-    did not take (null: it was stopped before its first recorded step)."""
-    return 'n/a' if value is None else format(value, spec)
-
-
 def signal_name(sig: int) -> str:
     """Return the name of signal ``sig`` (``SIGTERM``)."""
     return signal.Signals(sig).name

@@ -36,6 +36,7 @@ pytestmark = pytest.mark.ros
 
 #: Wall-clock bound of one run in these tests (a run that hangs fails instead of blocking CI).
 RUN_TIMEOUT = 240.0
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def ros_run(tmp_path, domain, preset, overrides, **kwargs):
@@ -147,6 +148,43 @@ def test_swarm_converges_without_collisions(tmp_path, ros_domain):
     assert summary['velocity_mismatch_max'] < 0.05
     assert summary['collisions'] == 0 and summary['min_pair_distance'] > 0.5
     assert summary['components_final'] == 1
+
+
+def test_the_demo_leads_with_what_fig6_is_about(tmp_path, ros_domain):
+    """scripts/demo (Su 2009 Fig. 6): its last line gives the COM error against the paper's
+    claim, and /swarm/metrics' first values are the COM errors (issue 24)."""
+    out = tmp_path / 'demo'
+    run = subprocess.run([str(ROOT / 'scripts' / 'demo'), str(out), '--set', 'duration=0.1',
+                          '--no-plots'], env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)),
+                         capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    s = json.loads((out / 'summary.json').read_text())
+    line = next(x for x in run.stderr.splitlines() if x.startswith('[swarm] completed'))
+    assert line == (
+        f'[swarm] completed at t = 0.1 s: COM position error = {s["com_position_error"]:.3g} m, '
+        f'COM velocity error = {s["com_velocity_error"]:.3g} m/s '
+        f'(Su 2009 Fig. 6: -> 0 exponentially); collisions = {s["collisions"]}, '
+        f'missed commands = {s["missed_commands"]} ({s["wall_time_s"]:.1f} s wall)')
+    assert 'eta' in s and 'eta' not in line
+    statuses = [msg.status[0] for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics'])]
+    assert statuses
+    for st in statuses:
+        keys = [kv.key for kv in st.values]
+        assert keys[:2] == ['com_position_error', 'com_velocity_error']
+        assert {'eta', 'velocity_mismatch_max', 'step', 'missed_commands'} <= set(keys)
+    last = {kv.key: kv.value for kv in statuses[-1].values}
+    assert float(last['com_position_error']) == s['com_position_error']
+
+
+def test_a_scenario_without_a_headline_publishes_eta_first(tmp_path, ros_domain):
+    """The metrics' values in the order they always had when a scenario names no headline."""
+    sc, summary, out = ros_run(tmp_path, ros_domain, 'demo', [
+        'n_agents=4', 'informed.count=2', 'duration=0.1', 'metrics={eta_tolerance: 0.05}'])
+    assert sc.headline.keys == ('eta', 'velocity_mismatch_max')
+    statuses = [msg.status[0] for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics'])]
+    assert statuses and all([kv.key for kv in st.values][:6] == [
+        'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
+        'min_pair_distance', 'components'] for st in statuses)
 
 
 def test_absent_agent_gets_zero_commands_and_is_counted(tmp_path, ros_domain):

@@ -32,11 +32,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, event, given, settings, strategies as st
+from hypothesis import HealthCheck, event, example, given, settings, strategies as st
 
 from flock_swarm.cli import sim
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import TOP_KEYS
+from flock_swarm.core.summary import SUMMARY_KEYS
 from flock_swarm.scenario_yaml import apply_override, parse_yaml
 from flock_swarm.presets import load_mapping, preset_names
 
@@ -48,6 +49,7 @@ CLI_KEYS = ('scenario', '<scenario>', '--seed', '--set', '--out')
 #: Budgets: the whole file stays under about a minute on two cores.
 SIM_EXAMPLES = 600
 CLI_EXAMPLES = 200
+HEADLINE_EXAMPLES = 100
 
 
 def short(data: dict) -> dict:
@@ -444,6 +446,39 @@ def test_overrides_and_seed_run_or_name_the_key(case):
     assert_runs_or_names_key(BASES[name], args)
 
 
+#: Items of a headline: every summary key (measures and not), near misses, and bad values.
+HEADLINE_ITEMS = st.one_of(
+    st.sampled_from([k.name for k in SUMMARY_KEYS]
+                    + ['com_error', 'ETA', '', 'components', 'metric_eta', 'eta ']),
+    BAD_VALUES)
+#: ``metrics.headline``: lists of items (repeats too), or anything else.
+HEADLINES = st.one_of(st.lists(HEADLINE_ITEMS, max_size=4), BAD_VALUES)
+#: ``metrics.claim``: any text (line breaks, control and format characters, too long), or not
+#: text at all.
+CLAIMS = st.one_of(st.text(st.characters(exclude_categories=('Cs',)), max_size=120),
+                   BAD_VALUES)
+
+
+@settings(derandomize=True, database=None, max_examples=HEADLINE_EXAMPLES, deadline=None)
+@given(st.sampled_from(sorted(BASES)), HEADLINES, st.one_of(st.none(), CLAIMS))
+@example('su2009_fig6', ['com_position_error', 'com_error'], None)
+@example('su2009_fig6', ['eta', 'eta'], None)
+@example('demo', 'eta', None)
+@example('demo', [], None)
+@example('os2003_sink', ['seed'], 'one flock')
+@example('demo', None, 'Su 2009:\n-> 0')
+@example('demo', None, 'x' * 101)
+@example('demo', ['x' * 10 ** 6], None)
+def test_any_headline_runs_or_names_the_key(name, headline, claim):
+    """``metrics.headline`` and ``metrics.claim`` (issue 24): the same property."""
+    data = copy.deepcopy(BASES[name])
+    if headline is not None:
+        data['metrics']['headline'] = headline
+    if claim is not None:
+        data['metrics']['claim'] = claim
+    assert_runs_or_names_key(data)
+
+
 # --------------------------------------------------------------------------------------------
 # ROS parameters of the nodes
 
@@ -465,7 +500,8 @@ COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor')
 #: Scenario keys given as ROS parameters (overrides of single values), and unknown ones.
 OVERRIDE_PARAMS = ('n_agents', 'dt', 'duration', 'dim', 'protocol.c1', 'protocol.name',
                    'protocol.h', 'informed.count', 'informed.select', 'leader.position',
-                   'leader.model', 'metrics.eta_tolerance', 'record_every', 'gain',
+                   'leader.model', 'metrics.eta_tolerance', 'metrics.headline',
+                   'metrics.claim', 'record_every', 'gain',
                    'protocol.gain', 'leader.position.x')
 
 INT64 = st.integers(-2 ** 63, 2 ** 63 - 1)

@@ -287,3 +287,21 @@ def test_yu_connectivity_finds_the_first_split_and_who_is_cut_off():
     assert connectivity(sc, series) == {'connectivity_lost_t': 0.1, 'cut_off_agents': 1}
     series['metric_components'] = np.array([1, 1, 1])
     assert connectivity(sc, series) == {'connectivity_lost_t': None, 'cut_off_agents': 0}
+
+
+def test_a_preset_run_from_before_its_headline_is_reused(tmp_path):
+    """A cached preset run whose scenario.json has no headline (issue 24) is the same run."""
+    from flock_swarm.core.run import simulate
+    from flock_swarm.outputs import write_outputs
+    from flock_swarm.presets import load
+    sc = load('su2009_fig6', ['duration=0.02'])
+    result = simulate(sc)
+    write_outputs(result, tmp_path, sc)
+    ran = json.loads((tmp_path / 'scenario.json').read_text())
+    assert ran['metrics'].pop('headline') and ran['metrics'].pop('claim')
+    (tmp_path / 'scenario.json').write_text(json.dumps(ran))
+    assert execution.cached_preset(tmp_path, sc) == result.summary
+    # A changed run is not reused; nor is a scenario.json that is not a mapping.
+    assert execution.cached_preset(tmp_path, load('su2009_fig6', ['duration=0.04'])) is None
+    (tmp_path / 'scenario.json').write_text('[1, 2]')
+    assert execution.cached_preset(tmp_path, sc) is None

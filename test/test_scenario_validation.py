@@ -107,6 +107,47 @@ def test_invalid_law_parameters(section, key):
     assert err.value.key == key
 
 
+@pytest.mark.parametrize('metrics, key, reason', [
+    ({'headline': 'com_position_error'}, 'metrics.headline',
+     "expected a non-empty list of summary keys (one or more of: eta, "),
+    ({'headline': []}, 'metrics.headline', 'expected a non-empty list'),
+    ({'headline': {'eta': 1}}, 'metrics.headline', 'expected a non-empty list'),
+    ({'headline': ['eta', 'com_error']}, 'metrics.headline[1]',
+     "'com_error' is not a summary key (expected one of: eta, velocity_mismatch_max, "
+     'com_position_error, com_velocity_error, min_pair_distance, collisions, '
+     'components_final)'),
+    ({'headline': ['seed']}, 'metrics.headline[0]',
+     "'seed' is a summary key that does not measure the run"),
+    ({'headline': [0.5]}, 'metrics.headline[0]', 'expected a summary key'),
+    ({'headline': [['eta']]}, 'metrics.headline[0]', 'expected a summary key'),
+    ({'headline': ['eta', 'eta']}, 'metrics.headline[1]', 'eta is named twice'),
+    ({'headline': ['x' * 10 ** 6]}, 'metrics.headline[0]', "'xxxxxxxx"),
+    ({'claim': 'Su 2009 Fig. 6:\n-> 0'}, 'metrics.claim', 'must be one line'),
+    ({'claim': 'a\u2028b'}, 'metrics.claim', 'must be one line'),
+    ({'claim': 'x' * 101}, 'metrics.claim', 'at most 100 characters'),
+    ({'claim': ['Fig. 6']}, 'metrics.claim', 'expected text'),
+    ({'claim': float('nan')}, 'metrics.claim', 'expected text'),
+])
+def test_a_bad_headline_names_its_key(metrics, key, reason):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('metrics', metrics))
+    assert err.value.key == key
+    assert reason in err.value.reason
+    # One short line, whatever the value held.
+    assert '\n' not in str(err.value) and len(str(err.value)) < 300
+
+
+def test_the_headline_defaults_to_eta_and_the_velocity_mismatch():
+    sc = parse_scenario(BASE)
+    assert sc.headline.keys == ('eta', 'velocity_mismatch_max') and sc.headline.claim == ''
+    sc = parse_scenario(with_value('metrics', {
+        'eta_tolerance': 0.2, 'headline': ['com_position_error', 'eta'],
+        'claim': 'Su 2009 Fig. 6: -> 0'}))
+    assert sc.headline.keys == ('com_position_error', 'eta')
+    assert sc.headline.claim == 'Su 2009 Fig. 6: -> 0' and sc.eta_tolerance == 0.2
+    assert sc.raw['metrics']['headline'] == ['com_position_error', 'eta']
+
+
 def test_lorenz_needs_three_dimensions():
     data = with_value('leader', {'model': 'lorenz', 'position': [0, 0], 'velocity': [1, 1]})
     with pytest.raises(ScenarioError) as err:
@@ -179,6 +220,25 @@ def test_every_preset_is_valid_and_stable(name):
     assert load_mapping(name).get('reference'), 'every preset cites its source'
 
 
+@pytest.mark.parametrize('name', preset_names())
+def test_every_preset_names_the_metrics_that_matter_for_it(name):
+    """The paper's statistic (docs/reproduction.md) leads; a paper's preset says its claim."""
+    metrics = load_mapping(name)['metrics']
+    assert metrics['headline'] == list(load(name).headline.keys)
+    if name != 'demo':
+        assert load(name).headline.claim.startswith(load_mapping(name)['reference'].split(',')[0])
+
+
+@pytest.mark.parametrize('name, keys', [
+    ('su2009_fig6', ('com_position_error', 'com_velocity_error')),
+    ('su2009_fig5', ('com_position_error', 'com_velocity_error')),
+    ('su2009_fig2', ('eta', 'components_final')),
+    ('os2003_sink', ('components_final', 'collisions')),
+])
+def test_a_papers_preset_leads_with_its_claims_statistic(name, keys):
+    assert load(name).headline.keys == keys
+
+
 def test_presets_cover_every_paper_experiment():
     expected = {'demo', 'su2009_fig2', 'su2009_fig3', 'su2009_fig5', 'su2009_fig6',
                 'su2009_fig7', 'os2003_sink', 'zhou2012_sec51', 'zhou2012_sec52',
@@ -233,6 +293,8 @@ def run_sim(*args, cwd=None):
     (['demo', '--set', 'nonsense'], '--set'),
     (['no_such_preset'], 'scenario'),
     (['zhou2012_sec51', '--set', 'dt=0.01'], 'dt'),
+    (['su2009_fig6', '--set', 'metrics.headline=[eta, com]'], 'metrics.headline[1]'),
+    (['su2009_fig6', '--set', 'metrics.claim=[1, 2]'], 'metrics.claim'),
 ])
 def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path):
     res = run_sim(*args, '--out', str(tmp_path / 'o'))

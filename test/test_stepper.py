@@ -409,3 +409,15 @@ def test_controller_publishes_zero_for_a_non_finite_command(monkeypatch, caplog)
             assert_array_equal(u[1], want[2])
     assert ctrl.non_finite == {1: 2}
     assert caplog.text.count('agent 1: the law gave a non-finite command') == 1
+
+
+@pytest.mark.parametrize('preset, shown, hidden', [
+    ('su2009_fig6', '  COM error = ', 'eta = '),
+    ('demo', '  eta = 0.00  mismatch = 0  missed = 0', 'COM'),
+])
+def test_the_worlds_progress_line_leads_with_the_headline(preset, shown, hidden):
+    """The demo's progress lines give what its experiment is about (eta before a headline)."""
+    sc = load(preset, ['duration=0.04'])
+    st = WorldStepper(sc, WorldSettings(), LOG, now=0.0)
+    line = st.progress_line(10.0, every=0.0)
+    assert line.startswith('[world] t = 0.00/0.04 s') and shown in line and hidden not in line

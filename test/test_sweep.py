@@ -38,6 +38,7 @@ from flock_swarm.study.spec import Run, parse_spec, plan_runs, points, read_spec
 from flock_swarm.cli.sweep import main, spec_path
 
 BIN = Path(sys.executable).parent
+ROOT = Path(__file__).resolve().parent.parent
 #: The small study: 2 x 2 points, 3 seeds, 1 s runs of 10 and 16 agents.
 SMALL = {
     'name': 'small', 'scenario': 'su2009_fig3', 'set': {'duration': 1.0},
@@ -146,6 +147,20 @@ def test_the_shipped_fig3_spec_is_the_reproductions_sweep():
     runs = plan_runs(spec)
     assert len(runs) == 40 and spec.seeds == (0,)
     assert [r.digest for r in runs] == [r.digest for r in fig3_tasks(Plan(False, 1))]
+
+
+@pytest.mark.parametrize('spec', ['reproduce_su2009_fig6', 'reproduce_os2003_sink',
+                                  'reproduce_jadbabaie2003_linked'])
+def test_a_headline_reruns_nothing(spec):
+    """The presets' headlines (issue 24) changed no run: the committed caches hold them all."""
+    runs = plan_runs(read_spec(spec_path(spec)))
+    cached = read_cache(ROOT / 'docs' / 'reproduction' / 'runs' / f'{spec}.jsonl')
+    assert runs and all(r.digest in cached for r in runs)
+    # Any other headline or claim: the same digests.
+    other = plan_runs(read_spec(spec_path(spec), overrides=(
+        'metrics.headline=[min_pair_distance]', 'metrics.claim=another claim')))
+    assert [r.digest for r in other] == [r.digest for r in runs]
+    assert other[0].scenario().headline.keys == ('min_pair_distance',)
 
 
 def test_plan_is_seed_major_largest_first_with_common_seeds():

@@ -12,9 +12,10 @@ import sys
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
-                                 measure, signal_name)
+                                 signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
+from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
 from flock_swarm.outputs import ensure_writable, write_outputs
 
@@ -131,11 +132,7 @@ def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSign
     if say:
         if stop.stopped:
             say(f'[sim] stopped by {signal_name(stop.first)}')
-        say(f'[sim] {s["status"]} at t = {measure(s["t_final"], "g")} s: eta = '
-            f'{measure(s["eta"], ".3f")}, '
-            f'velocity mismatch = {measure(s["velocity_mismatch_max"], ".3g")}, '
-            f'collisions = {s["collisions"]}, components = {measure(s["components_final"], "")} '
-            f'({s["wall_time_s"]:.1f} s wall)')
+        say('[sim] ' + result_line(s, sc.headline, ('collisions', 'components_final')))
         if result.series:
             say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
         else:

@@ -16,8 +16,9 @@ import sys
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals,
-                                 measure, signal_name)
+                                 signal_name)
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.headline import result_line
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
                                        run_processes)
@@ -169,11 +170,7 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
             from flock_swarm.plots import plot_timeseries
             with np.load(written[0]) as data:
                 written += plot_timeseries(dict(data), out, sc.name)
-    say(f'[swarm] {summary["status"]} at t = {measure(summary["t_final"], "g")} s: eta = '
-        f'{measure(summary["eta"], ".3f")}, velocity mismatch = '
-        f'{measure(summary["velocity_mismatch_max"], ".3g")}, '
-        f'collisions = {summary["collisions"]}, missed commands = '
-        f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
+    say('[swarm] ' + result_line(summary, sc.headline, ('collisions', 'missed_commands')))
     # Only what is there: a run stopped before its first step has no bag and no time series.
     written = [path for path in [out / 'bag', out / 'summary.json', *written] if path.exists()]
     say('[swarm] wrote ' + ', '.join(str(path) for path in written))

@@ -17,6 +17,7 @@ import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
+from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
 from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
@@ -468,8 +469,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                 latest = logs[0].latest
                 stacked = f'  {len(logs)} stacked' if len(stack.scenarios) > 1 else ''
                 progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
-                         f'step {step + 1}/{steps}  eta = {latest.get("eta", 0):.2f}  '
-                         f'mismatch = {latest.get("velocity_mismatch_max", 0):.3g}  '
+                         f'step {step + 1}/{steps}  {progress_text(latest, sc.headline)}  '
                          f'({rate:.0f} steps/s){stacked}')
     except KeyboardInterrupt:
         stack.finish('interrupted', step)

@@ -20,6 +20,7 @@ from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, o
                                      text, vector)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
+from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
 from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
@@ -102,6 +103,7 @@ class Scenario:
     eta_tolerance: float
     collision_distance: float
     raw: dict
+    headline: Headline = Headline()
 
     @property
     def steps(self) -> int:
@@ -179,14 +181,14 @@ def parse_scenario(data: Any) -> Scenario:
     leader = _parse_leader(mapping(data['leader'], 'leader'), dim)
     intrinsic = _parse_intrinsic(mapping(data.get('intrinsic'), 'intrinsic'), dim, leader)
     metrics = mapping(data.get('metrics'), 'metrics')
-    only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
+    only(metrics, ('eta_tolerance', 'collision_distance', *HEADLINE_KEYS), 'metrics.')
     eta_tol = positive(metrics.get('eta_tolerance', law.eta_tolerance), 'metrics.eta_tolerance')
     coll = positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
     return Scenario(name, text(data.get('description'), 'description', ''),
                     text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
-                    intrinsic, eta_tol, coll, data)
+                    intrinsic, eta_tol, coll, data, parse_headline(metrics))
 
 
 def _parse_law(section: dict, ctx: LawContext) -> Law:

@@ -23,6 +23,7 @@ from flock_swarm.contract import state_labels, state_slices
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
+from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary, observed_pairs,
                                   static_graph)
@@ -524,8 +525,7 @@ class WorldStepper:
         sc, m = self.scenario, self.metrics_now
         return (f'[world] t = {self.k * sc.dt:.2f}/{sc.duration:g} s  step {self.k}/{sc.steps}'
                 f'  {self.k / max(now - self.t_wall0, 1e-9):.1f} steps/s'
-                f'  eta = {m.get("eta", 0.0):.2f}'
-                f'  mismatch = {m.get("velocity_mismatch_max", 0.0):.3g}'
+                f'  {progress_text(m, sc.headline)}'
                 f'  missed = {int(self.missed.sum())}')
 
     # -- the end ------------------------------------------------------------------------------

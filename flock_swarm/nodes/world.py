@@ -122,7 +122,8 @@ class WorldNode(RecordedNode):
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
         # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
-        self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed)
+        self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed,
+                                   sc.headline)
         subscribe = self.recorded_subscription
         self.cmd_handlers = [lambda msg, i=i: self.on_command(i, msg)
                              for i in range(sc.n_agents)]

@@ -11,6 +11,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flock_swarm import __version__
+from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.summary import compared_metrics
 from flock_swarm.core.run import simulate
 from flock_swarm.core.scenario import Scenario
@@ -45,7 +46,9 @@ def cached_preset(out: Path, sc: Scenario) -> dict | None:
         return None
     if not (out / 'timeseries.npz').is_file():
         return None
-    same = ran == json.loads(json.dumps(plain(sc.raw)))
+    # The headline changes what is printed, not the run: a run from before it was chosen counts.
+    same = isinstance(ran, dict) \
+        and run_mapping(ran) == json.loads(json.dumps(plain(run_mapping(sc.raw))))
     if same and summary.get('flock_swarm_version') == __version__ \
             and summary.get('status') == 'completed':
         return summary

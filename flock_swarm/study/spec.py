@@ -20,6 +20,7 @@ import yaml
 from flock_swarm import __version__
 from flock_swarm.core import summary
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.run import stack_mismatch
 from flock_swarm.core.scenario import Scenario, parse_scenario
 from flock_swarm.scenario_yaml import parse_yaml
@@ -145,8 +146,12 @@ def plain(value: Any) -> Any:
 
 
 def scenario_digest(sc: Scenario) -> str:
-    """Return the cache key of a run: a hash of its scenario as run and the package version."""
-    text = json.dumps(plain(sc.raw), sort_keys=True)
+    """Return the cache key of a run: a hash of its scenario as run and the package version.
+
+    The scenario's headline (``metrics.headline``, ``metrics.claim``) is left out: it changes
+    what is printed, not the run.
+    """
+    text = json.dumps(plain(run_mapping(sc.raw)), sort_keys=True)
     return hashlib.sha1(f'{text}|{__version__}'.encode()).hexdigest()[:16]
 
 
