@@ -144,6 +144,24 @@ def _certificate(x: SummaryInputs) -> Any:
             'components': sel.components}
 
 
+def _network(series: str, reduce: str) -> Callable[[SummaryInputs], Any]:
+    """Return the value function of a network statistic over the recorded instants.
+
+    Absent without a ``network:`` section; ``None`` when no recorded instant had a value
+    (no link used, no message sent).
+    """
+    def value(x: SummaryInputs) -> Any:
+        import numpy as np
+        if series not in x.series:
+            return ABSENT
+        values = np.asarray(x.series[series], dtype=float)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            return None
+        return float(values.max() if reduce == 'max' else values.mean())
+    return value
+
+
 _K = SummaryKey
 #: Every key of ``summary.json``, in the order it is written.
 SUMMARY_KEYS: tuple[SummaryKey, ...] = (
@@ -192,6 +210,18 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
        writers=(SIM,)),
     _K('pseudo_leader_reselections', WHOLE_RUN, 'how often `sim` re-selected the '
        'pseudo-leaders (`reselect: true`)', sweep=True, sim_only=True, writers=(SIM,)),
+    _K('network_delivered', WHOLE_RUN, 'with a `network:` section: the fraction of the '
+       'agents\' messages not lost, averaged over the recorded instants (of each, its latest '
+       'sending step)', _network('network_delivered', 'mean'), sweep=True,
+       series='network_delivered', writers=(SIM,)),
+    _K('network_age_mean', WHOLE_RUN, 'with a `network:` section: the mean age [s] of the '
+       'neighbour states the law used, averaged over the recorded instants',
+       _network('network_age_mean', 'mean'), sweep=True, series='network_age_mean',
+       writers=(SIM,)),
+    _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
+       'neighbour state the law used, over the recorded instants',
+       _network('network_age_max', 'max'), sweep=True, series='network_age_max',
+       writers=(SIM,)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),
