@@ -32,8 +32,8 @@ def test_absent_or_zero_section_is_inactive():
 
 
 def test_times_become_steps():
-    spec = parse_network({'delay': 0.1, 'leader': {'delay': {'law': 'uniform', 'min': 0.02,
-                                                              'max': 0.05}}}, DT)
+    uniform = {'law': 'uniform', 'min': 0.02, 'max': 0.05}
+    spec = parse_network({'delay': 0.1, 'leader': {'delay': uniform}}, DT)
     assert (spec.agents.delay.law, spec.agents.delay.low, spec.agents.delay.high) == \
         ('fixed', 10, 10)
     assert (spec.leader.delay.low, spec.leader.delay.high) == (2, 5)
@@ -380,3 +380,34 @@ def test_without_delay_the_linear_law_tracks_the_leader():
     result = simulate(parse_scenario(data))
     q, lq = result.series['q'][-1], result.series['leader_q'][-1]
     np.testing.assert_allclose(q, np.broadcast_to(lq, q.shape), atol=1e-2)
+
+
+def test_the_ros_front_ends_refuse_an_active_section_in_one_line(tmp_path):
+    """Until the agents' controller applies the model, a ROS run must not silently ignore it."""
+    from flock_swarm.nodes.harness import resolve_scenario
+    with pytest.raises(ScenarioError, match='network: not yet applied by the ROS nodes'):
+        resolve_scenario('demo', ['network={delay: 0.04}'], None, tmp_path)
+    assert not parse_network({'delay': 0}, DT).active
+    resolve_scenario('demo', ['network={delay: 0}'], None, tmp_path)
+    assert (tmp_path / 'scenario.yaml').is_file()
+
+
+def test_a_sweep_may_vary_every_network_key_and_collect_its_statistics():
+    from flock_swarm.study.spec import parse_spec, plan_runs
+    parsed = parse_spec({
+        'scenario': 'demo', 'set': {'duration': 0.1},
+        'grid': {'network.delay': [0, 0.04], 'network.loss': [0, 0.2],
+                 'network.noise.position': [0.01], 'network.noise.velocity': [0.0],
+                 'network.period': [2], 'network.model': ['input'],
+                 'network.max_age': [0.2], 'network.leader.delay': [0.02],
+                 'network.leader.loss': [0.1], 'network.leader.noise.position': [0.0],
+                 'network.leader.noise.velocity': [0.0], 'network.leader.period': [1]},
+        'metrics': ['eta', 'network_delivered', 'network_age_mean', 'network_age_max']})
+    runs = plan_runs(parsed)
+    assert len(runs) == 4
+    scenarios = [run.scenario() for run in runs]
+    assert {sc.network.agents.delay.low for sc in scenarios} == {0, 2}
+    assert all(sc.network.model == 'input' and sc.network.max_age == 10 for sc in scenarios)
+    assert all(run.stack_key is None for run in runs)
+    with pytest.raises(ScenarioError, match='network.delay'):
+        plan_runs(parse_spec({'scenario': 'demo', 'grid': {'network.delay': [0.03]}}))

@@ -349,6 +349,19 @@ def parse_network(value, dt: float) -> NetworkSpec:
     return NetworkSpec(agents, leader, model, max_age)
 
 
+def refuse_in_ros(spec: NetworkSpec) -> None:
+    """Refuse an active section in a ROS run: the nodes do not apply the model yet.
+
+    A ROS run would otherwise ignore the section and differ from ``sim`` without a word.
+
+    :param spec: the scenario's ``network:`` section.
+    :raises ScenarioError: naming ``network`` when it is active.
+    """
+    if spec.active:
+        raise ScenarioError('network', 'not yet applied by the ROS nodes: run it with sim '
+                            '(docs/network.md)')
+
+
 # --------------------------------------------------------------------------------------------
 # A run's messages
 
