@@ -35,7 +35,6 @@ from typing import Any, Callable, Iterable, TYPE_CHECKING
 
 from flock_swarm import contract
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.network import refuse_in_ros
 
 if TYPE_CHECKING:
     import numpy as np
@@ -81,6 +80,7 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
     """
     import yaml
 
+    from flock_swarm.core.network import refuse_in_ros
     from flock_swarm.presets import prepare
 
     if seed is not None and seed < 0:
