@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flock_swarm.core.checks import integer, mapping, number, only
+from flock_swarm.core.checks import choice, integer, mapping, number, only
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, within_radius
 from flock_swarm.core.laws.base import AgentData, Law
@@ -248,10 +248,7 @@ def _parse_delay(value, key: str, dt: float) -> Delay:
     if not isinstance(value, dict):
         steps = steps_of(0 if value is None else value, key, dt)
         return Delay('fixed', steps, steps)
-    law = value.get('law', 'fixed')
-    if law not in DELAY_LAWS:
-        raise ScenarioError(f'{key}.law', f'unknown value {law!r} (expected one of: '
-                            f'{", ".join(DELAY_LAWS)})')
+    law = choice(value.get('law', 'fixed'), f'{key}.law', DELAY_LAWS)
     if law == 'fixed':
         only(value, ('law', 'value'), f'{key}.')
         steps = steps_of(value.get('value', 0), f'{key}.value', dt)
@@ -280,10 +277,7 @@ def _parse_delay(value, key: str, dt: float) -> Delay:
 def _parse_loss(value, key: str) -> Loss:
     if not isinstance(value, dict):
         return Loss('bernoulli', _probability(0 if value is None else value, key))
-    model = value.get('model', 'bernoulli')
-    if model not in LOSS_MODELS:
-        raise ScenarioError(f'{key}.model', f'unknown value {model!r} (expected one of: '
-                            f'{", ".join(LOSS_MODELS)})')
+    model = choice(value.get('model', 'bernoulli'), f'{key}.model', LOSS_MODELS)
     if model == 'bernoulli':
         only(value, ('model', 'p'), f'{key}.')
         return Loss('bernoulli', _probability(value.get('p', 0), f'{key}.p'))
@@ -329,10 +323,7 @@ def parse_network(value, dt: float) -> NetworkSpec:
     leader_section = mapping(section.get('leader'), 'network.leader')
     only(leader_section, CHANNEL_KEYS, 'network.leader.')
     leader = _parse_channel(leader_section, 'network.leader.', dt)
-    model = section.get('model', 'communication')
-    if model not in DELAY_MODELS:
-        raise ScenarioError('network.model', f'unknown value {model!r} (expected one of: '
-                            f'{", ".join(DELAY_MODELS)})')
+    model = choice(section.get('model', 'communication'), 'network.model', DELAY_MODELS)
     oldest = max(agents.oldest, leader.oldest)
     if 'max_age' in section:
         max_age = steps_of(section['max_age'], 'network.max_age', dt)
