@@ -411,3 +411,15 @@ def test_a_sweep_may_vary_every_network_key_and_collect_its_statistics():
     assert all(run.stack_key is None for run in runs)
     with pytest.raises(ScenarioError, match='network.delay'):
         plan_runs(parse_spec({'scenario': 'demo', 'grid': {'network.delay': [0.03]}}))
+
+
+def test_the_recorded_statistics_cover_every_step_since_the_previous_instant():
+    """With period 2 and a record every 2 steps, each instant sees ages 1 and 0 (no aliasing)."""
+    data = oracle_scenario(0, 0.02, 0.2).raw
+    sc = parse_scenario({**data, 'record_every': 2, 'network': {'period': 2}})
+    series = simulate(sc).series
+    dt = 0.02
+    assert series['network_age_mean'][0] == 0.0
+    np.testing.assert_allclose(series['network_age_mean'][1:], 0.5 * dt, rtol=1e-12)
+    np.testing.assert_allclose(series['network_age_max'][1:], dt, rtol=1e-12)
+    assert np.all(series['network_delivered'] == 1.0)

@@ -525,6 +525,9 @@ class NetworkState:
         self.own_p = np.zeros((window + 1, n, dim))
         self.step = -1
         self.leader_now: LeaderState | None = None
+        # Since the last recorded instant: messages delivered and sent, ages summed, their
+        # count and largest (a record every few steps would otherwise alias with a period).
+        self._tally = [0, 0, 0, 0, -1]
 
     def send(self, k: int, q: np.ndarray, p: np.ndarray, leader: LeaderState,
              edges: EdgeList, informed: np.ndarray, receivers: np.ndarray | None = None) -> None:
@@ -590,12 +593,28 @@ class NetworkState:
         for col in range(to_i.shape[1]):
             s[:, col] = np.bincount(at, weights=to_i[:, col], minlength=ids.size)
         u = self._combine(ids, row, q, p, s, agents, dt, law.combine)
-        ages = held.age[use] * dt
+        ages = held.age[use]
         got, total = self.links.delivered(hosted)
-        stats = {'network_delivered': got / total if total else np.nan,
-                 'network_age_mean': float(ages.mean()) if ages.size else np.nan,
-                 'network_age_max': float(ages.max()) if ages.size else np.nan}
-        return u, stats
+        tally = self._tally
+        if k % self.spec.agents.period == 0:
+            tally[0] += got
+            tally[1] += total
+        tally[2] += int(ages.sum())
+        tally[3] += ages.size
+        tally[4] = max(tally[4], int(ages.max()) if ages.size else -1)
+        return u, _statistics([got, total, int(ages.sum()), ages.size,
+                               int(ages.max()) if ages.size else -1], dt)
+
+    def recorded(self, dt: float) -> dict:
+        """Return the statistics of the steps since the last call, and start anew.
+
+        ``network_delivered``: of the messages sent at those steps, the fraction not lost;
+        ``network_age_mean`` and ``network_age_max``: the mean and largest age [s] of the
+        neighbour states the law used at those steps (NaN when none).
+        """
+        out = _statistics(self._tally, dt)
+        self._tally = [0, 0, 0, 0, -1]
+        return out
 
     def advance_state(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
                       agents: AgentData, dt: float) -> None:
@@ -671,6 +690,14 @@ class NetworkState:
         mask = np.zeros(self.n, dtype=bool)
         mask[ids] = True
         return mask
+
+
+def _statistics(tally: list[int], dt: float) -> dict:
+    """Return the recorded statistics of ``[delivered, sent, age sum, ages, age max]``."""
+    got, total, age_sum, count, age_max = tally
+    return {'network_delivered': got / total if total else np.nan,
+            'network_age_mean': age_sum / count * dt if count else np.nan,
+            'network_age_max': age_max * dt if count else np.nan}
 
 
 def _scatter(out, members: np.ndarray, part, size: int):

@@ -406,12 +406,11 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             edges = stack.edges()
             if stack.reselector is not None:
                 stack.reselector.update(stack.agents, edges)
-            net_stats: dict = {}
             if stack.net is None:
                 u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
             else:
                 stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
-                u, net_stats = stack.net.control(None, stack.q, stack.p, stack.agents, dt)
+                u = stack.net.control(None, stack.q, stack.p, stack.agents, dt)[0]
             gone = stack.failed(u)
             if gone.any():
                 u = u[stack.end(gone, 'diverged', step)]
@@ -429,6 +428,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)
             if step % every == 0 or step == steps:
+                net_stats = {} if stack.net is None else stack.net.recorded(dt)
                 for b, log in enumerate(logs):
                     rows = slice(b * m, (b + 1) * m)
                     log.record(step, step * dt, q[rows], p[rows], u[rows], state,

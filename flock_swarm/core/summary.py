@@ -145,7 +145,7 @@ def _certificate(x: SummaryInputs) -> Any:
 
 
 def _network(series: str, reduce: str) -> Callable[[SummaryInputs], Any]:
-    """Return the value function of a network statistic over the recorded instants.
+    """Return the value function of a network statistic from its recorded series.
 
     Absent without a ``network:`` section; ``None`` when no recorded instant had a value
     (no link used, no message sent).
@@ -211,17 +211,16 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('pseudo_leader_reselections', WHOLE_RUN, 'how often `sim` re-selected the '
        'pseudo-leaders (`reselect: true`)', sweep=True, sim_only=True, writers=(SIM,)),
     _K('network_delivered', WHOLE_RUN, 'with a `network:` section: the fraction of the '
-       'agents\' messages not lost, averaged over the recorded instants (of each, its latest '
-       'sending step)', _network('network_delivered', 'mean'), sweep=True,
+       'agents\' messages not lost (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_delivered', 'mean'), sweep=True,
        series='network_delivered', writers=(SIM,)),
     _K('network_age_mean', WHOLE_RUN, 'with a `network:` section: the mean age [s] of the '
-       'neighbour states the law used, averaged over the recorded instants',
-       _network('network_age_mean', 'mean'), sweep=True, series='network_age_mean',
-       writers=(SIM,)),
+       'neighbour states the law used (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_age_mean', 'mean'), sweep=True,
+       series='network_age_mean', writers=(SIM,)),
     _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
-       'neighbour state the law used, over the recorded instants',
-       _network('network_age_max', 'max'), sweep=True, series='network_age_max',
-       writers=(SIM,)),
+       'neighbour state the law used over the whole run', _network('network_age_max', 'max'),
+       sweep=True, series='network_age_max', writers=(SIM,)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),
