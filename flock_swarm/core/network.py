@@ -470,12 +470,21 @@ class _Link:
         keys = np.concatenate([s.key[idx] for s, idx in parts])
         # Parts run from the newest sending step: the first occurrence of a key is its newest.
         _, first = np.unique(keys, return_index=True)
+        part = np.concatenate([np.full(idx.size, n) for n, (_, idx) in enumerate(parts)])[first]
+        rows = np.concatenate([idx for _, idx in parts])[first]
+        # Only the chosen messages are gathered, each from its own sending step's record.
+        chosen = [(parts[n][0], part == n) for n in np.unique(part).tolist()]
 
         def gather(name):
             if getattr(parts[0][0], name) is None:
                 return None
-            return np.concatenate([getattr(s, name)[idx] for s, idx in parts])[first]
-        age = np.concatenate([np.full(idx.size, k - s.step) for s, idx in parts])[first]
+            like = getattr(parts[0][0], name)
+            out = np.empty((first.size, *like.shape[1:]), dtype=like.dtype)
+            for sent, mask in chosen:
+                out[mask] = getattr(sent, name)[rows[mask]]
+            return out
+        age = k - np.array([parts[n][0].step for n in range(len(parts))],
+                           dtype=np.int64)[part]
         return Held(gather('receiver'), gather('sender'), age, gather('weight'),
                     gather('q'), gather('p'), gather('a'))
 
