@@ -54,6 +54,7 @@ setup(
             'zhou_pseudo_leader = flock_swarm.core.laws.zhou2012:ZhouPseudoLeader',
             'yu_pinning_observer = flock_swarm.core.laws.yu2010:YuPinningObserver',
             'jadbabaie_leader = flock_swarm.core.laws.jadbabaie2003:JadbabaieLeader',
+            'linear_consensus = flock_swarm.core.laws.linear:LinearConsensus',
         ],
         'flock_swarm.leaders': [
             'constant_velocity = flock_swarm.core.leaders.models:ConstantVelocity',

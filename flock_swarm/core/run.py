@@ -23,6 +23,7 @@ from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
 from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
                                         swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
+from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
@@ -332,6 +333,9 @@ def stack_mismatch(scenarios: list[Scenario]) -> str | None:
         return None
     first = scenarios[0]
     for sc in scenarios:
+        if sc.network.active:
+            # Each run's messages are keyed by its own seed and kept per link: one at a time.
+            return f'{sc.name}: a run with a network model runs alone'
         if sc.graph_type != 'disk' or sc.law.all_pairs or sc.informed.reselect:
             return f'{sc.name}: only r-disk graphs without re-selection stack'
         same = {'dim': sc.dim == first.dim, 'n_agents': sc.n_agents == first.n_agents,
@@ -373,6 +377,10 @@ class _Stack:
             else None
         self._disk = static is None and not sc.law.all_pairs
         self.graph = self._new_graph()
+        #: The messages between the agents (``network:``), ``None`` without the section.
+        self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight) if sc.network.active else None
 
     def _new_graph(self) -> VerletDiskGraph | None:
         """Return the r-disk graph tracker of the active realisations (``None``: not r-disk)."""
@@ -439,7 +447,11 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             edges = stack.edges()
             if stack.reselector is not None:
                 stack.reselector.update(stack.agents, edges)
-            u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
+            if stack.net is None:
+                u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
+            else:
+                stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
+                u = stack.net.control(None, stack.q, stack.p, stack.agents, dt)[0]
             gone = stack.failed(u)
             if gone.any():
                 u = u[stack.end(gone, 'diverged', step)]
@@ -452,14 +464,18 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)
             if step % every == 0 or step == steps:
+                net_stats = {} if stack.net is None else stack.net.recorded(dt)
                 for b, log in enumerate(logs):
                     rows = slice(b * m, (b + 1) * m)
                     log.record(step, step * dt, q[rows], p[rows], u[rows], state,
                                stack.agents.informed[rows], step == steps,
-                               **stack.extra(rows))
+                               **stack.extra(rows), **net_stats)
             if step == steps:
                 break
-            advance_state(law, q, p, state, stack.agents, dt)
+            if stack.net is None:
+                advance_state(law, q, p, state, stack.agents, dt)
+            else:
+                stack.net.advance_state(None, q, p, stack.agents, dt)
             stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
             leader.step(dt)
             now = time.monotonic()

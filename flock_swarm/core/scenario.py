@@ -23,11 +23,12 @@ from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
 from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
 from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
+from flock_swarm.core.network import NetworkSpec, parse_network
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
 
 TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
             'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
-            'intrinsic', 'metrics')
+            'intrinsic', 'metrics', 'network')
 #: ``intrinsic.model`` values besides the registered autonomous leader models.
 INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
@@ -104,6 +105,8 @@ class Scenario:
     collision_distance: float
     raw: dict
     headline: Headline = Headline()
+    #: The ``network:`` section (``docs/network.md``); inactive when absent or all zero.
+    network: NetworkSpec = NetworkSpec()
 
     @property
     def steps(self) -> int:
@@ -184,11 +187,12 @@ def parse_scenario(data: Any) -> Scenario:
     only(metrics, ('eta_tolerance', 'collision_distance', *HEADLINE_KEYS), 'metrics.')
     eta_tol = positive(metrics.get('eta_tolerance', law.eta_tolerance), 'metrics.eta_tolerance')
     coll = positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
+    network = parse_network(data.get('network'), dt)
     return Scenario(name, text(data.get('description'), 'description', ''),
                     text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
-                    intrinsic, eta_tol, coll, data, parse_headline(metrics))
+                    intrinsic, eta_tol, coll, data, parse_headline(metrics), network)
 
 
 def _parse_law(section: dict, ctx: LawContext) -> Law:

@@ -147,6 +147,24 @@ def _certificate(x: SummaryInputs) -> Any:
             'components': sel.components}
 
 
+def _network(series: str, reduce: str) -> Callable[[SummaryInputs], Any]:
+    """Return the value function of a network statistic from its recorded series.
+
+    Absent without a ``network:`` section; ``None`` when no recorded instant had a value
+    (no link used, no message sent).
+    """
+    def value(x: SummaryInputs) -> Any:
+        import numpy as np
+        if series not in x.series:
+            return ABSENT
+        values = np.asarray(x.series[series], dtype=float)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            return None
+        return float(values.max() if reduce == 'max' else values.mean())
+    return value
+
+
 _K = SummaryKey
 #: Every key of ``summary.json``, in the order it is written.
 SUMMARY_KEYS: tuple[SummaryKey, ...] = (
@@ -196,6 +214,17 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
        '(`zhou_pseudo_leader`; a ROS run records them from the agents\' `/agent_<i>/state`)'),
     _K('pseudo_leader_reselections', WHOLE_RUN, 'how often `sim` re-selected the '
        'pseudo-leaders (`reselect: true`)', sweep=True, sim_only=True, writers=(SIM,)),
+    _K('network_delivered', WHOLE_RUN, 'with a `network:` section: the fraction of the '
+       'agents\' messages not lost (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_delivered', 'mean'), sweep=True,
+       series='network_delivered', writers=(SIM,)),
+    _K('network_age_mean', WHOLE_RUN, 'with a `network:` section: the mean age [s] of the '
+       'neighbour states the law used (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_age_mean', 'mean'), sweep=True,
+       series='network_age_mean', writers=(SIM,)),
+    _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
+       'neighbour state the law used over the whole run', _network('network_age_max', 'max'),
+       sweep=True, series='network_age_max', writers=(SIM,)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),

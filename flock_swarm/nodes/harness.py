@@ -79,11 +79,13 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
     """
     import yaml
 
+    from flock_swarm.core.network import refuse_in_ros
     from flock_swarm.presets import prepare
 
     if seed is not None and seed < 0:
         raise ScenarioError('--seed', f'must be >= 0, got {seed}')
     sc, _ = prepare(name, overrides, seed, allow_unstable=allow_unstable)
+    refuse_in_ros(sc.network)
     out.mkdir(parents=True, exist_ok=True)
     path = out / 'scenario.yaml'
     path.write_text(yaml.safe_dump(sc.raw, sort_keys=False))
