@@ -40,19 +40,20 @@ def build_parser() -> argparse.ArgumentParser:
 def listing() -> str:
     """Return the ``sim --list`` text: presets, laws and leader models with their sources.
 
-    :raises ScenarioError: when a registered plugin cannot be loaded (named).
+    A plugin that cannot be used (an import error, a name registered twice...) is listed as
+    ``BROKEN`` with the reason; it fails only the runs that use it.
     """
     from flock_swarm.presets import preset_names
     lines = ['presets (sim NAME):']
     lines += [f'  {name}' for name in preset_names()]
     for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
                          ('leader models (leader.model):', registry.LEADER_GROUP)):
-        found = registry.entries(group)
+        found = registry.status(group)
         width = max((len(name) for name in found), default=0)
         lines += ['', title]
-        for name, entry in found.items():
-            cls = registry.load(group, name)
-            lines.append(f'  {name:<{width}}  [{entry.package}]  {registry.describe(cls)}')
+        for name, (entry, cls, problem) in found.items():
+            what = registry.describe(cls) if problem is None else f'BROKEN: {problem}'
+            lines.append(f'  {name:<{width}}  [{entry.package}]  {what}')
     return '\n'.join(lines) + '\n'
 
 
