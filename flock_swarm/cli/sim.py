@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.run import simulate
 from flock_swarm.outputs import ensure_writable, write_outputs
@@ -91,7 +91,13 @@ def main(argv: list[str] | None = None) -> int:
     if say:
         say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
             f'of {sc.dt:g} s, seed {sc.seed}')
-    result = simulate(sc, progress=say)
+    try:
+        result = simulate(sc, progress=say)
+    except PluginError as exc:
+        # A law's output of the wrong shape at some step: the run cannot go on (status 1,
+        # a failed run, not a usage error).
+        print(f'sim: error: {exc}', file=sys.stderr)
+        return EXIT_DIVERGED
     try:
         write_outputs(result, out, sc)
         if args.plots:
