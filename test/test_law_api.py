@@ -129,23 +129,12 @@ class Gains(Consensus):
     gains: tuple[float, ...] = (1.0, 1.0)
 
 
-@dataclass(frozen=True)
-class NeedsGain(Law):
+@dataclass(frozen=True, kw_only=True)
+class NeedsGain(Consensus):
     """A field without default: the scenario must give it."""
 
     name: ClassVar[str] = 'needs_gain'
     gain: float
-    r: float = 4.0
-
-    @property
-    def radius(self):
-        return self.r
-
-    def pair(self, qi, pi, qj, pj, w):
-        return pj - pi
-
-    def combine(self, q, p, s, leader, agents, dt):
-        return s
 
 
 TEST_LAWS = {cls.name: cls for cls in (Consensus, OldCombine, Clock, NeighbourMean,

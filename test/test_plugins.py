@@ -162,20 +162,12 @@ class MeanDefault(MeanClaimed):
     antisymmetric: ClassVar[bool] = False
 
 
-@dataclass(frozen=True)
-class Required(Law):
-    """A law with a field without default."""
+@dataclass(frozen=True, kw_only=True)
+class Required(Damped):
+    """A law with a field without default (keyword-only: after the inherited defaults)."""
 
     name: ClassVar[str] = 'required'
     gain: float
-    r: float = 4.0
-
-    @property
-    def radius(self):
-        return self.r
-
-    def pair(self, qi, pi, qj, pj, w):
-        return pj - pi
 
     def combine(self, q, p, s, leader, agents, dt):
         return s if leader is None else s - self.gain * (p - leader.p)
