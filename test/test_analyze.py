@@ -248,6 +248,24 @@ def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
             assert_allclose(ours[name], series[name], rtol=0, atol=0, err_msg=name)
 
 
+def test_a_bag_whose_plugin_law_is_not_installed_names_the_plugin(flat, tmp_path, capsys):
+    """Issue 24: not 'the bag has no flock_swarm scenario metadata' but the missing law."""
+    run, _, _ = flat
+    metadata = BagReader(run / 'bag').metadata('flock_swarm')
+    scenario = json.loads(metadata['scenario'])
+    scenario['protocol']['name'] = 'cucker_smale'
+    bag = copy_bag(run / 'bag', tmp_path / 'plugin',
+                   dict(metadata, scenario=json.dumps(scenario)))
+    assert main([str(bag), '--out', str(tmp_path / 'x'), '--quiet']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "recorded with the law 'cucker_smale' (protocol.name)" in err[0]
+    assert 'install the package that provides it, or give --radius' in err[0]
+    # With --radius it is analysed like a bag without its scenario.
+    assert main([str(bag), '--out', str(tmp_path / 'y'), '--radius', '4', '--no-anim',
+                 '--quiet']) == 0
+
+
 def run_cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze', *args],
                           capture_output=True, text=True, timeout=120, check=False)

@@ -176,8 +176,8 @@ def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypat
     # beyond x = 25, which some realisations reach at different steps, one never.
     real_control = run.swarm_control
 
-    def failing(law, q, p, edges, leader, agents, dt):
-        u = real_control(law, q, p, edges, leader, agents, dt)
+    def failing(law, q, p, edges, leader, agents, dt, *t):
+        u = real_control(law, q, p, edges, leader, agents, dt, *t)
         u[(q[:, 0] > 25.0) & agents.informed] = np.nan
         return u
 

@@ -232,23 +232,42 @@ def _id_list(ids: list[int]) -> str:
     return shown + (f' and {len(ids) - 8} more' if len(ids) > 8 else '')
 
 
+#: The scenario keys that name a plugin (a law or a leader model): a bag whose scenario fails
+#: on one of them was recorded with a plugin this installation does not have (or cannot load).
+PLUGIN_KEYS = ('protocol.name', 'leader.model', 'intrinsic.model')
+
+
 def _stored_scenario(reader: BagReader, notes: list[str]
-                     ) -> tuple[Scenario | None, dict[str, str] | None]:
-    """Return the scenario of the bag's ``flock_swarm`` record and the record itself."""
+                     ) -> tuple[Scenario | None, dict[str, str] | None, str | None]:
+    """Return the scenario of the bag's ``flock_swarm`` record, the record itself, and why a
+    plugin the scenario names cannot be used here (``None``: no such problem)."""
     meta = reader.metadata(METADATA_RECORD)
     if meta is None:
-        return None, None
+        return None, None, None
+    plugin = None
     try:
-        return parse_scenario(json.loads(meta['scenario'])), meta
+        data = json.loads(meta['scenario'])
+        return parse_scenario(data), meta, None
     except KeyError:
         reason = 'no scenario key'
     except json.JSONDecodeError as exc:
         reason = f'not JSON: {exc}'
     except ScenarioError as exc:
         reason = str(exc)
+        if exc.key in PLUGIN_KEYS:
+            plugin = _missing_plugin(data, exc)
     notes.append(f'the bag\'s {METADATA_RECORD} metadata has no usable scenario ({reason}); '
                  'analysed like a bag without one')
-    return None, meta
+    return None, meta, plugin
+
+
+def _missing_plugin(data, exc: ScenarioError) -> str:
+    """Return the one line naming the plugin a bag's scenario needs and why it is unusable."""
+    section, _, field = exc.key.partition('.')
+    name = data.get(section, {}).get(field) if isinstance(data.get(section), dict) else None
+    what = 'law' if section == 'protocol' else 'leader model'
+    return (f'the bag was recorded with the {what} {name!r} ({exc.key}), which cannot be '
+            f'loaded here ({exc.reason}): install the package that provides it')
 
 
 def _stamp_ns(stamp) -> int:
@@ -280,13 +299,16 @@ def load_run(bag: Path | str, *, radius: float | None = None,
     """
     reader = BagReader(Path(bag))
     notes: list[str] = []
-    sc, meta = _stored_scenario(reader, notes)
+    sc, meta, plugin = _stored_scenario(reader, notes)
     topics = swarm_topics(reader.topics(), sc.n_agents if sc is not None else None)
     absent = optional_topics_missing(topics)
     if absent:
         notes.append(f'optional topic(s) not in the bag: {"; ".join(absent)} (the odometry '
                      'of every agent is all analyze requires)')
     if sc is None:
+        if radius is None and plugin is not None:
+            raise AnalyzeError(f'{plugin}, or give --radius (and --eta-tolerance, '
+                               '--collision-distance) to analyse it without its scenario')
         if radius is None:
             raise AnalyzeError('the bag has no flock_swarm scenario metadata: give --radius '
                                '(and --eta-tolerance, --collision-distance)')

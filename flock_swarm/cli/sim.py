@@ -13,7 +13,7 @@ from pathlib import Path
 
 from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
                                  signal_name)
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
@@ -43,19 +43,20 @@ def build_parser() -> argparse.ArgumentParser:
 def listing() -> str:
     """Return the ``sim --list`` text: presets, laws and leader models with their sources.
 
-    :raises ScenarioError: when a registered plugin cannot be loaded (named).
+    A plugin that cannot be used (an import error, a name registered twice...) is listed as
+    ``BROKEN`` with the reason; it fails only the runs that use it.
     """
     from flock_swarm.presets import preset_names
     lines = ['presets (sim NAME):']
     lines += [f'  {name}' for name in preset_names()]
     for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
                          ('leader models (leader.model):', registry.LEADER_GROUP)):
-        found = registry.entries(group)
+        found = registry.status(group)
         width = max((len(name) for name in found), default=0)
         lines += ['', title]
-        for name, entry in found.items():
-            cls = registry.load(group, name)
-            lines.append(f'  {name:<{width}}  [{entry.package}]  {registry.describe(cls)}')
+        for name, (entry, cls, problem) in found.items():
+            what = registry.describe(cls) if problem is None else f'BROKEN: {problem}'
+            lines.append(f'  {name:<{width}}  [{entry.package}]  {what}')
     return '\n'.join(lines) + '\n'
 
 
@@ -111,7 +112,13 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
     if say:
         say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
             f'of {sc.dt:g} s, seed {sc.seed}')
-    result = simulate(sc, progress=say)
+    try:
+        result = simulate(sc, progress=say)
+    except PluginError as exc:
+        # A law's output of the wrong shape at some step: the run cannot go on (status 1,
+        # a failed run, not a usage error).
+        print(f'sim: error: {exc}', file=sys.stderr)
+        return EXIT_DIVERGED
     with stop.held():
         return _finish(result, sc, out, args, say, stop)
 

@@ -26,3 +26,12 @@ class ScenarioError(ValueError):
         super().__init__(f'{key}: {reason}')
         self.key = key
         self.reason = reason
+
+
+class PluginError(ScenarioError):
+    """A registered law or leader model that cannot be used; names its entry point or law.
+
+    Raised when a plugin cannot be loaded (:mod:`flock_swarm.core.registry`), when a law's
+    claims fail their check (``antisymmetric``), and when a law's output has the wrong shape
+    at any step (:mod:`flock_swarm.core.laws.base`).
+    """

@@ -36,7 +36,7 @@ import numpy as np
 from flock_swarm.core.checks import choice, integer, mapping, number, only
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, within_radius
-from flock_swarm.core.laws.base import AgentData, Law
+from flock_swarm.core.laws.base import AgentData, Law, control, state_rates
 from flock_swarm.core.leaders.base import LeaderState
 
 DELAY_LAWS = ('fixed', 'uniform', 'geometric')
@@ -568,7 +568,7 @@ class NetworkState:
                                np.broadcast_to(leader.a, (m, self.dim)))
 
     def control(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
-                agents: AgentData, dt: float) -> tuple[np.ndarray, dict]:
+                agents: AgentData, dt: float, t: float = 0.0) -> tuple[np.ndarray, dict]:
         """Return ``u`` of the agents ``ids`` on the held states, and the step's statistics.
 
         :param ids: the agents to evaluate (ascending), ``None`` for all.
@@ -576,6 +576,7 @@ class NetworkState:
         :param p: true velocities of every agent.
         :param agents: per-agent data of ``ids`` (``agents.subset(ids)``; all for ``None``).
         :param dt: the step.
+        :param t: the time of the step (for a ``combine`` that takes it).
         :return: ``u`` of ``ids`` and ``{'network_delivered', 'network_age_mean',
             'network_age_max'}`` of their incoming links (ages in seconds; NaN when none).
         """
@@ -604,7 +605,8 @@ class NetworkState:
         s = np.empty((ids.size, to_i.shape[1]))
         for col in range(to_i.shape[1]):
             s[:, col] = np.bincount(at, weights=to_i[:, col], minlength=ids.size)
-        u = self._combine(ids, row, q, p, s, agents, dt, law.combine)
+        u = self._combine(ids, row, q, p, s, agents, dt,
+                          lambda *args: control(law, *args, t=t))
         ages = held.age[use]
         got, total = self.links.delivered(hosted)
         tally = self._tally
@@ -629,11 +631,13 @@ class NetworkState:
         return out
 
     def advance_state(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
-                      agents: AgentData, dt: float) -> None:
+                      agents: AgentData, dt: float, t: float = 0.0) -> None:
         """Advance the law's adaptive state in place with the leader's state held.
 
         The same explicit step as :func:`flock_swarm.core.laws.base.advance_state`, each
         informed agent using the leader's state it holds (own state as in :meth:`control`).
+        A ``state_rate`` that takes the pair sums receives ``s=None`` under the network model
+        (the sums of the held states are :meth:`control`'s, not kept).
         """
         if not agents.state:
             return
@@ -642,7 +646,7 @@ class NetworkState:
         row[ids] = np.arange(ids.size)
 
         def rate(qg, pg, sg, leader, group, dt_):
-            return self.law.state_rate(qg, pg, leader, group)
+            return state_rates(self.law, qg, pg, leader, group, None, t)
         rates = self._combine(ids, row, q, p, None, agents, dt, rate)
         for key, value in rates.items():
             agents.state[key] += dt * value

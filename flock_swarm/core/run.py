@@ -21,11 +21,12 @@ from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
 from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
-                                        swarm_control)
+                                        pair_sums, swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
-from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
+from flock_swarm.core.errors import PluginError
+from flock_swarm.core.registry import LAW_GROUP, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
 from flock_swarm.core.stability import model_bounds
 from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
@@ -216,12 +217,21 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
         with np.errstate(all='ignore'):
             edges = interaction_graph(sc, real, real.q0, static_graph(sc, real))
             u = swarm_control(sc.law, real.q0, real.p0, edges, leader, real.agents, sc.dt)
+    except PluginError as exc:
+        raise PluginError('protocol.name', f'{label}: {_unnamed(sc.law, exc.reason)}') from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         raise PluginError('protocol.name', f'{label}: raised {type(exc).__name__} at the '
                           f'initial state: {exc}') from None
-    problem = output_problem(u, sc.n_agents, sc.dim)
+    problem = output_problem(sc.law, 'combine()', u, (sc.n_agents, sc.dim))
     if problem is not None:
-        raise PluginError('protocol.name', f'{label}: {problem}')
+        raise PluginError('protocol.name', f'{label}: {_unnamed(sc.law, problem)} at the '
+                          'initial state')
+
+
+def _unnamed(law, reason: str) -> str:
+    """Return a law's error without the law's name in front (the entry point names it)."""
+    prefix = f'{law.name}: '
+    return reason[len(prefix):] if reason.startswith(prefix) else reason
 
 
 def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
@@ -448,10 +458,11 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             if stack.reselector is not None:
                 stack.reselector.update(stack.agents, edges)
             if stack.net is None:
-                u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt)
+                u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt,
+                                  step * dt)
             else:
                 stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
-                u = stack.net.control(None, stack.q, stack.p, stack.agents, dt)[0]
+                u = stack.net.control(None, stack.q, stack.p, stack.agents, dt, step * dt)[0]
             gone = stack.failed(u)
             if gone.any():
                 u = u[stack.end(gone, 'diverged', step)]
@@ -473,9 +484,10 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             if step == steps:
                 break
             if stack.net is None:
-                advance_state(law, q, p, state, stack.agents, dt)
+                advance_state(law, q, p, state, stack.agents, dt,
+                              lambda: pair_sums(law, q, p, edges), step * dt)
             else:
-                stack.net.advance_state(None, q, p, stack.agents, dt)
+                stack.net.advance_state(None, q, p, stack.agents, dt, step * dt)
             stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
             leader.step(dt)
             now = time.monotonic()

@@ -18,10 +18,11 @@ import numpy as np
 from flock_swarm.core import registry
 from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, only, positive,
                                      text, vector)
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
 from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
-from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
+from flock_swarm.core.laws.base import (AgentData, Law, LawContext, LawSetup, ObserverGroup,
+                                        antisymmetry_problem)
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.network import NetworkSpec, parse_network
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
@@ -202,19 +203,61 @@ def _parse_law(section: dict, ctx: LawContext) -> Law:
     cls = registry.law_class(section['name'])
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     only(section, ('name', *fields), 'protocol.')
+    for name, f in fields.items():
+        if name not in section and f.default is dataclasses.MISSING \
+                and f.default_factory is dataclasses.MISSING:
+            raise ScenarioError(f'protocol.{name}', f'missing (protocol {cls.name} has no '
+                                'default for it)')
     values = {}
     for key, value in section.items():
         if key == 'name':
             continue
-        if fields[key].type in (int, 'int'):
+        kind = _field_kind(fields[key].type)
+        if kind == 'int':
             values[key] = integer(value, f'protocol.{key}')
-        elif fields[key].type in (str, 'str'):
+        elif kind == 'str':
             values[key] = text(value, f'protocol.{key}', '')
+        elif kind == 'tuple':
+            values[key] = _numbers(value, f'protocol.{key}')
         else:
             values[key] = number(value, f'protocol.{key}')
-    law = cls(**values)
+    try:
+        law = cls(**values)
+    except Exception as exc:  # noqa: BLE001 - whatever a plugin's constructor raises
+        raise PluginError('protocol.name', f'{cls.name}: cannot be built from the protocol '
+                          f'section: {type(exc).__name__}: {exc}') from None
     law.validate(ctx)
+    problem = antisymmetry_problem(law, ctx.dim)
+    if problem is not None:
+        raise PluginError('protocol.name', problem)
     return law
+
+
+def _field_kind(annotation: Any) -> str:
+    """Return ``int``, ``str``, ``tuple`` or ``float``: how a law field is read from YAML.
+
+    :param annotation: the field's annotation (a type, or its text under
+        ``from __future__ import annotations``).
+    """
+    name = annotation if isinstance(annotation, str) else getattr(annotation, '__name__', '')
+    name = name.split('[', 1)[0].strip().lower()
+    return name if name in ('int', 'str', 'tuple') else 'float'
+
+
+def _numbers(value: Any, key: str) -> tuple:
+    """Return a law's vector field (a YAML list of numbers, or of such lists) as tuples.
+
+    Tuples keep the law a hashable frozen dataclass (sweeps and stacks compare laws).
+    """
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ScenarioError(key, f'expected a non-empty list of numbers, got {value!r}')
+    if isinstance(value[0], (list, tuple)):
+        rows = tuple(_numbers(row, f'{key}[{k}]') for k, row in enumerate(value))
+        if len({len(row) for row in rows}) > 1:
+            raise ScenarioError(key, 'expected rows of one length, got lengths '
+                                f'{[len(row) for row in rows]}')
+        return rows
+    return tuple(number(v, f'{key}[{k}]') for k, v in enumerate(value))
 
 
 def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
@@ -332,6 +375,14 @@ def _parse_leader(section: dict, dim: int) -> LeaderSpec:
     cls = registry.leader_class(section.get('model'))
     state = ('model', 'position', 'velocity') if cls.moving else ('model', 'position')
     model = parse_model(cls, section, dim, 'leader.', state)
+    own = model.initial_state(dim)
+    if own is not None:
+        given = [key for key in state[1:] if key in section]
+        if given:
+            raise ScenarioError(f'leader.{given[0]}', f'set by the {model.name} model from its '
+                                'parameters (its initial_state): remove it')
+        position, velocity = _own_state(model, own, dim)
+        return LeaderSpec(model, position, velocity if cls.moving else np.zeros(dim))
     if 'position' not in section:
         raise ScenarioError('leader.position', 'missing')
     position = vector(section['position'], 'leader.position', dim)
@@ -342,10 +393,25 @@ def _parse_leader(section: dict, dim: int) -> LeaderSpec:
     return LeaderSpec(model, position, vector(section['velocity'], 'leader.velocity', dim))
 
 
+def _own_state(model: LeaderModel, own: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return a leader model's own initial state, checked like the scenario's keys."""
+    try:
+        position, velocity = (np.asarray(v, dtype=float).ravel().tolist() for v in own)
+    except (TypeError, ValueError):
+        raise PluginError('leader.model', f'{model.name}: initial_state() must return '
+                          f'(position, velocity), got {own!r}') from None
+    return (vector(position, 'leader.position (initial_state)', dim),
+            vector(velocity, 'leader.velocity (initial_state)', dim))
+
+
 def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> LeaderModel | None:
     """Return the agents' intrinsic dynamics ``f(p)``: ``None`` for the plain double integrator."""
-    autonomous = [name for name, cls in registry.leader_models().items()
-                  if cls.autonomous and not cls.still]
+    raw = section.get('model', 'none')
+    loaded = registry.usable(registry.LEADER_GROUP)
+    if isinstance(raw, str) and raw in registry.names(registry.LEADER_GROUP) \
+            and raw not in loaded:
+        registry.leader_class(raw, 'intrinsic.model')  # a broken plugin: its own error
+    autonomous = [name for name, cls in loaded.items() if cls.autonomous and not cls.still]
     name = choice(section.get('model', 'none'), 'intrinsic.model',
                   (*INTRINSIC_SPECIAL, *autonomous))
     if name == 'none':

@@ -22,7 +22,7 @@ import numpy as np
 from flock_swarm.contract import state_labels
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.laws.base import advance_state, group_control
+from flock_swarm.core.laws.base import advance_state, group_control, group_sums
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -254,7 +254,7 @@ class AgentController:
         for old in [s for s in self.pending if s < k]:
             del self.pending[old]
         self.answered = k
-        return self.command(*box.swarm(self.sc.n_agents))
+        return self.command(*box.swarm(self.sc.n_agents), k=k)
 
     def realtime_answer(self, now: float) -> np.ndarray | None:
         """Realtime: return the commands for the latest known states (``None`` before every
@@ -265,22 +265,27 @@ class AgentController:
         q, p, leader = latest.swarm(self.sc.n_agents)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
-        return self.command(q, p, None if self.leader.lost else leader)
+        return self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
 
-    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None) -> np.ndarray:
+    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
+                k: int = 0) -> np.ndarray:
         """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains.
 
         A non-finite row (the law failed: an overflow, a division by zero) is zero.
+
+        :param k: the step the state is of (the law's time ``t = k dt``).
         """
         law, ids = self.sc.law, self.ids
         edges = interaction_graph(self.sc, self.real, q, self.static)
         if self.reselector is not None:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
-        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
+        t = k * self.sc.dt
+        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt, t)
         if group.state:
             self.state = {key: value.copy() for key, value in group.state.items()}
-            advance_state(law, q[ids], p[ids], leader, group, self.sc.dt)
+            advance_state(law, q[ids], p[ids], leader, group, self.sc.dt,
+                          lambda: group_sums(law, ids, q, p, edges), t)
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
         if np.isfinite(u).all():

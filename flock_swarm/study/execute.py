@@ -27,7 +27,7 @@ from flock_swarm.core import summary
 from flock_swarm.core.run import SimResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.study.cache import CacheWriter, read_cache
-from flock_swarm.study.spec import Run, plain, timed_column
+from flock_swarm.study.spec import Run, metric_value, plain, timed_column
 
 #: Without a terminal, progress lines come at most this often [s] (on one, a live line).
 PROGRESS_EVERY = 30.0
@@ -108,7 +108,7 @@ class MetricRecorder:
         s, series = result.summary, result.series
         record: dict[str, Any] = {'point': plain(run.point), 'seed': run.seed}
         for name in self.metrics:
-            record[name] = plain(s[name])
+            record[name] = plain(metric_value(s, name))
         if self.times:
             t, timed = series['t'], summary.timed_series()
             for when in self.times:

@@ -11,6 +11,7 @@ import copy
 import hashlib
 import itertools
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,9 @@ SUMMARY_METRICS = summary.sweep_metrics()
 TIMED_METRICS = summary.timed_series()
 #: Default metrics when a spec names none.
 DEFAULT_METRICS = summary.default_metrics()
+#: How a law's own summary key (``Law.state_summary``: one value per agent) becomes a sweep
+#: metric: ``KEY.STAT``, e.g. ``adaptive_gain_final.max``.
+LAW_METRIC_STATS = {'min': min, 'mean': lambda xs: sum(xs) / len(xs), 'max': max}
 #: Runs of one stack hold about this many agents in all (see :mod:`flock_swarm.study.execute`).
 STACK_AGENTS = 3000
 
@@ -178,7 +182,27 @@ def read_spec(path: Path, overrides: tuple[str, ...] = (), seeds: int | None = N
     data.setdefault('name', path.stem)
     if seeds is not None:
         data['seeds'] = seeds
+    if isinstance(data.get('scenario'), str):
+        data['scenario'] = near_spec(path, data['scenario'])
     return parse_spec(data, overrides)
+
+
+def near_spec(spec: Path, scenario: str) -> str:
+    """Return a spec's ``scenario:`` with a relative file path taken from the spec's folder.
+
+    A spec and its scenario file travel together (``sweep`` runs from any directory); a
+    preset name (no ``.yaml`` suffix, no ``/``) and an absolute path stay as they are, by the
+    rule :func:`flock_swarm.presets.resolve` tells a path from a preset name with.
+
+    :param spec: the spec file.
+    :param scenario: its ``scenario:`` value.
+    :return: the scenario to load.
+    """
+    candidate = Path(scenario)
+    is_path = candidate.suffix in ('.yaml', '.yml') or os.sep in scenario
+    if not is_path or candidate.is_absolute():
+        return scenario
+    return str(spec.parent / candidate)
 
 
 def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
@@ -308,15 +332,38 @@ def _natural(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
+def law_metric(name: Any) -> tuple[str, str] | None:
+    """Return ``(summary key, statistic)`` of a law-state metric ``KEY.STAT``, else ``None``."""
+    if not isinstance(name, str):
+        return None
+    key, dot, stat = name.rpartition('.')
+    return (key, stat) if dot and key and stat in LAW_METRIC_STATS else None
+
+
+def metric_value(summary_: dict, name: str) -> Any:
+    """Return a run's value of a sweep metric: a summary key, or a law-state statistic."""
+    law = law_metric(name)
+    if law is None:
+        return summary_[name]
+    values = summary_.get(law[0])
+    return LAW_METRIC_STATS[law[1]](values) if values else None
+
+
 def _metrics(value: Any) -> tuple[str, ...]:
-    """Return the metrics, each a scalar summary key."""
+    """Return the metrics, each a scalar summary key or a law-state statistic ``KEY.STAT``.
+
+    Which law-state keys a run writes depends on its law: :func:`plan_runs` checks them
+    against the scenario's.
+    """
     if not isinstance(value, list) or not value:
         raise ScenarioError('metrics', f'expected a non-empty list, got {value!r}')
     known = summary.sweep_metrics()
     for k, name in enumerate(value):
-        if name not in known:
+        if name not in known and law_metric(name) is None:
             raise ScenarioError(f'metrics[{k}]', f'unknown metric {name!r} (known: '
-                                f'{", ".join(known)})')
+                                f'{", ".join(known)}; and a law\'s own summary key as KEY.'
+                                f'{"/".join(LAW_METRIC_STATS)}, e.g. '
+                                'adaptive_gain_final.max)')
     if len(set(value)) < len(value):
         raise ScenarioError('metrics', 'a metric is listed twice')
     return tuple(value)
@@ -395,6 +442,7 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
             if exc.key in ('scenario', '--set'):
                 raise
             raise ScenarioError(where or 'set', str(exc)) from None
+        _law_metrics(spec.metrics, sc)
         for t in spec.times:
             if t > sc.duration + 0.5 * sc.dt:
                 raise ScenarioError('times', f'{t:g} s is after the end of the run '
@@ -411,6 +459,17 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
             runs.append(Run(point, seed, data, scenario_digest(sc), sc.n_agents, sc.steps,
                             stack_key(sc)))
     return runs
+
+
+def _law_metrics(metrics: tuple[str, ...], sc: Scenario) -> None:
+    """Refuse a law-state metric whose key the scenario's law does not write."""
+    own = tuple(sc.law.state_summary.values())
+    for k, name in enumerate(metrics):
+        law = law_metric(name)
+        if law is not None and law[0] not in own:
+            raise ScenarioError(f'metrics[{k}]', f'{name}: protocol {sc.law.name} writes no '
+                                f'summary key {law[0]!r} (its own keys: '
+                                f'{", ".join(own) or "none"})')
 
 
 def stack_key(sc: Scenario) -> str | None:

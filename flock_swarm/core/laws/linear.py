@@ -36,6 +36,8 @@ class LinearConsensus(Law):
     citation: ClassVar[str] = ('Ren & Beard 2008, Sec. 4.2-4.3: second-order linear consensus '
                                'with a virtual leader')
     graph_types: ClassVar[tuple[str, ...]] = ('disk', 'fixed')
+    #: ``a_ij = a_ji`` and the differences change sign: each pair is evaluated once.
+    antisymmetric: ClassVar[bool] = True
 
     k_p: float = 1.0
     k_v: float = 1.0
@@ -59,7 +61,7 @@ class LinearConsensus(Law):
         """Return ``a_ij [k_p (q_j - q_i) + k_v (p_j - p_i)]``."""
         return w[:, None] * (self.k_p * (qj - qi) + self.k_v * (pj - pi))
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Add ``-c1 (q_i - q_l) - c2 (p_i - p_l) + f_l`` for the informed agents."""
         if leader is None:
             return s
