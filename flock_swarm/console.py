@@ -7,9 +7,15 @@ imports a command module.
 
 import argparse
 import signal
+from pathlib import Path
+
+from flock_swarm.core.errors import one_line
 
 #: Exit status for invalid input (as argparse uses), of every command and node of the package.
 EXIT_USAGE = 2
+#: Exit status of a command whose machinery failed while it ran, its input being valid (a
+#: sweep's Dask scheduler lost, no Dask workers): running it again may succeed.
+EXIT_RUNTIME = 3
 #: Exit status after Ctrl-C (as a shell reports SIGINT), of every command that catches it.
 EXIT_INTERRUPTED = 130
 
@@ -31,7 +37,21 @@ class OneLineParser(argparse.ArgumentParser):
             message = f'{message[len(required):]}: required'
         elif message.startswith(unknown):
             message = f'{message[len(unknown):]}: unrecognized argument(s)'
-        self.exit(EXIT_USAGE, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+        self.exit(EXIT_USAGE, f'{self.prog}: error: {one_line(message)} (see {self.prog} '
+                  '--help)\n')
+
+
+def out_dir(text: str) -> Path:
+    """Return the path of an ``--out`` option; an empty one is refused.
+
+    ``Path('')`` is the current directory: ``--out ''`` (an unset shell variable, say) would
+    write the outputs among whatever is there.
+
+    :raises argparse.ArgumentTypeError: for an empty (or all-blank) text.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError('must name a directory, got an empty path')
+    return Path(text)
 
 
 def accept_sigint() -> None:

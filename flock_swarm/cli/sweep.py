@@ -13,7 +13,8 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_RUNTIME, EXIT_USAGE, OneLineParser,
+                                  accept_sigint, out_dir)
 from flock_swarm.core.errors import ScenarioError
 
 
@@ -31,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog='sweep', description='Run a parameter study over a scenario.')
     parser.add_argument('spec', help='sweep spec: a YAML file or a shipped name '
                         '(config/sweeps/NAME.yaml)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/sweeps/NAME)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/sweeps/NAME)')
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1,
                         help='local worker processes (default: all cores; 1: this process)')
     parser.add_argument('--scheduler', metavar='ADDRESS',
@@ -62,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     from flock_swarm.study import execute as ex
     from flock_swarm.study import tables
-    from flock_swarm.study.spec import plan_runs, read_spec
+    from flock_swarm.study.spec import plan_runs, read_spec, times_within
 
     def fail(message: str) -> int:
         print(f'sweep: error: {message}', file=sys.stderr)
@@ -77,7 +78,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         path = spec_path(args.spec)
         spec = read_spec(path, tuple(args.overrides), args.seeds)
-        runs = plan_runs(spec, args.allow_unstable)
+        spec, dropped = times_within(spec)
+        if dropped:
+            say(f'[sweep] times: {", ".join(f"{t:g}" for t in dropped)} s dropped: after the '
+                'end of the runs set by --set duration')
+        runs = plan_runs(spec, args.allow_unstable, say)
     except ScenarioError as exc:
         return fail(str(exc))
     out = args.out if args.out is not None else Path('out') / 'sweeps' / spec.name
