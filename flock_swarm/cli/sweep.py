@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_RUNTIME, EXIT_USAGE, OneLineParser,
-                                  accept_sigint, out_dir)
-from flock_swarm.core.errors import ScenarioError
+                                 accept_sigint, out_dir)
+from flock_swarm.core.errors import ScenarioError, one_line
 
 
 def spec_path(name_or_path: str) -> Path:
@@ -39,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='run on the Dask scheduler at ADDRESS (tcp://host:8786), or '
                         '"local" for a LocalCluster of --jobs workers')
     parser.add_argument('--connect-timeout', type=float, default=10.0, metavar='S',
-                        help='seconds to wait for the scheduler (default: 10)')
+                        help='seconds to wait for the scheduler, and for a worker when it has '
+                        'none (default: 10)')
     parser.add_argument('--seeds', type=int, metavar='R',
                         help='seeds 0 .. R-1 per point (replaces the spec\'s seeds)')
     parser.add_argument('--set', dest='overrides', action='append', default=[],
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     from flock_swarm.study.spec import plan_runs, read_spec, times_within
 
     def fail(message: str) -> int:
-        print(f'sweep: error: {message}', file=sys.stderr)
+        print(f'sweep: error: {one_line(message)}', file=sys.stderr)
         return EXIT_USAGE
 
     say = (lambda line: None) if args.quiet else \
@@ -75,6 +76,9 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f'--jobs: must be >= 1, got {args.jobs}')
     if args.seeds is not None and args.seeds < 1:
         return fail(f'--seeds: must be >= 1, got {args.seeds}')
+    if not 0 < args.connect_timeout < float('inf'):
+        return fail(f'--connect-timeout: must be a number of seconds > 0, got '
+                    f'{args.connect_timeout}')
     try:
         path = spec_path(args.spec)
         spec = read_spec(path, tuple(args.overrides), args.seeds)
@@ -111,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f'sweep: interrupted; every finished run is kept in {out / "runs.jsonl"} '
               '(run the same command again to go on)', file=sys.stderr)
         return EXIT_INTERRUPTED
+    except ex.ClusterError as exc:
+        print(f'sweep: error: {one_line(str(exc))}', file=sys.stderr)
+        return EXIT_RUNTIME
     except ex.SweepError as exc:
         return fail(str(exc))
     finally:

@@ -159,7 +159,6 @@ class Expression:
         raise ExpressionError(f'{self.text!r}: unknown name {name!r} (known: '
                               f'{", ".join(sorted(values)) or "none"})')
 
-
     def _budget(self, op: ast.operator, left: Any, right: Any) -> None:
         """Refuse an operation whose result would exceed the budget, before computing it."""
         if isinstance(op, ast.Pow) and _integer(left) and _integer(right) and right > 0:
