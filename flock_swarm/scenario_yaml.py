@@ -173,7 +173,9 @@ def parse_value(text: str) -> Any:
         return parse_yaml(text)
     except yaml.YAMLError as exc:
         why = getattr(exc, 'problem', None) or exc
-        raise ScenarioError('--set', f'cannot parse value {text!r}: {why}') from None
+        # The start of a long value is enough to recognise it, and leaves room for the why.
+        shown = repr(text) if len(text) <= 80 else f'{text[:60]!r}...'
+        raise ScenarioError('--set', f'cannot parse value {shown}: {why}') from None
 
 
 def apply_override(data: dict, assignment: str) -> dict:
