@@ -392,8 +392,9 @@ def times_within(spec: SweepSpec) -> tuple[SweepSpec, tuple[float, ...]]:
         key, _, text = assignment.partition('=')
         if key.strip() == 'duration':
             duration = parse_value(text)
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)):
-        return spec, ()
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not duration > 0:
+        return spec, ()  # no duration given, or an invalid one: the plan refuses it
     dropped = tuple(t for t in spec.times if t > duration)
     if not dropped:
         return spec, ()
