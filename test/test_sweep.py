@@ -509,7 +509,8 @@ def test_planning_shows_its_progress(monkeypatch):
     monkeypatch.setattr(spec_module, 'PLAN_EVERY', 2)
     lines = []
     plan_runs(parse_spec(SMALL), say=lines.append)
-    assert lines == ['[sweep] planning: 2/4 points checked', '[sweep] planning: 4/4 points checked']
+    assert lines == ['[sweep] planning: 2/4 points checked',
+                     '[sweep] planning: 4/4 points checked']
 
 
 @pytest.mark.parametrize('key', ['n_agents', 'informed.fraction', 'informed',
