@@ -558,11 +558,9 @@ def test_unusable_cache_lines_are_reported_once(small_serial, tmp_path, capsys):
     assert main(args) == 0
     err = capsys.readouterr().err
     assert err.count('unusable cache line') == 1
-    assert f'{cache}: 1 unusable line(s) moved to {cache}.unusable' in err
     assert (Path(f'{cache}.unusable')).read_text() == lines[-1][:30] + '\n'
     assert main(args) == 0
-    err = capsys.readouterr().err
-    assert 'unusable cache line' not in err and 'moved to' not in err
+    assert 'unusable cache line' not in capsys.readouterr().err
 
 
 def test_a_scheduler_without_workers_is_one_line_with_the_runtime_status(tmp_path, capsys):

@@ -89,10 +89,7 @@ def _set_aside(path: Path, kept: list[bytes], unusable: list[bytes],
         os.replace(partial, path)
     except OSError as exc:  # a read-only cache: the lines are reported again next time
         if report is not None:
-            report(f'{path}: cannot set the unusable lines aside ({exc.strerror})')
-        return
-    if report is not None:
-        report(f'{path}: {len(unusable)} unusable line(s) moved to {aside}')
+            report(f'{path}: cannot set the unusable lines aside to {aside} ({exc.strerror})')
 
 
 class CacheWriter:
