@@ -15,8 +15,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import signal
+from pathlib import Path
 from types import FrameType
 from typing import Iterator
+
+from flock_swarm.core.errors import one_line
 
 #: Exit status when the run failed (a node, a child process or the recording failed).
 EXIT_FAILURE = 1
@@ -35,6 +38,9 @@ EXIT_INTERRUPTED = EXIT_SIGNAL[signal.SIGINT]
 #: processes died: the world ends the run with status ``failed`` and exits with
 #: :data:`EXIT_FAILURE`. No stop signal: the run did not end because somebody asked.
 FAIL_SIGNAL = signal.SIGUSR1
+#: Exit status of a command whose machinery failed while it ran, its input being valid (a
+#: sweep's Dask scheduler lost, no Dask workers): running it again may succeed.
+EXIT_RUNTIME = 3
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -54,7 +60,21 @@ class OneLineParser(argparse.ArgumentParser):
             message = f'{message[len(required):]}: required'
         elif message.startswith(unknown):
             message = f'{message[len(unknown):]}: unrecognized argument(s)'
-        self.exit(EXIT_USAGE, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+        self.exit(EXIT_USAGE, f'{self.prog}: error: {one_line(message)} (see {self.prog} '
+                  '--help)\n')
+
+
+def out_dir(text: str) -> Path:
+    """Return the path of an ``--out`` option; an empty one is refused.
+
+    ``Path('')`` is the current directory: ``--out ''`` (an unset shell variable, say) would
+    write the outputs among whatever is there.
+
+    :raises argparse.ArgumentTypeError: for an empty (or all-blank) text.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError('must name a directory, got an empty path')
+    return Path(text)
 
 
 def accept_sigint() -> None:

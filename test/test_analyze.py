@@ -224,6 +224,22 @@ def test_truncated_bag_is_analysed_up_to_its_last_complete_step(flat, tmp_path, 
         assert_allclose(ours['q'], series['q'][:k], rtol=0, atol=0)
 
 
+def test_a_bag_cut_after_its_data_section_is_truncated_though_every_step_survived(
+        flat, tmp_path, capsys):
+    run, _, _ = flat
+    copy = copy_bag(run / 'bag', tmp_path / 'cut', BagReader(run / 'bag').metadata(
+        'flock_swarm'), chunk_size=8_000)
+    mcap = copy / 'cut_0.mcap'
+    with mcap.open('r+b') as stream:
+        stream.truncate(mcap.stat().st_size - 20)  # inside the summary: only the index lost
+    assert main([str(copy), '--out', str(tmp_path / 'out'), '--no-anim', '--quiet']) == 0
+    assert 'is truncated after its data section' in capsys.readouterr().err
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    world, _ = world_outputs(run)
+    assert summary['steps'] == world['steps']
+    assert summary['status'] == 'truncated' and 'only the index' in summary['bag_warning']
+
+
 def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
     """Any rosbag2 bag with /agent_<i>/odom: radius and tolerances come from the command line."""
     run, _, _ = flat

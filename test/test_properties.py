@@ -358,6 +358,13 @@ def changed(name: str, changes: dict) -> dict:
     ('demo', {'duration': 1e12}, 'duration'),
     # summary.json held min_pair_distance = Infinity (not JSON) for a single agent.
     ('su2009_fig5', {'n_agents': 1}, 'n_agents'),
+    # Issue 24: a seed beyond int64 ran in sim but died in swarm and the nodes.
+    ('demo', {'seed': 2 ** 64}, 'seed'),
+    # Issue 24: values the informed selection or an explicit initial state ignored silently.
+    ('demo', {'informed.select': 'all'}, 'informed.count'),
+    ('zhou2012_sec51', {'informed.fraction': 0.5}, 'informed.fraction'),
+    ('su2009_fig2', {'informed.select': 'first', 'informed.ids': [1, 2]}, 'informed.ids'),
+    ('demo', {'initial.velocities': [[0.0, 0.0]] * 30}, 'initial.velocity_box'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),
@@ -409,6 +416,18 @@ def test_regression_name_is_one_directory(name, tmp_path, monkeypatch, capsys):
     (None, ['--seed', 'abc'], '--seed'),
     (None, ['--seed', '1.5'], '--seed'),
     (None, ['--set'], '--set'),
+    # Issue 24: a billion laughs (MemoryError after 56 s), a key given twice (last one won),
+    # an alias to itself, --out '' (wrote into the current directory), a seed beyond int64.
+    ('l0: &l0 [a, a, a, a, a, a, a, a, a, a]\n' + ''.join(
+        f'l{k}: &l{k} [{", ".join([f"*l{k - 1}"] * 10)}]\n' for k in range(1, 9))
+     + 'description: *l8\n', [], 'scenario'),
+    ('dt: 0.1\ndt: 0.2\n', [], 'scenario'),
+    ('dt: &a [*a]\n', [], 'scenario'),
+    (None, ['--set', 'description=[&a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1], &b [*a, *a, *a, *a, *a, '
+            '*a, *a, *a, *a, *a], &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b], [*c, *c, *c, *c, '
+            '*c, *c, *c, *c, *c, *c]]'], '--set'),
+    (None, ['--out', ''], '--out'),
+    (None, ['--seed', str(2 ** 63)], 'seed'),
 ])
 def test_regression_cli(text, extra, key):
     """Malformed YAML or arguments: one line naming the file or the option, status 2."""
@@ -590,6 +609,9 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
     # ValueError: a timer period of NaN (an infinite factor gave a busy 0 ns timer).
     ('agent', {'realtime_factor': float('nan'), 'mode': 'realtime'}, 'realtime_factor'),
     ('agent', {'realtime_factor': float('inf'), 'mode': 'realtime'}, 'realtime_factor'),
+    # Issue 24: an infinite timeout was taken (a missing agent then held the world forever).
+    ('world', {'step_timeout': float('inf')}, 'step_timeout'),
+    ('world', {'start_timeout': float('inf')}, 'start_timeout'),
 ])
 def test_node_parameter_regression(kind, overrides, key, ros_context, node_scenario, tmp_path):
     """Each override once broke a node's construction (or was taken); now it names its key."""
@@ -608,6 +630,8 @@ def test_node_parameter_regression(kind, overrides, key, ros_context, node_scena
     # Through the whole executable: a value of the wrong type.
     ('agent', ['-p', 'seed:=abc'], 'seed'),
     ('world', ['-p', 'step_timeout:=[1, 2]'], 'step_timeout'),
+    # Issue 24: .inf was accepted while .nan was refused.
+    ('world', ['-p', 'step_timeout:=.inf'], 'step_timeout'),
 ])
 def test_node_main_bad_arguments(kind, ros_args, key, ros_domain, monkeypatch, capfd,
                                  node_scenario):
@@ -633,3 +657,46 @@ def test_node_parameters_build_or_name_the_key(kind, ros_context, node_scenario,
     """
     overrides = data.draw(node_parameters(kind), label='overrides')
     assert_builds_or_names_key(kind, ros_context, overrides, node_scenario)
+
+
+# --------------------------------------------------------------------------------------------
+# Sweep expressions (issue 24): any expression of the language evaluates or is refused, fast
+
+#: Operands that make results grow: big exponents, long lists, large integers.
+EXPR_ATOMS = st.sampled_from(['2', '10', '999', '1000', '0.5', '1e300', 'n', '[1]', '[n, 1]',
+                              '[[0.0] * 1000]', '10 ** 1000', '-3'])
+
+
+@st.composite
+def expressions(draw, depth: int = 0) -> str:
+    """Draw an expression of the sweep language, nested up to four levels."""
+    if depth >= 4 or draw(st.integers(0, 3)) == 0:
+        return draw(EXPR_ATOMS)
+    kind = draw(st.integers(0, 2))
+    if kind == 0:
+        op = draw(st.sampled_from(['+', '-', '*', '/', '//', '%', '**']))
+        return f'({draw(expressions(depth + 1))}) {op} ({draw(expressions(depth + 1))})'
+    if kind == 1:
+        return f'[{draw(expressions(depth + 1))}, {draw(expressions(depth + 1))}]'
+    func = draw(st.sampled_from(['sqrt', 'exp', 'log', 'floor', 'abs', 'round', 'int', 'max']))
+    args = [draw(expressions(depth + 1)) for _ in range(2 if func in ('round', 'max') else 1)]
+    return f'{func}({", ".join(args)})'
+
+
+@settings(derandomize=True, database=None, max_examples=300, deadline=2000)
+@given(expressions())
+def test_expressions_evaluate_or_are_refused_within_the_budget(text):
+    """A value within the budget, or one ExpressionError line; never a hang or a traceback."""
+    from flock_swarm.study.expr import MAX_INT_BITS, MAX_ITEMS, Expression, ExpressionError
+    try:
+        value = Expression(text).evaluate({'n': 7})
+    except ExpressionError as exc:
+        assert '\n' not in one_line(str(exc))
+        return
+
+    def check(v):
+        if isinstance(v, list):
+            return sum(check(item) for item in v)
+        assert not isinstance(v, int) or v.bit_length() <= 2 * MAX_INT_BITS
+        return 1
+    assert check(value) <= MAX_ITEMS

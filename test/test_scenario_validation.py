@@ -369,3 +369,136 @@ def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith(start), res.stderr
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 24: bounded inputs, no silent acceptance
+
+#: A "billion laughs": nine levels of ten aliases, 10**9 strings from a few hundred bytes.
+LAUGHS = 'l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n' + ''.join(
+    f'l{k}: &l{k} [{", ".join([f"*l{k - 1}"] * 10)}]\n' for k in range(1, 9))
+
+
+def billion_laughs(field: str) -> str:
+    """Return a scenario file (demo's keys) whose ``field`` is the last level of laughs."""
+    lines = yaml.safe_dump(load_mapping('demo'), default_flow_style=True, width=10 ** 6)
+    return f'{LAUGHS}scenario_keys: {lines}{field}: *l8\n'
+
+
+@pytest.mark.parametrize('field', ['description', 'dt'])
+def test_yaml_aliases_expanding_too_far_are_one_line(field, tmp_path):
+    path = tmp_path / 'laughs.yaml'
+    path.write_text(billion_laughs(field))
+    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.startswith(f'sim: error: scenario: {path}: invalid YAML at line 2: '
+                                 'aliases would expand the document by ')
+    assert len(res.stderr.strip().splitlines()) == 1 and 'MemoryError' not in res.stderr
+
+
+def test_yaml_aliases_are_bounded_in_set_values_too():
+    value = '[' + ', '.join(f'&l{k} [' + ', '.join([f'*l{k - 1}' if k else '1'] * 10) + ']'
+                            for k in range(9)) + ']'
+    with pytest.raises(ScenarioError, match=r'^--set: cannot parse value .*aliases would '
+                       r'expand the document by \d+ nodes \(at most 10000\); refused$'):
+        apply_override({}, f'description={value}')
+
+
+def test_a_few_small_aliases_still_read():
+    data = parse_value('{a: &box [[0.0, 5.0], [0.0, 5.0]], b: *box}')
+    assert data == {'a': [[0.0, 5.0], [0.0, 5.0]], 'b': [[0.0, 5.0], [0.0, 5.0]]}
+
+
+def test_a_node_that_contains_itself_is_refused():
+    with pytest.raises(ScenarioError, match='an alias refers to a node that contains it'):
+        parse_value('&a [1, *a]')
+
+
+def test_duplicate_yaml_keys_are_refused_with_their_line(tmp_path):
+    path = tmp_path / 'twice.yaml'
+    path.write_text(yaml.safe_dump(BASE) + 'dt: 0.02\n')
+    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr.strip() == (f"sim: error: scenario: {path}: invalid YAML at line "
+                                  f"{len(path.read_text().splitlines())}: duplicate key 'dt' "
+                                  '(a key may be given once)')
+    with pytest.raises(ScenarioError, match="duplicate key 'x'"):
+        parse_value('{x: 1, x: 2}')
+    # A key merged with << may be overridden: that is what YAML's merge means.
+    assert parse_value('{base: &b {x: 1}, c: {<<: *b, x: 2}}')['c'] == {'x': 2}
+
+
+def test_huge_values_in_errors_are_cut_to_one_readable_line():
+    data = with_value('description', list(range(300_000)))
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert len(str(err.value)) < 500 and str(err.value).startswith('description: expected')
+    cut = ScenarioError('description', 'got ' + repr(list(range(300_000))))
+    assert len(str(cut)) <= 420 and str(cut).endswith(' characters in all)')
+
+
+@pytest.mark.parametrize('seed, ok', [(0, True), (2 ** 63 - 1, True), (2 ** 63, False),
+                                      (10 ** 30, False), (-1, False)])
+def test_one_seed_range_for_every_front_end(seed, ok):
+    data = with_value('seed', seed)
+    if ok:
+        assert parse_scenario(data).seed == seed
+    else:
+        with pytest.raises(ScenarioError, match='^seed: must be'):
+            parse_scenario(data)
+
+
+@pytest.mark.parametrize('tool', ['sim', 'swarm'])
+def test_a_seed_beyond_int64_is_one_line_in_sim_and_swarm(tool, tmp_path):
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', 'demo', '--seed',
+                          str(2 ** 64), '--out', str(tmp_path / 'o')],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == (f'{tool}: error: seed: must be <= 2**63 - 1 (a ROS int64 '
+                                  f'parameter), got {2 ** 64}')
+
+
+@pytest.mark.parametrize('informed, key, other', [
+    ({'select': 'ids', 'ids': [0, 1], 'count': 5}, 'informed.count', 'select: ids'),
+    ({'select': 'all', 'count': 3}, 'informed.count', 'select: all'),
+    ({'select': 'first', 'fraction': 0.5, 'ids': [1, 2]}, 'informed.ids', 'select: first'),
+    ({'select': 'pseudo_leaders', 'fraction': 0.5}, 'informed.fraction',
+     'select: pseudo_leaders'),
+])
+def test_informed_keys_the_selection_ignores_are_refused(informed, key, other):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('informed', informed))
+    assert err.value.key == key and f'not used by informed.{other}' in err.value.reason
+
+
+def test_null_removes_an_informed_key():
+    sc = load('demo', ['informed.select=all', 'informed.count=null'])
+    assert sc.informed.select == 'all' and 'count' not in sc.raw['informed']
+
+
+@pytest.mark.parametrize('given, box', [('positions', 'position_box'),
+                                        ('velocities', 'velocity_box')])
+def test_explicit_initial_state_and_its_box_are_refused_together(given, box):
+    data = with_value(f'initial.{given}', [[0.0, 0.0]] * 5)
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == f'initial.{box}' and f'initial.{given}' in err.value.reason
+
+
+def test_a_scenario_path_that_is_a_directory_says_so(tmp_path):
+    (tmp_path / 'dir.yaml').mkdir()
+    res = run_sim(str(tmp_path / 'dir.yaml'))
+    assert res.returncode == 2
+    assert res.stderr.strip() == (f'sim: error: scenario: {tmp_path / "dir.yaml"} is a '
+                                  'directory, not a YAML file')
+
+
+@pytest.mark.parametrize('tool, args', [('sim', ['demo']), ('swarm', ['demo']),
+                                        ('sweep', ['su2009_fig3']), ('analyze', ['bag']),
+                                        ('reproduce', [])])
+def test_an_empty_out_is_refused(tool, args, tmp_path):
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', *args, '--out', ''],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert '--out: must name a directory, got an empty path' in res.stderr
+    assert 'Traceback' not in res.stderr and list(tmp_path.iterdir()) == []

@@ -114,6 +114,8 @@ class RunData:
     has_leader: bool = True
     #: The reader's warning for a truncated or unfinished bag.
     warning: str | None = None
+    #: Whether a file of the bag was cut or not closed (its warning says how).
+    recovered: bool = False
     #: Facts about how the bag was read (fallbacks, skipped steps), one line each.
     notes: list[str] = field(default_factory=list)
     #: Odometry stamps for which some agent's message is missing.
@@ -502,7 +504,7 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         record_every=sc.record_every if sc is not None else 1, scenario=sc, mode=mode,
         missed_commands_per_agent=[int(x) for x in per_agent], leader_missed=leader_missed,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
-        incomplete_steps=incomplete, state=state)
+        incomplete_steps=incomplete, state=state, recovered=reader.recovered)
 
 
 def _commands(cmds: list, steps: np.ndarray, index: dict[int, int],

@@ -54,6 +54,10 @@ def recompute(run: RunData, record_every: int | None = None,
 
 
 def _status(run: RunData) -> str:
+    # A cut file is `truncated` even when every step survived (cut after its data section:
+    # only the index is lost), as docs/analysis.md says: the bag is not as the world wrote it.
+    if run.recovered:
+        return 'truncated'
     if run.scenario is not None and run.steps[-1] >= run.scenario.steps:
         return 'completed'
     if run.warning is not None:

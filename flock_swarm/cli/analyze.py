@@ -22,7 +22,8 @@ from flock_swarm.analysis.bagrun import (AnalyzeError, FALLBACK_COLLISION_DISTAN
 from flock_swarm.analysis.compare import check_verifiable, VERIFY_TOLERANCE
 from flock_swarm.analysis.pipeline import analyze, default_out
 from flock_swarm.bag import BagError
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
+                                 out_dir)
 from flock_swarm.outputs import ensure_writable
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
@@ -61,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog='analyze',
         description='Metrics, time series and figures of a recorded flock_swarm run.')
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
-    parser.add_argument('--out', type=Path,
+    parser.add_argument('--out', type=out_dir,
                         help='output directory (default: BAG_analysis next to the bag)')
     parser.add_argument('--snapshots', type=_times, metavar='T,T,...',
                         help='snapshot times in seconds (default: first, middle, last)')

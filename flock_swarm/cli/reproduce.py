@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, StopSignals
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, StopSignals, out_dir
 from flock_swarm.reproduce import pipeline
 from flock_swarm.reproduce.seeds import SEEDS_CACHE
 
@@ -18,7 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='python -m flock_swarm.reproduce',
         description='Run every experiment of the papers and write the reproduction report.')
-    parser.add_argument('--out', type=Path, default=Path('out/reproduce'),
+    parser.add_argument('--out', type=out_dir, default=Path('out/reproduce'),
                         help='runs, caches and JSON results (default: out/reproduce)')
     parser.add_argument('--report', type=Path, default=Path('docs/reproduction.md'),
                         help='the Markdown report (default: docs/reproduction.md)')

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
-                                 signal_name)
+                                 out_dir, signal_name)
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.headline import result_line
@@ -32,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='KEY=VALUE',
                         help='override one value, e.g. --set protocol.c1=0.8 (repeatable)')
     parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO)')
     parser.add_argument('--plots', action='store_true', help='also write PNG figures')
     parser.add_argument('--quiet', action='store_true', help='no progress output')
     parser.add_argument('--allow-unstable', action='store_true',

@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import (EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals,
+from flock_swarm.console import (EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals, out_dir,
                                  signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--set', dest='overrides', action='append', default=[],
                         metavar='KEY=VALUE', help='override one scenario value (repeatable)')
     parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO_ros)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO_ros)')
     parser.add_argument('--processes', action='store_true',
                         help='run every node as its own OS process (default: one process)')
     parser.add_argument('--container', action='store_true',

@@ -42,6 +42,15 @@ MAX_AGENTS = 1_000_000
 MIN_DT = 1e-9
 #: The longest run [s]: the seconds of a ROS stamp (builtin_interfaces/Time.sec) are int32.
 MAX_DURATION = 2 ** 31 - 1
+#: The largest seed: the nodes take the seed as a ROS integer parameter, an int64 (NumPy's
+#: generator takes any integer >= 0); one range for ``sim``, ``swarm``, the nodes and
+#: ``sweep``, so that a seed ``sim`` accepts runs in ROS too.
+MAX_SEED = 2 ** 63 - 1
+#: What each ``informed.select`` reads besides itself (and ``reselect``): any other of
+#: ``count``, ``fraction``, ``ids`` given with it would be ignored, so it is refused.
+INFORMED_USES = {'all': (), 'random': ('count', 'fraction'), 'first': ('count', 'fraction'),
+                 'highest_degree': ('count', 'fraction'), 'ids': ('ids',),
+                 'pseudo_leaders': ()}
 
 
 def _box(value: Any, key: str, dim: int) -> np.ndarray:
@@ -124,6 +133,11 @@ def parse_scenario(data: Any) -> Scenario:
     """
     data = mapping(data, '<scenario>')
     only(data, TOP_KEYS, '')
+    for section in ('informed', 'initial'):
+        if isinstance(data.get(section), dict) and None in data[section].values():
+            # null removes a key (--set informed.count=null, after --set informed.select=all);
+            # the scenario as run (``raw``) holds only the keys that count.
+            data = {**data, section: {k: v for k, v in data[section].items() if v is not None}}
     for key in ('dim', 'n_agents', 'dt', 'duration', 'protocol', 'leader'):
         if key not in data:
             raise ScenarioError(key, 'missing required key')
@@ -154,6 +168,8 @@ def parse_scenario(data: Any) -> Scenario:
     seed = integer(data.get('seed', 0), 'seed')
     if seed < 0:
         raise ScenarioError('seed', f'must be >= 0, got {seed}')
+    if seed > MAX_SEED:
+        raise ScenarioError('seed', f'must be <= 2**63 - 1 (a ROS int64 parameter), got {seed}')
     record_every = integer(data.get('record_every', 1), 'record_every')
     if record_every < 1:
         raise ScenarioError('record_every', f'must be >= 1, got {record_every}')
@@ -178,6 +194,10 @@ def parse_scenario(data: Any) -> Scenario:
         if 'position_box' in init else None
     velocity_box = _box(init['velocity_box'], 'initial.velocity_box', dim) \
         if 'velocity_box' in init else None
+    for given, box in (('positions', 'position_box'), ('velocities', 'velocity_box')):
+        if given in init and box in init:
+            raise ScenarioError(f'initial.{box}', f'given with initial.{given}, which replace '
+                                'it: give one of them')
     if positions is None and position_box is None:
         raise ScenarioError('initial.position_box', 'missing (or give initial.positions)')
     if velocities is None and velocity_box is None:
@@ -289,6 +309,11 @@ def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
 def _parse_informed(section: dict, n: int, law: Law) -> InformedSpec:
     only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
     select = choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
+    for key in ('count', 'fraction', 'ids'):
+        # A value the selection would ignore: the run would not be what the file says.
+        if key in section and key not in INFORMED_USES[select]:
+            raise ScenarioError(f'informed.{key}', f'not used by informed.select: {select} '
+                                '(remove one of them; --set informed.KEY=null removes a key)')
     # Every value given is validated, also those the selection does not use: the scenario is
     # recorded as run (scenario.json, the bag's metadata), so it must hold only sound values.
     count = fraction = None

@@ -13,6 +13,7 @@ lockstep, a step's commands are queued as bytes and handed over at once (:class:
 
 import bisect
 import json
+import math
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
@@ -138,10 +139,12 @@ def _setting(name: str, description: str, check: Callable[[Any], bool]) -> Param
 
 #: The world's settings as parameters: description and the check each value must pass.
 SETTING_PARAMS = (
+    # Finite, as swarm's --step-timeout and --start-timeout: with .inf a missing agent would
+    # hold the world forever.
     _setting('step_timeout', 'lockstep: seconds to wait for commands before a missing agent '
-             'gets a zero command', lambda v: v > 0),
+             'gets a zero command', lambda v: 0 < v < math.inf),
     _setting('start_timeout', 'lockstep: seconds to wait for agents and leader to appear and '
-             'answer step 0 before starting anyway', lambda v: v >= 0),
+             'answer step 0 before starting anyway', lambda v: 0 <= v < math.inf),
     _setting('marker_every', 'publish markers every N steps', lambda v: v >= 1),
     _setting('metrics_every', 'publish metrics every N steps', lambda v: v >= 1),
     _setting('staleness', 'realtime: seconds a held command (or the leader state) stays valid; '
