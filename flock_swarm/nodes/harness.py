@@ -45,20 +45,27 @@ if TYPE_CHECKING:
 
 #: Wall-clock bound [s] of one whole test run when the caller gives none (a hung run fails).
 RUN_TIMEOUT = 240.0
-#: Domain ids handed out by :func:`unique_domain`: [1, DOMAIN_SPAN]. Domain 0 is everybody's
-#: default, and ids above are left to the demo and to people's own runs.
-DOMAIN_SPAN = 200
+#: Domain ids handed out by :func:`unique_domain`: the ranges the ROS 2 docs ("The
+#: ROS_DOMAIN_ID") recommend on Linux, 1-101 and 215-232 (0 is everybody's default and is left
+#: to people's own runs). Ids 102-214 can clash with the ephemeral ports the OS hands out, and
+#: ids above 232 overflow the DDS port range.
+DOMAIN_RANGES = ((1, 101), (215, 232))
+#: How many ids :func:`unique_domain` hands out before one repeats.
+DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 
 _domains = itertools.count()
 
 
 def unique_domain() -> int:
-    """Return a ROS domain id not handed out before in this process, in [1, 200].
+    """Return a ROS domain id not handed out before in this process, in 1-101 or 215-232
+    (:data:`DOMAIN_RANGES`).
 
-    Ids are spread over the range by process id, so two test processes on one machine are
-    unlikely to collide (200 ids a process before one repeats).
+    Ids are spread over the ranges by process id, so two test processes on one machine are
+    unlikely to collide (119 ids a process before one repeats).
     """
-    return 1 + (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+    n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+    (lo, hi), (second, _) = DOMAIN_RANGES
+    return lo + n if n <= hi - lo else second + n - (hi - lo + 1)
 
 
 def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
