@@ -46,10 +46,11 @@ if TYPE_CHECKING:
 #: Wall-clock bound [s] of one whole test run when the caller gives none (a hung run fails).
 RUN_TIMEOUT = 240.0
 #: Domain ids handed out by :func:`unique_domain`: the ranges the ROS 2 docs ("The
-#: ROS_DOMAIN_ID") recommend on Linux, 1-101 and 215-232 (0 is everybody's default and is left
-#: to people's own runs). Ids 102-214 can clash with the ephemeral ports the OS hands out, and
-#: ids above 232 overflow the DDS port range.
-DOMAIN_RANGES = ((1, 101), (215, 232))
+#: ROS_DOMAIN_ID") recommend on Linux, 1-101 and 215-232, less 0 (everybody's default, left to
+#: people's own runs) and 215-222 (222 is scripts/demo's, the rest left to people's own runs).
+#: Ids 102-214 can clash with the ephemeral ports the OS hands out, and ids above 232 overflow
+#: the DDS port range.
+DOMAIN_RANGES = ((1, 101), (223, 232))
 #: How many ids :func:`unique_domain` hands out before one repeats.
 DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 
@@ -57,11 +58,11 @@ _domains = itertools.count()
 
 
 def unique_domain() -> int:
-    """Return a ROS domain id not handed out before in this process, in 1-101 or 215-232
-    (:data:`DOMAIN_RANGES`).
+    """Return a ROS domain id not handed out before in this process, in 1-101 or 223-232
+    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges).
 
     Ids are spread over the ranges by process id, so two test processes on one machine are
-    unlikely to collide (119 ids a process before one repeats).
+    unlikely to collide (111 ids a process before one repeats).
     """
     n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
     (lo, hi), (second, _) = DOMAIN_RANGES
