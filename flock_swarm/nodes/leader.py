@@ -21,7 +21,7 @@ from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.graph import agent_hosts, follow_world
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 #: The leader's parameters, in the order they are read and checked.
@@ -59,9 +59,9 @@ class LeaderNode(Node):
         self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
         if params['mode'] == 'lockstep':
             self.create_subscription(Clock, CLOCK, self.on_clock, qos_profile(CLOCK_QOS))
-            self.retry = self.create_timer(0.01, self.flush)
+            self.retry = wall_timer(self, 0.01, self.flush)
         else:
-            self.create_timer(params.timer_period(sc.dt), self.on_timer)
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     def on_clock(self, msg: Clock) -> None:
         """Advance to the tick's step and publish (a repeated tick republishes)."""

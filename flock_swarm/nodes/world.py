@@ -36,12 +36,17 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.recording import BagSink, RecordedNode
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
                                        WorldSettings, WorldStepper)
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
                                     encode_clock)
 from flock_swarm.outputs import SpooledRecorder, write_outputs
+
+
+#: Why the world refuses ``use_sim_time:=true`` (and how the parameter reads back).
+SIM_TIME_REFUSED = ('must be false: the world publishes /clock itself (it is the simulation '
+                    'clock); the leader and the agents accept either value')
 
 
 def _split_bound(name: str, default: int | float, description: str) -> Param:
@@ -78,7 +83,8 @@ class WorldNode(RecordedNode):
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
         init_node(super().__init__, 'world', kwargs)
-        params = self.params = NodeParameters(self, WORLD_PARAMS)
+        params = self.params = NodeParameters(self, WORLD_PARAMS, SIM_TIME_REFUSED,
+                                                   'always false: the world publishes /clock')
         sc = self.scenario = params.load_scenario()
         self.progress = progress
         self.mode = params['mode']
@@ -129,13 +135,13 @@ class WorldNode(RecordedNode):
                            for i in range(sc.n_agents)]
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
-        self.create_timer(1.0, self.check_claims)
+        wall_timer(self, 1.0, self.check_claims)
         self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
-        self.timer = self.create_timer(0.01, self.on_lockstep_timer) if self.lockstep else \
-            self.create_timer(params.timer_period(sc.dt), self.on_realtime_timer)
+        self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \
+            wall_timer(self, params.timer_period(sc.dt), self.on_realtime_timer)
 
     # The stepper's state, as the runner and the tests read it off the node.
     k = property(lambda self: self.stepper.k, doc='The open step.')
