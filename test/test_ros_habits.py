@@ -3,6 +3,7 @@ who it waits for, a second world on the same domain, parameters that read back t
 use."""
 
 import json
+import subprocess
 
 import pytest
 
@@ -49,9 +50,11 @@ def test_a_use_sim_time_of_the_wrong_type_is_one_line(tmp_path, ros_domain, monk
     assert err.endswith('\nleader: error: use_sim_time: expected true or false, got 1\n')
 
 
-def test_leader_and_agents_run_at_full_speed_under_use_sim_time(tmp_path, ros_domain):
+def test_leader_and_agents_run_at_full_speed_under_use_sim_time_and_read_back_expect_subscribers(tmp_path, ros_domain):
     """Their ROS clock follows ``/clock``, their timers the steady clock (on the ROS clock
     they slowed from ~500 to ~22 steps/s), and the run is ``sim``'s, bit for bit."""
+    from rclpy.parameter import Parameter
+
     from flock_swarm.nodes.leader import LeaderNode
     with Swarm('demo', tmp_path / 'run', SMALL, domain_id=ros_domain,
                agent_params={'use_sim_time': True}) as swarm:
@@ -63,6 +66,13 @@ def test_leader_and_agents_run_at_full_speed_under_use_sim_time(tmp_path, ros_do
             assert steady(node)
             assert node.get_parameter('use_sim_time').value is True
         assert steady(swarm.world) and not swarm.world.get_clock().ros_time_is_active
+        # Given as -1, expect_subscribers reads back the number waited for once known.
+        assert swarm.world.get_parameter('expect_subscribers').value == -1
+        swarm.spin_until(lambda: swarm.world.k >= 1, RUN_TIMEOUT, 'the first step')
+        assert swarm.world.get_parameter('expect_subscribers').value == 1  # the container
+        swarm.spin_until(lambda: leader.matched, RUN_TIMEOUT, 'the leader to start')
+        assert leader.get_parameter('expect_subscribers').value == 2  # the world, the container
+        assert not leader.set_parameters([Parameter('expect_subscribers', value=5)])[0].successful
         run = swarm.run(RUN_TIMEOUT)
     summary = run.summary
     assert summary['status'] == 'completed' and not summary['missed_commands']
@@ -96,3 +106,86 @@ def test_use_sim_time_is_read_only(kind, tmp_path, ros_context):
         if close is not None:
             close()
         node.destroy_node()
+
+
+def test_id_list_names_agents_in_ranges():
+    from flock_swarm.nodes.world import id_list
+    assert id_list([3]) == 'agent 3'
+    assert id_list([0, 1, 2, 5, 7, 8]) == 'agents 0-2, 5, 7-8'
+
+
+def test_a_waiting_world_says_who_is_missing(tmp_path, ros_context, capfd):
+    """Every few seconds (WAIT_LOG_EVERY) a line names the agents, the leader and the
+    subscribers the start waits for; it logged nothing before."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes import world as world_module
+    assert 2.0 <= world_module.WAIT_LOG_EVERY <= 10.0
+    world = world_module.WorldNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value='demo'), Parameter('n_agents', value=4),
+        Parameter('informed.count', value=1), Parameter('out_dir', value=str(tmp_path / 'o'))])
+    try:
+        assert not world.ready_to_start()  # just created: no line yet
+        world.wait_logged -= world_module.WAIT_LOG_EVERY
+        assert not world.ready_to_start()
+        assert not world.ready_to_start()  # one line per period
+    finally:
+        world.close()
+        world.destroy_node()
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if 'waiting' in line]
+    assert len(lines) == 1, err
+    assert lines[0].endswith(
+        's for agents 0-3 (nobody publishes their cmd_accel); 1 subscriber(s) of the odometry '
+        'of agents 0-3; the leader (nobody publishes /leader/odom); a subscriber of /clock '
+        '(the leader)'), lines[0]
+
+
+def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_domain,
+                                                               monkeypatch, capfd):
+    """A world that finds another world (or a replay) on its domain before its start refuses
+    (a by-hand run mixed silently with another before). The first world may refuse too if it
+    sees the second before the second has gone; a world that has started does not look."""
+    from flock_swarm.nodes.harness import executable, stop
+    from flock_swarm.nodes.world import main
+    from conftest import subprocess_env
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
+    args = ['--ros-args', '-p', 'scenario:=demo', '-p', 'start_timeout:=60.0']
+    first = subprocess.Popen(executable('world') + args + ['-p', f'out_dir:={tmp_path / "a"}'],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+        status = main(['world'] + args + ['-p', f'out_dir:={tmp_path / "b"}'])
+        out, err = capfd.readouterr()
+    finally:
+        stop([first])
+    assert status == 2 and out == ''
+    assert err.endswith(f'world: error: ROS_DOMAIN_ID: another world or a replay publishes '
+                        f'/clock on domain {ros_domain} (nodes: /world): give each run a domain of '
+                        'its own\n'), err
+    # Before that line, at most the lines of a wait (if discovery took 5 s).
+    assert all('waiting' in line for line in err.splitlines()[:-1]), err
+
+
+def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domain):
+    """The harness (``swarm``) raises the world's refusal (``swarm`` prints it as one line);
+    here the swarm waits for an absent agent, so it meets the other world before its
+    start."""
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.nodes.harness import executable, run_in_process, stop
+    from conftest import subprocess_env
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
+    first = subprocess.Popen(executable('world') + [
+        '--ros-args', '-p', 'scenario:=demo', '-p', 'start_timeout:=60.0', '-p',
+        f'out_dir:={tmp_path / "a"}'], env=env, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)
+    try:
+        with pytest.raises(ScenarioError) as err:
+            run_in_process('demo', tmp_path / 'b', domain_id=ros_domain, agents=[0],
+                           world_params={'start_timeout': 60.0}, timeout=RUN_TIMEOUT)
+    finally:
+        stop([first])
+    assert str(err.value) == (f'ROS_DOMAIN_ID: another world or a replay publishes /clock on '
+                              f'domain {ros_domain} (nodes: /world): give each run a domain '
+                              'of its own')
+    assert not (tmp_path / 'b' / 'summary.json').exists()

@@ -136,11 +136,16 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
                                 container=args.container, world_params=world_params,
                                 live=live, allow_unstable=args.allow_unstable)
     else:
-        summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
-                                 args.executor, progress=say,
-                                 realtime_factor=args.realtime_factor,
-                                 world_params=world_params, live=live,
-                                 allow_unstable=args.allow_unstable)
+        try:
+            summary = run_in_process(scenario, out, args.mode, args.domain_id,
+                                     args.step_timeout, args.executor, progress=say,
+                                     realtime_factor=args.realtime_factor,
+                                     world_params=world_params, live=live,
+                                     allow_unstable=args.allow_unstable)
+        except ScenarioError as exc:
+            # The world refused to start (another world on the domain: docs/ros.md).
+            print(f'swarm: error: {exc}', file=sys.stderr)
+            return EXIT_USAGE
     if not summary:
         print('swarm: error: the world wrote no summary', file=sys.stderr)
         return 1

@@ -291,6 +291,8 @@ class InProcessSwarm:
         world = self.world
         deadline = time.monotonic() + timeout
         while not condition():
+            if world.refusal is not None:
+                raise world.refusal
             if world.done:
                 raise AssertionError(f'the run ended ({world.status} at step {world.k}) '
                                      f'before {what}')
@@ -308,6 +310,8 @@ class InProcessSwarm:
         started = time.monotonic()
         while self.context.ok() and not self.world.done:
             self.executor.spin_once(timeout_sec=0.1)
+            if self.world.refusal is not None:
+                raise self.world.refusal
             if timeout is not None and time.monotonic() - started > timeout:
                 raise TimeoutError(f'the run did not finish within {timeout:g} s')
 

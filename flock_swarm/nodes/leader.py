@@ -27,7 +27,8 @@ from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 #: The leader's parameters, in the order they are read and checked.
 LEADER_PARAMS = COMMON_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each leader topic must have before the first '
-          'tick is answered (-1: the world plus one per node hosting agents)'),
+          'tick is answered (given as -1: the world plus one per node hosting agents; reads '
+          'back as that number once the leader has found them)'),
     Param('start_timeout', 30.0, 'seconds to wait for expect_subscribers'),
     KEEP_RUNNING,
 )
@@ -86,6 +87,8 @@ class LeaderNode(Node):
             waited = time.monotonic() - self.t0
             if (need is None or min(counts) < need) and waited < self.start_timeout:
                 return
+            if need is not None and self.expect < 0:
+                self.params.settle('expect_subscribers', need)
             self.matched = True
             self.retry.cancel()
         while self.step < self.target:

@@ -354,6 +354,26 @@ class NodeParameters:
         # instead of answering "successful" for a clock no timer of the node follows.
         self._declare(USE_SIM_TIME, self.sim_time, self.sim_time_description)
 
+    def settle(self, name: str, value: Any) -> None:
+        """Make parameter ``name`` (declared read-only) read back ``value``: a default the
+        node resolves once it knows it (``expect_subscribers`` -1 becomes the number of
+        subscribers waited for, known at the start). ``ros2 param set`` stays refused.
+
+        :param name: a parameter of the table.
+        :param value: the value in use, of the parameter's type.
+        """
+        from rclpy.parameter import Parameter
+        self.values[name] = value
+        node = self.node
+        # rclpy has no public way to change a read-only parameter; given the parameter's own
+        # descriptor, its setter (the one declare_parameter uses) skips the read-only check
+        # and still runs the set-parameter callbacks and publishes the parameter event.
+        result = node._set_parameters_atomically_common(
+            [Parameter(name, value=value)], {name: node.describe_parameter(name)})
+        if not result.successful:
+            node.get_logger().warning(f'{name} reads back its given value, not {value!r}: '
+                                      f'{result.reason}')
+
     def _declare(self, name: str, value: Any, description: str, free_typed: bool = False,
                  read_only: bool = True) -> None:
         """Declare ``name`` with ``value`` (replacing its declaration from the given value)."""

@@ -29,9 +29,10 @@ from std_msgs.msg import String
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                   RUNNING, STATUS, STATUS_QOS, cmd_topic, odom_topic,
                                   qos_profile)
+from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.clock import StepClock
-from flock_swarm.nodes.graph import agent_hosts, check_claims
+from flock_swarm.nodes.graph import check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
@@ -47,6 +48,22 @@ from flock_swarm.outputs import SpooledRecorder, write_outputs
 #: Why the world refuses ``use_sim_time:=true`` (and how the parameter reads back).
 SIM_TIME_REFUSED = ('must be false: the world publishes /clock itself (it is the simulation '
                     'clock); the leader and the agents accept either value')
+
+
+#: Seconds between the waiting world's lines naming who it waits for.
+WAIT_LOG_EVERY = 5.0
+
+
+def id_list(ids: list[int]) -> str:
+    """Return agent ids as ``agent 3`` or ``agents 0-2, 5``."""
+    runs: list[list[int]] = []
+    for i in ids:
+        if runs and runs[-1][1] == i - 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    text = ', '.join(str(a) if a == b else f'{a}-{b}' for a, b in runs)
+    return f'agent {text}' if len(ids) == 1 else f'agents {text}'
 
 
 def _split_bound(name: str, default: int | float, description: str) -> Param:
@@ -65,7 +82,8 @@ WORLD_PARAMS = COMMON_PARAMS + (
                  'many seconds of simulation time (0: no split)'),
 ) + SETTING_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each odometry topic must have before the '
-          'start (-1: one per node hosting agents)'),
+          'start (given as -1: one per node hosting agents; reads back as that number once '
+          'the world has found them)'),
     Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
           'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
           'must be 0 or more, not {value}'),
@@ -83,8 +101,8 @@ class WorldNode(RecordedNode):
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
         init_node(super().__init__, 'world', kwargs)
-        params = self.params = NodeParameters(self, WORLD_PARAMS, SIM_TIME_REFUSED,
-                                                   'always false: the world publishes /clock')
+        params = self.params = NodeParameters(
+            self, WORLD_PARAMS, SIM_TIME_REFUSED, 'always false: the world publishes /clock')
         sc = self.scenario = params.load_scenario()
         self.progress = progress
         self.mode = params['mode']
@@ -93,6 +111,11 @@ class WorldNode(RecordedNode):
         self.record = params['record']
         self.expect_subscribers = params['expect_subscribers']
         self.expect_telemetry = params['expect_telemetry_subscribers']
+        self.created = self.wait_logged = time.monotonic()
+        #: Why the world refused to start (another world on the domain), or ``None``.
+        self.refusal: ScenarioError | None = None
+        self.other_world_reported = False
+        self.subscribers_needed = self.expect_subscribers
         out_dir = params['out_dir']
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
         params.declare(out_dir=str(self.out))
@@ -217,6 +240,13 @@ class WorldNode(RecordedNode):
     def check_claims(self) -> None:
         """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
         check_claims(self, self.scenario.n_agents, self.duplicates)
+        # After the start (a run in one process starts before discovery could show another
+        # world): said once, the run goes on.
+        if self.stepper.started and not self.other_world_reported:
+            other = self.other_worlds()
+            if other is not None:
+                self.other_world_reported = True
+                self.get_logger().error(f'{other} (this run\'s messages mix with its)')
 
     def publish_states(self, t_ns: int) -> None:
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
@@ -245,22 +275,69 @@ class WorldNode(RecordedNode):
     # -- lockstep -----------------------------------------------------------------------------
 
     def ready_to_start(self) -> bool:
-        """Return whether every agent and the leader are discovered and subscribed."""
+        """Return whether every agent and the leader are discovered and subscribed; say who
+        is missing every :data:`WAIT_LOG_EVERY` seconds.
+
+        :raises ScenarioError: when another world (or a replay) publishes on this domain.
+        """
+        self.refusal = self.refusal or self.other_worlds()
+        if self.refusal is not None:
+            # Not raised here: an executor logs an exception of a callback with its traceback.
+            self.timer.cancel()
+            return False
+        missing = self.waiting_for()
+        if not missing:
+            if self.expect_subscribers < 0:
+                self.params.settle('expect_subscribers', self.subscribers_needed)
+            return True
+        now = time.monotonic()
+        if now - self.wait_logged >= WAIT_LOG_EVERY:
+            self.wait_logged = now
+            self.get_logger().info(f'waiting {now - self.created:.0f} s for ' + '; '.join(missing))
+        return False
+
+    def waiting_for(self) -> list[str]:
+        """Return what the start still waits for, one phrase each (empty: nothing)."""
+        n, missing = self.scenario.n_agents, []
         if self.expect_subscribers < 0:
-            need = agent_hosts(self, self.scenario.n_agents)
-            if need is None:
-                return False
+            claims = command_claims(self, n)
+            absent = [i for i in range(n) if i not in claims]
+            if absent:
+                missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
+            need = len(set().union(*claims.values())) if claims else 1
         else:
             need = self.expect_subscribers
-            if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
-                return False
-        if any(pub.get_subscription_count() < need for pub in self.odom_pubs):
-            return False
-        if any(pub.get_subscription_count() < self.expect_telemetry
-               for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub)):
-            return False
-        return (self.count_publishers(self.leader_odom_topic) >= 1
-                and self.clock_pub.get_subscription_count() >= 1)
+            absent = [i for i, t in enumerate(self.cmd_topics) if self.count_publishers(t) < 1]
+            if absent:
+                missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
+        self.subscribers_needed = need
+        short = [i for i, pub in enumerate(self.odom_pubs) if pub.get_subscription_count() < need]
+        if short:
+            missing.append(f'{need} subscriber(s) of the odometry of {id_list(short)}')
+        for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub):
+            if pub.get_subscription_count() < self.expect_telemetry:
+                missing.append(f'{self.expect_telemetry} subscriber(s) of {pub.topic_name}')
+        if self.count_publishers(self.leader_odom_topic) < 1:
+            missing.append(f'the leader (nobody publishes {self.leader_odom_topic})')
+        if self.clock_pub.get_subscription_count() < 1:
+            missing.append(f'a subscriber of {self.clock_pub.topic_name} (the leader)')
+        return missing
+
+    def other_worlds(self) -> ScenarioError | None:
+        """Return the refusal to start beside another world on the same ROS domain (two runs
+        would mix their messages): another publisher of ``/clock`` or ``swarm/status``
+        (``None``: nobody else)."""
+        for pub in (self.clock_pub, self.status_pub):
+            topic = pub.topic_name
+            if self.count_publishers(topic) > 1:
+                nodes = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                                for i in self.get_publishers_info_by_topic(topic)
+                                if not i.node_name.startswith('_NODE_NAME_UNKNOWN')})
+                return ScenarioError('ROS_DOMAIN_ID', (
+                    f'another world or a replay publishes {topic} on domain '
+                    f'{self.context.get_domain_id()} (nodes: {", ".join(nodes)}): give each '
+                    'run a domain of its own'))
+        return None
 
     def on_lockstep_timer(self) -> None:
         """Start when everybody is there; turn an expired step into zero commands.
@@ -362,6 +439,13 @@ class WorldNode(RecordedNode):
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
         announcement of the end reach the leader and agents before the node goes."""
+        if self.refusal is not None:
+            # Announce nothing on swarm/status: the other world's leader and agents hear it.
+            self.stepper.end('refused')
+            for sink in self.sinks:
+                sink.close()
+            self.spool.discard()
+            return
         if self.stepper.end('interrupted'):
             self.write_results()
         self.status_pub.wait_for_all_acked(Duration(seconds=2))
@@ -374,7 +458,10 @@ def main(args: list[str] | None = None) -> int:
     """
     built: list[WorldNode] = []
     status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
-                      until=lambda node: node.done)
+                      until=lambda node: node.done or node.refusal is not None)
+    if built and built[0].refusal is not None:
+        print(f'world: error: {built[0].refusal}', file=sys.stderr)
+        return EXIT_USAGE
     failed = built and (built[0].status == 'recording_failed' or built[0].bag_error)
     return 1 if status == 0 and failed else status
 
