@@ -25,7 +25,7 @@ from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
 from flock_swarm.contract import contract_topics
 from flock_swarm.foxglove_ws import CLOSE_TIMEOUT, LiveServer, message_stamp_ns, start_live
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, unique_domain
 
 pytestmark = pytest.mark.ros
 
@@ -175,7 +175,7 @@ def subscribed_client(url: str, topics=tuple(CONTRACT), **kwargs) -> FoxgloveCli
 def recorded(tmp_path_factory):
     """A run served on a live server while it records, and the client that watched it."""
     tmp_path = tmp_path_factory.mktemp('live')
-    domain = 1 + (os.getpid() * 37 + 101) % 200
+    domain = unique_domain()
     with start_live(port=0) as live:
         def connect(swarm):
             client = subscribed_client(live.url)

@@ -50,9 +50,10 @@ def test_a_use_sim_time_of_the_wrong_type_is_one_line(tmp_path, ros_domain, monk
     assert err.endswith('\nleader: error: use_sim_time: expected true or false, got 1\n')
 
 
-def test_leader_and_agents_run_at_full_speed_under_use_sim_time_and_read_back_expect_subscribers(tmp_path, ros_domain):
+def test_leader_and_agents_run_at_full_speed_under_use_sim_time(tmp_path, ros_domain):
     """Their ROS clock follows ``/clock``, their timers the steady clock (on the ROS clock
-    they slowed from ~500 to ~22 steps/s), and the run is ``sim``'s, bit for bit."""
+    they slowed from ~500 to ~22 steps/s), and the run is ``sim``'s, bit for bit;
+    ``expect_subscribers`` reads back the number waited for."""
     from rclpy.parameter import Parameter
 
     from flock_swarm.nodes.leader import LeaderNode
@@ -161,8 +162,8 @@ def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_dom
         stop([first])
     assert status == 2 and out == ''
     assert err.endswith(f'world: error: ROS_DOMAIN_ID: another world or a replay publishes '
-                        f'/clock on domain {ros_domain} (nodes: /world): give each run a domain of '
-                        'its own\n'), err
+                        f'/clock or /swarm/status on domain {ros_domain} (nodes: /world): '
+                        'give each run a domain of its own\n'), err
     # Before that line, at most the lines of a wait (if discovery took 5 s).
     assert all('waiting' in line for line in err.splitlines()[:-1]), err
 
@@ -185,7 +186,7 @@ def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domai
                            world_params={'start_timeout': 60.0}, timeout=RUN_TIMEOUT)
     finally:
         stop([first])
-    assert str(err.value) == (f'ROS_DOMAIN_ID: another world or a replay publishes /clock on '
-                              f'domain {ros_domain} (nodes: /world): give each run a domain '
-                              'of its own')
+    assert str(err.value) == (f'ROS_DOMAIN_ID: another world or a replay publishes /clock or '
+                              f'/swarm/status on domain {ros_domain} (nodes: /world): give '
+                              'each run a domain of its own')
     assert not (tmp_path / 'b' / 'summary.json').exists()

@@ -27,8 +27,8 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                  RUNNING, STATUS, STATUS_QOS, cmd_topic, odom_topic,
-                                  qos_profile)
+                                  RUNNING, SCENARIO, SCENARIO_QOS, STATUS, STATUS_QOS,
+                                  cmd_topic, odom_topic, qos_profile)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.clock import StepClock
@@ -36,7 +36,7 @@ from flock_swarm.nodes.graph import check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
-from flock_swarm.nodes.recording import BagSink, RecordedNode
+from flock_swarm.nodes.recording import BagSink, RecordedNode, provenance, provenance_text
 from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
                                        WorldSettings, WorldStepper)
@@ -163,6 +163,13 @@ class WorldNode(RecordedNode):
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
+        # Latched, and recorded at t = 0: the bag keeps the scenario where tools that drop
+        # MCAP metadata (rosbags-convert) keep it too (analyze reads it there).
+        self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
+        self.publish_recorded(self.scenario_pub, String(data=provenance_text(
+            provenance(sc, self.stepper.real, self.mode))), 0)
+        for sink in self.sinks:
+            sink.flush()
         self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \
             wall_timer(self, params.timer_period(sc.dt), self.on_realtime_timer)
 
@@ -327,17 +334,16 @@ class WorldNode(RecordedNode):
         """Return the refusal to start beside another world on the same ROS domain (two runs
         would mix their messages): another publisher of ``/clock`` or ``swarm/status``
         (``None``: nobody else)."""
-        for pub in (self.clock_pub, self.status_pub):
-            topic = pub.topic_name
-            if self.count_publishers(topic) > 1:
-                nodes = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
-                                for i in self.get_publishers_info_by_topic(topic)
-                                if not i.node_name.startswith('_NODE_NAME_UNKNOWN')})
-                return ScenarioError('ROS_DOMAIN_ID', (
-                    f'another world or a replay publishes {topic} on domain '
-                    f'{self.context.get_domain_id()} (nodes: {", ".join(nodes)}): give each '
-                    'run a domain of its own'))
-        return None
+        topics = [pub.topic_name for pub in (self.clock_pub, self.status_pub)]
+        if all(self.count_publishers(topic) <= 1 for topic in topics):
+            return None
+        nodes = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                        for topic in topics for i in self.get_publishers_info_by_topic(topic)
+                        if not i.node_name.startswith('_NODE_NAME_UNKNOWN')})
+        return ScenarioError('ROS_DOMAIN_ID', (
+            f'another world or a replay publishes {" or ".join(topics)} on domain '
+            f'{self.context.get_domain_id()} (nodes: {", ".join(nodes)}): give each run a '
+            'domain of its own'))
 
     def on_lockstep_timer(self) -> None:
         """Start when everybody is there; turn an expired step into zero commands.
