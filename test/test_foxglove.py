@@ -394,3 +394,54 @@ def test_message_stamp_of_every_contract_type():
             msg.header.stamp = stamp
         assert message_stamp_ns(type_name, serialize_message(msg)) == 12_340_000_000, type_name
     assert message_stamp_ns('nav_msgs/msg/Odometry', b'\x00\x01') is None
+
+
+# -- pacing and waiting for a viewer (issue 24) ------------------------------------------------
+
+
+def test_pace_holds_a_lockstep_run_to_real_time_or_a_factor(tmp_path, ros_domain):
+    """``pace`` (``swarm --pace``): a lockstep run takes at least its duration / pace of wall
+    time, and is still ``sim``'s run bit for bit (pacing only waits between steps)."""
+    from flock_swarm.testing import assert_matches_sim
+    run = assert_matches_sim('demo', tmp_path / 'run', RUN, domain_id=ros_domain, atol=0,
+                             world_params={'pace': 2.0})
+    # 1 s of simulation at twice real time: 0.5 s of wall time at least.
+    assert run.summary['wall_time_s'] >= 0.49
+
+
+def test_swarm_waits_for_the_first_viewer(tmp_path, ros_domain):
+    """``--wait-for-viewer``: the run starts once a client subscribed, so the viewer sees it
+    from step 0, even a run too short to be caught otherwise."""
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        announced(proc, r'waiting for a viewer to subscribe')
+        assert not (out / 'summary.json').exists()
+        client = subscribed_client(url)
+        client.pump(TIMEOUT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    clock = [t for topic, t, _ in client.messages if topic == '/clock']
+    assert clock and clock[0] == 0 and clock[-1] == 100_000_000
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--pace', '-1'], '--pace: must be finite and >= 0, got -1.0'),
+    (['--pace', 'inf'], '--pace: must be finite and >= 0, got inf'),
+    (['--pace', '1', '--mode', 'realtime'], '--pace: paces lockstep runs; realtime runs take '
+     '--realtime-factor'),
+    (['--wait-for-viewer'], '--wait-for-viewer: goes with --foxglove'),
+])
+def test_swarm_refuses_a_bad_pace_or_wait_in_one_line(tmp_path, argv, message):
+    res = subprocess.run(executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), *argv],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert res.returncode == 2
+    assert res.stderr == f'swarm: error: {message}\n'

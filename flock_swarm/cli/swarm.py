@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, accept_sigint
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
@@ -59,6 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
                         help='serve the run live to Foxglove / Lichtblick over the Foxglove '
                         f'WebSocket protocol (default port {DEFAULT_PORT}; 0: any free port)')
+    parser.add_argument('--pace', type=float, default=0.0, metavar='FACTOR',
+                        help='lockstep: at most FACTOR simulated seconds per wall second '
+                        '(1: real time, to watch a run; default 0: as fast as it goes)')
+    parser.add_argument('--wait-for-viewer', action='store_true',
+                        help='with --foxglove: start the run once a viewer has subscribed')
     parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
                         help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
                         'this machine only)')
@@ -82,6 +87,13 @@ def main(argv: list[str] | None = None) -> int:
         if not args.start_timeout >= 0 or math.isinf(args.start_timeout):
             raise ScenarioError('--start-timeout',
                                 f'must be finite and >= 0, got {args.start_timeout}')
+        if not args.pace >= 0 or math.isinf(args.pace):
+            raise ScenarioError('--pace', f'must be finite and >= 0, got {args.pace}')
+        if args.pace and args.mode != 'lockstep':
+            raise ScenarioError('--pace', 'paces lockstep runs; realtime runs take '
+                                '--realtime-factor')
+        if args.wait_for_viewer and args.foxglove is None:
+            raise ScenarioError('--wait-for-viewer', 'goes with --foxglove')
         if args.container and not args.processes:
             raise ScenarioError('--container', 'goes with --processes (a one-process run '
                                 'always hosts the agents in one container node)')
@@ -120,6 +132,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
     world_params = {'start_timeout': args.start_timeout}
+    if args.pace:
+        world_params['pace'] = args.pace
     if args.no_record:
         world_params['record'] = False
     if live is not None:
@@ -130,6 +144,13 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         live.add_topics(contract_topics(sc.n_agents, '/'))
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
+        if args.wait_for_viewer:
+            say('[swarm] waiting for a viewer to subscribe (--wait-for-viewer; Ctrl-C stops)')
+            try:
+                live.wait_for_viewer()
+            except KeyboardInterrupt:
+                say('[swarm] interrupted before the run started')
+                return EXIT_INTERRUPTED
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,

@@ -14,6 +14,7 @@ in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; t
 :class:`~flock_swarm.nodes.stepper.WorldStepper` (no ROS); this node is its plumbing.
 """
 
+import math
 import sys
 import time
 from pathlib import Path
@@ -84,6 +85,9 @@ WORLD_PARAMS = COMMON_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each odometry topic must have before the '
           'start (given as -1: one per node hosting agents; reads back as that number once '
           'the world has found them)'),
+    Param('pace', 0.0, 'lockstep: at most this many simulated seconds per wall second (0: as '
+          'fast as the nodes go; 1: real time, to watch a run live)',
+          lambda v: math.isfinite(v) and v >= 0, 'must be finite and >= 0, got {value!r}'),
     Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
           'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
           'must be 0 or more, not {value}'),
@@ -111,6 +115,9 @@ class WorldNode(RecordedNode):
         self.record = params['record']
         self.expect_subscribers = params['expect_subscribers']
         self.expect_telemetry = params['expect_telemetry_subscribers']
+        self.pace = params['pace']
+        #: Lockstep with ``pace``: the next step is held until its wall time.
+        self.paced = False
         self.created = self.wait_logged = time.monotonic()
         #: Why the world refused to start (another world on the domain), or ``None``.
         self.refusal: ScenarioError | None = None
@@ -351,6 +358,11 @@ class WorldNode(RecordedNode):
         Queued commands are taken one by one once the queue stopped growing for a tick (an
         agent is missing, or a message was doubled), and before a step times out.
         """
+        if self.paced:
+            if time.monotonic() >= self.pace_due():
+                self.paced = False
+                self.begin_step()
+            return
         if self.inbox.stalled():
             self.take_commands()
             return
@@ -382,7 +394,14 @@ class WorldNode(RecordedNode):
         """Close the current step: zero commands for absentees, record, integrate, go on."""
         self.go_on(self.stepper.close_step(timed_out, time.monotonic()))
         if not self.done:
+            if self.pace and time.monotonic() < self.pace_due():
+                self.paced = True  # the lockstep timer begins it when due
+                return
             self.begin_step()
+
+    def pace_due(self) -> float:
+        """Return the monotonic time at which ``pace`` lets the open step begin."""
+        return self.stepper.t_wall0 + self.k * self.scenario.dt / self.pace
 
     # -- realtime -----------------------------------------------------------------------------
 
