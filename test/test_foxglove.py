@@ -445,3 +445,31 @@ def test_swarm_refuses_a_bad_pace_or_wait_in_one_line(tmp_path, argv, message):
                          capture_output=True, text=True, timeout=TIMEOUT)
     assert res.returncode == 2
     assert res.stderr == f'swarm: error: {message}\n'
+
+
+def test_swarm_ends_within_the_close_bound_after_a_client_closed(tmp_path, ros_domain):
+    """A client that closes its connection cleanly during the run: ``swarm`` still exits
+    within CLOSE_TIMEOUT (+1 s of process exit) of its last line (docs/foxglove.md)."""
+    from websockets.sync.client import connect
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=4',
+                                     '--out', str(out), '--no-plots', '--no-record',
+                                     '--foxglove', '0', '--domain-id', str(ros_domain)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        ws = connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=TIMEOUT)
+        assert '"serverInfo"' in ws.recv(timeout=TIMEOUT)
+        started = time.monotonic()
+        ws.close()
+        assert time.monotonic() - started < 1.0  # the server answers the close at once
+        last = time.monotonic()
+        for _ in proc.stderr:
+            last = time.monotonic()
+        assert proc.wait(timeout=TIMEOUT) == 0
+        assert time.monotonic() - last < CLOSE_TIMEOUT + 1.0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
