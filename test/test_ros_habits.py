@@ -190,3 +190,4 @@ def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domai
                               f'/swarm/status on domain {ros_domain} (nodes: /world): give '
                               'each run a domain of its own')
     assert not (tmp_path / 'b' / 'summary.json').exists()
+    assert not (tmp_path / 'b' / 'bag').exists()  # the same --out can be used again

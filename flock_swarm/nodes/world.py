@@ -15,6 +15,7 @@ in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; t
 """
 
 import math
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -255,8 +256,8 @@ class WorldNode(RecordedNode):
         """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
         check_claims(self, self.scenario.n_agents, self.duplicates)
         # After the start (a run in one process starts before discovery could show another
-        # world): said once, the run goes on.
-        if self.stepper.started and not self.other_world_reported:
+        # world; a realtime world starts at once): said once, the run goes on.
+        if (self.stepper.started or not self.lockstep) and not self.other_world_reported:
             other = self.other_worlds()
             if other is not None:
                 self.other_world_reported = True
@@ -466,10 +467,13 @@ class WorldNode(RecordedNode):
         announcement of the end reach the leader and agents before the node goes."""
         if self.refusal is not None:
             # Announce nothing on swarm/status: the other world's leader and agents hear it.
+            # Leave no bag behind either (it holds nothing of a run): out_dir can be reused.
             self.stepper.end('refused')
             for sink in self.sinks:
                 sink.close()
             self.spool.discard()
+            if self.bag is not None:
+                shutil.rmtree(self.bag.path, ignore_errors=True)
             return
         if self.stepper.end('interrupted'):
             self.write_results()
