@@ -55,18 +55,50 @@ DOMAIN_RANGES = ((1, 101), (223, 232))
 DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 
 _domains = itertools.count()
+#: The domain ids this process holds, with the open lock file of each (see unique_domain).
+_held: dict[int, Any] = {}
 
 
 def unique_domain() -> int:
     """Return a ROS domain id not handed out before in this process, in 1-101 or 223-232
-    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges).
+    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges), and held by no other process
+    of this machine.
 
-    Ids are spread over the ranges by process id, so two test processes on one machine are
-    unlikely to collide (111 ids a process before one repeats).
+    Ids are spread over the ranges by process id, and each is held with a lock file (under
+    the temporary directory, ``flock_swarm_domains/``) until the process exits: a world
+    refuses to start beside another on its domain (docs/ros.md), so two test processes on
+    one machine (discovery is limited to it) must not meet. When every id is held, the next
+    one is shared (111 ids a process before one repeats).
     """
-    n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
-    (lo, hi), (second, _) = DOMAIN_RANGES
-    return lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+    domain = 0
+    for _ in range(DOMAIN_SPAN):
+        n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+        (lo, hi), (second, _) = DOMAIN_RANGES
+        domain = lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+        if _hold(domain):
+            return domain
+    return domain
+
+
+def _hold(domain: int) -> bool:
+    """Hold ``domain`` for this process (a lock on its file); return whether it is ours."""
+    import fcntl
+    import tempfile
+    if domain in _held:
+        return True
+    folder = Path(tempfile.gettempdir()) / 'flock_swarm_domains'
+    try:
+        folder.mkdir(exist_ok=True)
+        lock = open(folder / f'{domain}.lock', 'a')
+    except OSError:
+        return True  # no lock files here: spread by process id only, as before
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return False
+    _held[domain] = lock
+    return True
 
 
 def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
