@@ -28,7 +28,6 @@ setup(
         'a reference simulator, and MCAP recording.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
     python_requires='>=3.10',
     entry_points={
         'console_scripts': [

@@ -36,6 +36,12 @@ LEADER_ACCEL = 'leader/accel'
 MARKERS = 'swarm/markers'
 METRICS = 'swarm/metrics'
 STATUS = 'swarm/status'
+#: The run's scenario, seed and informed set (what the bag's ``flock_swarm`` MCAP metadata
+#: record holds) as a YAML mapping, published once, latched, and recorded at t = 0: it
+#: survives tools that drop MCAP metadata (``rosbags-convert``) and ``ros2 topic echo`` shows
+#: it to a late joiner.
+SCENARIO = 'swarm/scenario'
+SCENARIO_TYPE = STATUS_TYPE
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
@@ -122,6 +128,8 @@ TELEMETRY_QOS = QosSpec(depth=5)
 #: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
 #: world announced the end of the run still learns it.
 STATUS_QOS = QosSpec(depth=1, latched=True)
+#: /swarm/scenario: latched (transient local), published once before the run.
+SCENARIO_QOS = QosSpec(depth=1, latched=True)
 #: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
 #: acknowledgements (it matches the reliable writers of the contract); the depth covers a
 #: step's burst.

@@ -509,13 +509,13 @@ NODE_AGENTS = 3
 NODE_PARAMS = {
     'world': ('out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every',
               'metrics_every', 'expect_subscribers', 'expect_telemetry_subscribers',
-              'staleness', 'max_abs_position',
+              'staleness', 'pace', 'max_abs_position',
               'max_abs_velocity', 'max_abs_accel'),
     'leader': ('expect_subscribers', 'start_timeout'),
     'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'leader_start_timeout',
               'max_abs_position', 'max_abs_velocity', 'max_abs_accel'),
 }
-COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor')
+COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor', 'use_sim_time')
 #: Scenario keys given as ROS parameters (overrides of single values), and unknown ones.
 OVERRIDE_PARAMS = ('n_agents', 'dt', 'duration', 'dim', 'protocol.c1', 'protocol.name',
                    'protocol.h', 'informed.count', 'informed.select', 'leader.position',
@@ -600,6 +600,11 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
 
 
 @pytest.mark.parametrize('kind, overrides, key', [
+    # The world publishes /clock: following it, it never started and logged nothing.
+    ('world', {'use_sim_time': True}, 'use_sim_time'),
+    ('leader', {'use_sim_time': 'yes'}, 'use_sim_time'),
+    ('world', {'pace': -1.0}, 'pace'),
+    ('world', {'pace': float('inf')}, 'pace'),
     # TypeError: a list compared with a number, or made into a path.
     ('world', {'start_timeout': [True, False]}, 'start_timeout'),
     ('world', {'out_dir': [2, 2]}, 'out_dir'),
@@ -700,3 +705,33 @@ def test_expressions_evaluate_or_are_refused_within_the_budget(text):
         assert not isinstance(v, int) or v.bit_length() <= 2 * MAX_INT_BITS
         return 1
     assert check(value) <= MAX_ITEMS
+
+
+# Launch arguments (launch/swarm_launch.py, decided by flock_swarm.launch_plan)
+
+#: Launch argument texts: numbers, flags, informed selections and override lists, good and bad.
+LAUNCH_TEXTS = st.one_of(
+    st.text(max_size=10),
+    st.sampled_from(['0', '1', '2', '4', '-1', '1e3', 'true', 'false', 'first', 'random',
+                     'lockstep', 'realtime', 'duration=1', 'duration=-5; n_agents=3', ';', '=',
+                     'protocol.c1=[1, 2]', 'n_agents=abc', 'informed.count=2; n_agents=4',
+                     'initial.position_box=[[0, 5], [0, 5]]', 'a.b.c=1', 'duration=']))
+#: The arguments drawn (not ``container``: false with a huge n_agents plans a process each).
+LAUNCH_KEYS = ('scenario', 'n_agents', 'informed_count', 'informed_select', 'overrides',
+               'mode', 'foxglove')
+
+
+@given(st.dictionaries(st.sampled_from(LAUNCH_KEYS), LAUNCH_TEXTS, max_size=4))
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_launch_arguments_plan_or_name_the_argument(args):
+    """Any launch arguments: the processes are planned, or one line names an argument or a
+    scenario key (never another exception)."""
+    from flock_swarm.launch_plan import swarm_processes
+    try:
+        specs = swarm_processes(**args)
+    except ScenarioError as exc:
+        event('launch: error')
+        assert '\n' not in str(exc) and exc.key
+        return
+    event('launch: planned')
+    assert [spec.name for spec in specs][:2] == ['world', 'leader']

@@ -38,7 +38,9 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     states = {contract.state_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
-    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS} | odom | status,
+    # The world also publishes the run's scenario (latched, recorded at t = 0).
+    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
+                       | odom | status,
                        cmds | states | leader),
              'leader': (leader, {contract.CLOCK} | status)}
     for i in range(n):

@@ -15,11 +15,13 @@ from pathlib import Path
 import time
 
 import numpy as np
+import yaml
 
 from flock_swarm import contract
-from flock_swarm.bag import BagReader
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.bag import BagError, BagReader
+from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
+from flock_swarm.scenario_yaml import parse_yaml
 
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
 METADATA_RECORD = 'flock_swarm'
@@ -118,6 +120,8 @@ class RunData:
     recovered: bool = False
     #: Facts about how the bag was read (fallbacks, skipped steps), one line each.
     notes: list[str] = field(default_factory=list)
+    #: Whether the bag says which agents are informed (no scenario anywhere: ``False``).
+    informed_known: bool = True
     #: Odometry stamps for which some agent's message is missing.
     incomplete_steps: int = 0
     #: The law's adaptive state per step, ``{key: (K, N, ...)}`` as ``sim`` records it (empty
@@ -245,6 +249,8 @@ def _stored_scenario(reader: BagReader, notes: list[str]
     plugin the scenario names cannot be used here (``None``: no such problem)."""
     meta = reader.metadata(METADATA_RECORD)
     if meta is None:
+        meta = _scenario_topic(reader, notes)
+    if meta is None:
         return None, None, None
     plugin = None
     try:
@@ -270,6 +276,36 @@ def _missing_plugin(data, exc: ScenarioError) -> str:
     what = 'law' if section == 'protocol' else 'leader model'
     return (f'the bag was recorded with the {what} {name!r} ({exc.key}), which cannot be '
             f'loaded here ({exc.reason}): install the package that provides it')
+
+
+def _scenario_topic(reader: BagReader, notes: list[str]) -> dict[str, str] | None:
+    """Return the provenance record of the bag's ``/swarm/scenario`` message (the world
+    records it at t = 0), as the metadata record holds it; ``None`` when there is none.
+
+    Tools that rewrite a bag (``rosbags-convert``) drop MCAP metadata but keep messages.
+    """
+    names = [name for name, type_name in reader.topics().items()
+             if name.endswith('/' + contract.SCENARIO) and type_name == contract.SCENARIO_TYPE]
+    if len(names) != 1:
+        return None
+    try:
+        for _, msg in reader.decoded(names[0]):
+            data = parse_yaml(msg.data)
+            break
+        else:
+            return None
+        record = {key: str(value) for key, value in data.items()
+                  if key not in ('scenario', 'informed')}
+        record['scenario'] = json.dumps(data['scenario'])
+        if 'informed' in data:
+            record['informed'] = json.dumps([int(i) for i in data['informed']])
+    except (BagError, yaml.YAMLError, AttributeError, KeyError, TypeError, ValueError) as exc:
+        notes.append(f'{names[0]} holds no usable scenario ({one_line(str(exc))}); analysed '
+                     'like a bag without one')
+        return None
+    notes.append(f'scenario, seed and informed set from {names[0]} (the bag has no '
+                 f'{METADATA_RECORD} metadata record)')
+    return record
 
 
 def _stamp_ns(stamp) -> int:
@@ -486,12 +522,14 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
     if last_metrics and 'leader_missed' in last_metrics[-1]:
         leader_missed = int(last_metrics[-1]['leader_missed'])
 
+    informed_known = True
     if meta is not None and 'informed' in meta:
         ids = json.loads(meta['informed'])
     elif sc is not None:
         ids = realize(sc).informed_ids
     else:
         ids = []
+        informed_known = False
         notes.append('informed agents unknown (no scenario in the bag): none marked')
     informed = np.zeros(n, dtype=bool)
     informed[[int(i) for i in ids]] = True
@@ -504,7 +542,8 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         record_every=sc.record_every if sc is not None else 1, scenario=sc, mode=mode,
         missed_commands_per_agent=[int(x) for x in per_agent], leader_missed=leader_missed,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
-        incomplete_steps=incomplete, state=state, recovered=reader.recovered)
+        incomplete_steps=incomplete, state=state, recovered=reader.recovered,
+        informed_known=informed_known)
 
 
 def _commands(cmds: list, steps: np.ndarray, index: dict[int, int],

@@ -76,7 +76,8 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
         ``bag_warning``).
     """
     facts = (run_facts(run.scenario, realize(run.scenario)) if run.scenario is not None
-             else RunFacts(run.n_agents, run.dt, run.eta_tolerance, run.collision_distance))
+             else RunFacts(run.n_agents, run.dt, run.eta_tolerance, run.collision_distance,
+                           informed_known=run.informed_known))
     return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), _status(run)),
                       mode=run.mode,
                       missed_commands=int(sum(run.missed_commands_per_agent)),

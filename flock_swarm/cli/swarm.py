@@ -15,8 +15,8 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import (EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals, out_dir,
-                                 signal_name)
+from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
+                                 StopSignals, out_dir, signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
@@ -61,6 +61,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
                         help='serve the run live to Foxglove / Lichtblick over the Foxglove '
                         f'WebSocket protocol (default port {DEFAULT_PORT}; 0: any free port)')
+    parser.add_argument('--pace', type=float, default=0.0, metavar='FACTOR',
+                        help='lockstep: at most FACTOR simulated seconds per wall second '
+                        '(1: real time, to watch a run; default 0: as fast as it goes)')
+    parser.add_argument('--wait-for-viewer', action='store_true',
+                        help='with --foxglove: start the run once a viewer has subscribed')
     parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
                         help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
                         'this machine only)')
@@ -95,6 +100,13 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
         if not args.start_timeout >= 0 or math.isinf(args.start_timeout):
             raise ScenarioError('--start-timeout',
                                 f'must be finite and >= 0, got {args.start_timeout}')
+        if not args.pace >= 0 or math.isinf(args.pace):
+            raise ScenarioError('--pace', f'must be finite and >= 0, got {args.pace}')
+        if args.pace and args.mode != 'lockstep':
+            raise ScenarioError('--pace', 'paces lockstep runs; realtime runs take '
+                                '--realtime-factor')
+        if args.wait_for_viewer and args.foxglove is None:
+            raise ScenarioError('--wait-for-viewer', 'goes with --foxglove')
         if args.container and not args.processes:
             raise ScenarioError('--container', 'goes with --processes (a one-process run '
                                 'always hosts the agents in one container node)')
@@ -135,6 +147,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
     world_params = {'start_timeout': args.start_timeout}
+    if args.pace:
+        world_params['pace'] = args.pace
     if args.no_record:
         world_params['record'] = False
     if live is not None:
@@ -145,6 +159,16 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
         live.add_topics(contract_topics(sc.n_agents, '/', bool(sc.law.initial_state(1))))
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
+        if args.wait_for_viewer:
+            say('[swarm] waiting for a viewer to subscribe (--wait-for-viewer; Ctrl-C stops)')
+            try:
+                # Polled, so a stop signal that only notes itself (StopSignals) ends the wait.
+                while not live.wait_for_viewer(timeout=0.2):
+                    if stop.stopped:
+                        raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                say('[swarm] interrupted before the run started')
+                return stop.status(EXIT_INTERRUPTED)
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
@@ -152,12 +176,17 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
                                 live=live, allow_unstable=args.allow_unstable,
                                 stop=lambda: stop.first, say=say)
     else:
-        summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
-                                 args.executor, progress=say,
-                                 realtime_factor=args.realtime_factor,
-                                 world_params=world_params, live=live,
-                                 allow_unstable=args.allow_unstable,
-                                 stop=lambda: stop.stopped)
+        try:
+            summary = run_in_process(scenario, out, args.mode, args.domain_id,
+                                     args.step_timeout, args.executor, progress=say,
+                                     realtime_factor=args.realtime_factor,
+                                     world_params=world_params, live=live,
+                                     allow_unstable=args.allow_unstable,
+                                     stop=lambda: stop.stopped)
+        except ScenarioError as exc:
+            # The world refused to start (another world on the domain: docs/ros.md).
+            print(f'swarm: error: {exc}', file=sys.stderr)
+            return EXIT_USAGE
     if stop.stopped:
         say(f'[swarm] stopped by {signal_name(stop.first)}')
     if not summary:

@@ -66,6 +66,8 @@ class RunFacts:
     :ivar protocol: the law's name (``None``: unknown).
     :ivar selection: the pseudo-leader certificate, when the informed set was chosen by it.
     :ivar law_state: ``{state key: summary key}`` of the law (``Law.state_summary``).
+    :ivar informed_known: whether the informed set is known (``False``: a bag without its
+        scenario; the summary says ``unknown``, not an empty list).
     """
 
     n_agents: int
@@ -77,6 +79,7 @@ class RunFacts:
     protocol: str | None = None
     selection: PseudoLeaderSelection | None = None
     law_state: Mapping[str, str] = field(default_factory=dict)
+    informed_known: bool = True
 
 
 @dataclass(frozen=True)
@@ -132,8 +135,10 @@ def _final(series: str, cast: type = float) -> Callable[[SummaryInputs], Any]:
     return lambda x: cast(x.series[series][-1]) if x.series else None
 
 
-def _informed(x: SummaryInputs) -> list[int] | None:
+def _informed(x: SummaryInputs) -> list[int] | str | None:
     import numpy as np
+    if not x.facts.informed_known:
+        return 'unknown'
     if not x.series:
         return None
     return [int(i) for i in np.flatnonzero(x.series['informed'][0])]

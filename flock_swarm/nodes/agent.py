@@ -37,7 +37,7 @@ from flock_swarm.nodes.graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, StateEncoder, decode_accel,
                                     decode_odometry)
 
@@ -113,12 +113,12 @@ class AgentNode(Node):
         self.matched = [False] * len(self.pubs)
         self.sent: list[tuple[int, bytes]] = []
         self.duplicates: set[int] = set()
-        self.create_timer(1.0, self.check_claims)
+        wall_timer(self, 1.0, self.check_claims)
         self.world_finished = follow_world(self, params['keep_running'])
         if self.lockstep:
-            self.create_timer(0.01, self.on_lockstep_timer)
+            wall_timer(self, 0.01, self.on_lockstep_timer)
         else:
-            self.create_timer(params.timer_period(sc.dt), self.on_timer)
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     leader_lost = property(lambda self: self.controller.leader.lost,
                            doc='Whether the agents apply the uninformed law (leader lost).')

@@ -44,20 +44,60 @@ if TYPE_CHECKING:
 
 #: Wall-clock bound [s] of one whole test run when the caller gives none (a hung run fails).
 RUN_TIMEOUT = 240.0
-#: Domain ids handed out by :func:`unique_domain`: [1, DOMAIN_SPAN]. Domain 0 is everybody's
-#: default, and ids above are left to the demo and to people's own runs.
-DOMAIN_SPAN = 200
+#: Domain ids handed out by :func:`unique_domain`: the ranges the ROS 2 docs ("The
+#: ROS_DOMAIN_ID") recommend on Linux, 1-101 and 215-232, less 0 (everybody's default, left to
+#: people's own runs) and 215-222 (222 is scripts/demo's, the rest left to people's own runs).
+#: Ids 102-214 can clash with the ephemeral ports the OS hands out, and ids above 232 overflow
+#: the DDS port range.
+DOMAIN_RANGES = ((1, 101), (223, 232))
+#: How many ids :func:`unique_domain` hands out before one repeats.
+DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 
 _domains = itertools.count()
+#: The domain ids this process holds, with the open lock file of each (see unique_domain).
+_held: dict[int, Any] = {}
 
 
 def unique_domain() -> int:
-    """Return a ROS domain id not handed out before in this process, in [1, 200].
+    """Return a ROS domain id not handed out before in this process, in 1-101 or 223-232
+    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges), and held by no other process
+    of this machine.
 
-    Ids are spread over the range by process id, so two test processes on one machine are
-    unlikely to collide (200 ids a process before one repeats).
+    Ids are spread over the ranges by process id, and each is held with a lock file (under
+    the temporary directory, ``flock_swarm_domains/``) until the process exits: a world
+    refuses to start beside another on its domain (docs/ros.md), so two test processes on
+    one machine (discovery is limited to it) must not meet. When every id is held, the next
+    one is shared (111 ids a process before one repeats).
     """
-    return 1 + (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+    domain = 0
+    for _ in range(DOMAIN_SPAN):
+        n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+        (lo, hi), (second, _) = DOMAIN_RANGES
+        domain = lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+        if _hold(domain):
+            return domain
+    return domain
+
+
+def _hold(domain: int) -> bool:
+    """Hold ``domain`` for this process (a lock on its file); return whether it is ours."""
+    import fcntl
+    import tempfile
+    if domain in _held:
+        return True
+    folder = Path(tempfile.gettempdir()) / 'flock_swarm_domains'
+    try:
+        folder.mkdir(exist_ok=True)
+        lock = open(folder / f'{domain}.lock', 'a')
+    except OSError:
+        return True  # no lock files here: spread by process id only, as before
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return False
+    _held[domain] = lock
+    return True
 
 
 def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
@@ -285,6 +325,8 @@ class InProcessSwarm:
         world = self.world
         deadline = time.monotonic() + timeout
         while not condition():
+            if world.refusal is not None:
+                raise world.refusal
             if world.done:
                 raise AssertionError(f'the run ended ({world.status} at step {world.k}) '
                                      f'before {what}')
@@ -305,6 +347,8 @@ class InProcessSwarm:
         started = time.monotonic()
         while self.context.ok() and not self.world.done and not (stop and stop()):
             self.executor.spin_once(timeout_sec=0.1)
+            if self.world.refusal is not None:
+                raise self.world.refusal
             if timeout is not None and time.monotonic() - started > timeout:
                 raise TimeoutError(f'the run did not finish within {timeout:g} s')
 

@@ -21,13 +21,14 @@ from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.graph import agent_hosts, follow_world
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 #: The leader's parameters, in the order they are read and checked.
 LEADER_PARAMS = COMMON_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each leader topic must have before the first '
-          'tick is answered (-1: the world plus one per node hosting agents)'),
+          'tick is answered (given as -1: the world plus one per node hosting agents; reads '
+          'back as that number once the leader has found them)'),
     Param('start_timeout', 30.0, 'seconds to wait for expect_subscribers'),
     KEEP_RUNNING,
 )
@@ -59,9 +60,9 @@ class LeaderNode(Node):
         self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
         if params['mode'] == 'lockstep':
             self.create_subscription(Clock, CLOCK, self.on_clock, qos_profile(CLOCK_QOS))
-            self.retry = self.create_timer(0.01, self.flush)
+            self.retry = wall_timer(self, 0.01, self.flush)
         else:
-            self.create_timer(params.timer_period(sc.dt), self.on_timer)
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     def on_clock(self, msg: Clock) -> None:
         """Advance to the tick's step and publish (a repeated tick republishes)."""
@@ -86,6 +87,8 @@ class LeaderNode(Node):
             waited = time.monotonic() - self.t0
             if (need is None or min(counts) < need) and waited < self.start_timeout:
                 return
+            if need is not None and self.expect < 0:
+                self.params.settle('expect_subscribers', need)
             self.matched = True
             self.retry.cancel()
         while self.step < self.target:

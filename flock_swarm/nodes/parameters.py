@@ -35,8 +35,15 @@ from flock_swarm.core.scenario import Scenario
 from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.presets import load_mapping, prepare
 
+#: rclpy's parameter of every node: the node's ROS clock follows ``/clock`` when true.
+USE_SIM_TIME = 'use_sim_time'
 #: Parameters every rclpy node has; they are not scenario overrides.
-ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
+ROS_PARAMS = {USE_SIM_TIME, 'start_type_description_service'}
+#: How ``use_sim_time`` reads back on the leader and the agents (they accept either value).
+SIM_TIME_DESCRIPTION = (
+    'the node\'s ROS clock follows /clock (read at start). The node runs at the same speed '
+    'either way: its steps come from the world\'s /clock and odometry stamps, and its timers '
+    'run on the steady clock')
 #: The largest integer a ROS parameter holds (int64).
 INT64_MAX = 2 ** 63 - 1
 
@@ -268,11 +275,15 @@ class NodeParameters:
     :ivar scenario: the scenario (after :meth:`load_scenario`).
     """
 
-    def __init__(self, node, table: Sequence[Param]) -> None:
+    def __init__(self, node, table: Sequence[Param], sim_time_refused: str | None = None,
+                 sim_time_description: str = SIM_TIME_DESCRIPTION) -> None:
         """Read the parameters of ``table`` given to ``node`` (created by :func:`init_node`).
 
         :param node: the node, before it declared any parameter of its own.
         :param table: its parameters (:data:`COMMON_PARAMS` and its own).
+        :param sim_time_refused: the reason ``use_sim_time:=true`` is refused (the world's:
+            it publishes ``/clock`` itself); ``None``: accepted.
+        :param sim_time_description: how ``use_sim_time`` reads back (``ros2 param describe``).
         :raises ScenarioError: naming the first invalid parameter.
         """
         self.node = node
@@ -281,6 +292,11 @@ class NodeParameters:
         self.given = {param.name: plain(param.value)
                       for param in node.get_parameters(list(names))
                       if param.name not in ROS_PARAMS}
+        # rclpy declared it before us (and only logs a value of the wrong type).
+        self.sim_time = typed_value(USE_SIM_TIME, node.get_parameter(USE_SIM_TIME).value, False)
+        if self.sim_time and sim_time_refused is not None:
+            raise ScenarioError(USE_SIM_TIME, sim_time_refused)
+        self.sim_time_description = sim_time_description
         self.values = read_table(table, self.given)
         self.scenario: Scenario | None = None
 
@@ -336,6 +352,29 @@ class NodeParameters:
         for name in self.given:
             if name not in declared:
                 self.node.undeclare_parameter(name)
+        # Read-only too: `ros2 param set NODE use_sim_time true` is refused with the reason
+        # instead of answering "successful" for a clock no timer of the node follows.
+        self._declare(USE_SIM_TIME, self.sim_time, self.sim_time_description)
+
+    def settle(self, name: str, value: Any) -> None:
+        """Make parameter ``name`` (declared read-only) read back ``value``: a default the
+        node resolves once it knows it (``expect_subscribers`` -1 becomes the number of
+        subscribers waited for, known at the start). ``ros2 param set`` stays refused.
+
+        :param name: a parameter of the table.
+        :param value: the value in use, of the parameter's type.
+        """
+        from rclpy.parameter import Parameter
+        self.values[name] = value
+        node = self.node
+        # rclpy has no public way to change a read-only parameter; given the parameter's own
+        # descriptor, its setter (the one declare_parameter uses) skips the read-only check
+        # and still runs the set-parameter callbacks and publishes the parameter event.
+        result = node._set_parameters_atomically_common(
+            [Parameter(name, value=value)], {name: node.describe_parameter(name)})
+        if not result.successful:
+            node.get_logger().warning(f'{name} reads back its given value, not {value!r}: '
+                                      f'{result.reason}')
 
     def _declare(self, name: str, value: Any, description: str, free_typed: bool = False,
                  read_only: bool = True) -> None:

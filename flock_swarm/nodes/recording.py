@@ -13,6 +13,8 @@ from operator import itemgetter
 from pathlib import Path
 from typing import Callable, Protocol
 
+import yaml
+
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
@@ -44,6 +46,35 @@ class MessageSink(Protocol):
 
     def close(self) -> None:
         """Deliver the rest and finish (idempotent)."""
+
+
+def provenance(sc: Scenario, real: Realization, mode: str) -> dict[str, str]:
+    """Return the run's provenance as the bag's ``flock_swarm`` metadata record holds it:
+    the scenario (JSON text), its name, seed, informed set (JSON), mode and version.
+
+    :param sc: the scenario.
+    :param real: its realisation (the informed set).
+    :param mode: ``lockstep`` or ``realtime``.
+    """
+    return {
+        'scenario': json_text(sc.raw, indent=None).strip(),
+        'scenario_name': sc.name,
+        'seed': str(sc.seed),
+        'informed': json.dumps(real.informed_ids),
+        'mode': mode,
+        'flock_swarm_version': __version__,
+    }
+
+
+def provenance_text(record: dict[str, str]) -> str:
+    """Return the text of ``/swarm/scenario``: the provenance record as a YAML mapping, its
+    scenario, seed and informed set as YAML values (the scenario as its YAML text shows it).
+
+    :param record: :func:`provenance`'s record.
+    """
+    data = dict(record, scenario=json.loads(record['scenario']), seed=int(record['seed']),
+                informed=json.loads(record['informed']))
+    return yaml.safe_dump(data, sort_keys=False, width=float('inf'))
 
 
 class BagSink:
@@ -90,14 +121,7 @@ class BagSink:
         except OSError as exc:
             raise ScenarioError('out_dir', f'cannot write to {path.parent}: {exc.strerror}') \
                 from None
-        self.bag.add_metadata('flock_swarm', {
-            'scenario': json_text(sc.raw, indent=None).strip(),
-            'scenario_name': sc.name,
-            'seed': str(sc.seed),
-            'informed': json.dumps(real.informed_ids),
-            'mode': mode,
-            'flock_swarm_version': __version__,
-        })
+        self.bag.add_metadata('flock_swarm', provenance(sc, real, mode))
         self.path = path
         self.failed = failed
         self.error: str | None = None

@@ -26,6 +26,23 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
+def wall_timer(node: Node, period: float, callback: Callable[[], None]):
+    """Return a timer of ``node`` on the steady clock: it fires every ``period`` wall seconds
+    whatever ``use_sim_time`` says.
+
+    The nodes' timers time waits, retries and realtime pacing in wall time; the simulation's
+    time is in the stamps. On the node's ROS clock they would wait for ``/clock`` under
+    ``use_sim_time:=true``: the world (which publishes it) never started, and the leader and
+    the agents slowed from about 500 to 22 steps per second.
+
+    :param node: the node.
+    :param period: seconds of wall time between calls.
+    :param callback: called on every tick.
+    """
+    from rclpy.clock import Clock, ClockType
+    return node.create_timer(period, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None,
              until: Callable[[Node], bool] | None = None,
              on_fail: Callable[[Node], None] | None = None) -> int:
