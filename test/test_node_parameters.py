@@ -241,7 +241,14 @@ def test_each_node_declares_exactly_its_table_and_the_scenario(kind, tmp_path, r
         assert node.get_parameter('metrics.eta_tolerance').value == 0.2
         for param in table:
             descriptor = node.describe_parameter(param.name)
-            assert descriptor.read_only and descriptor.description == param.description
+            assert descriptor.description == param.description
+            if param.name in node.params.settled:
+                # Settled by the node once known (expect_subscribers: -1 reads back the number
+                # waited for): declared writable for the node alone, refused to anyone else.
+                value = node.get_parameter(param.name).value
+                assert not node.set_parameters([Parameter(param.name, value=value)])[0].successful
+            else:
+                assert descriptor.read_only
     finally:
         close = getattr(node, 'close', None)
         if close is not None:

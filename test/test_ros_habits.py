@@ -147,7 +147,8 @@ def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_dom
     """A world that finds another world (or a replay) on its domain before its start refuses
     (a by-hand run mixed silently with another before). The first world may refuse too if it
     sees the second before the second has gone; a world that has started does not look."""
-    from flock_swarm.nodes.harness import executable, stop
+    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.supervisor import stop
     from flock_swarm.nodes.world import main
     from conftest import subprocess_env
     env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
@@ -173,7 +174,8 @@ def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domai
     here the swarm waits for an absent agent, so it meets the other world before its
     start."""
     from flock_swarm.core.errors import ScenarioError
-    from flock_swarm.nodes.harness import executable, run_in_process, stop
+    from flock_swarm.nodes.harness import executable, run_in_process
+    from flock_swarm.nodes.supervisor import stop
     from conftest import subprocess_env
     env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
     first = subprocess.Popen(executable('world') + [

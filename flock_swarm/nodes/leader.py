@@ -42,6 +42,8 @@ class LeaderNode(Node):
         init_node(super().__init__, 'leader', kwargs)
         params = self.params = NodeParameters(self, LEADER_PARAMS)
         self.scenario = sc = params.load_scenario()
+        # expect_subscribers: -1 reads back the number waited for, once it is known.
+        params.will_settle('expect_subscribers')
         params.declare()
         self.clock = StepClock(sc.dt)
         self.model = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)

@@ -299,6 +299,9 @@ class NodeParameters:
         self.sim_time_description = sim_time_description
         self.values = read_table(table, self.given)
         self.scenario: Scenario | None = None
+        #: Parameters the node settles once it knows their value (:meth:`settle`).
+        self._settled: set[str] = set()
+        self._settling = False
 
     def __getitem__(self, name: str) -> Any:
         """Return the value of parameter ``name``."""
@@ -343,7 +346,7 @@ class NodeParameters:
         declared = set()
         for param in self.table.values():
             self._declare(param.name, self.values[param.name], param.description,
-                          param.free_typed, param.read_only)
+                          param.free_typed, param.read_only and param.name not in self._settled)
             declared.add(param.name)
         for key, value in scenario_parameters(self.scenario).items():
             if key not in declared:
@@ -356,8 +359,26 @@ class NodeParameters:
         # instead of answering "successful" for a clock no timer of the node follows.
         self._declare(USE_SIM_TIME, self.sim_time, self.sim_time_description)
 
+    @property
+    def settled(self) -> frozenset[str]:
+        """Return the parameters the node settles itself (:meth:`will_settle`)."""
+        return frozenset(self._settled)
+
+    def will_settle(self, name: str) -> None:
+        """Declare ``name`` (by :meth:`declare`) so that the node can :meth:`settle` it later.
+
+        rclpy offers no public way to change a read-only parameter, so such a parameter is
+        declared writable and a set-parameters callback refuses every change the node does not
+        make itself: ``ros2 param set`` is refused as for a read-only one.
+
+        :param name: a parameter of the table, before :meth:`declare`.
+        """
+        if not self._settled:
+            self.node.add_on_set_parameters_callback(self._refuse_outside_changes)
+        self._settled.add(name)
+
     def settle(self, name: str, value: Any) -> None:
-        """Make parameter ``name`` (declared read-only) read back ``value``: a default the
+        """Make parameter ``name`` (see :meth:`will_settle`) read back ``value``: a default the
         node resolves once it knows it (``expect_subscribers`` -1 becomes the number of
         subscribers waited for, known at the start). ``ros2 param set`` stays refused.
 
@@ -366,15 +387,24 @@ class NodeParameters:
         """
         from rclpy.parameter import Parameter
         self.values[name] = value
-        node = self.node
-        # rclpy has no public way to change a read-only parameter; given the parameter's own
-        # descriptor, its setter (the one declare_parameter uses) skips the read-only check
-        # and still runs the set-parameter callbacks and publishes the parameter event.
-        result = node._set_parameters_atomically_common(
-            [Parameter(name, value=value)], {name: node.describe_parameter(name)})
+        self._settling = True
+        try:
+            result = self.node.set_parameters([Parameter(name, value=value)])[0]
+        finally:
+            self._settling = False
         if not result.successful:
-            node.get_logger().warning(f'{name} reads back its given value, not {value!r}: '
-                                      f'{result.reason}')
+            self.node.get_logger().warning(f'{name} reads back its given value, not {value!r}: '
+                                           f'{result.reason}')
+
+    def _refuse_outside_changes(self, params):
+        """Refuse a change of a settled parameter unless the node itself settles it."""
+        from rcl_interfaces.msg import SetParametersResult
+        for param in params:
+            if param.name in self._settled and not self._settling:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'parameter {param.name!r} cannot be set because it is read-only')
+        return SetParametersResult(successful=True)
 
     def _declare(self, name: str, value: Any, description: str, free_typed: bool = False,
                  read_only: bool = True) -> None:
@@ -384,6 +414,11 @@ class NodeParameters:
         node = self.node
         if node.has_parameter(name):
             node.undeclare_parameter(name)
-        node.declare_parameter(name, value, ParameterDescriptor(
-            description=description, read_only=read_only, dynamic_typing=free_typed),
-            ignore_override=True)
+        # The node's own declaration: the guard of settled parameters lets it through.
+        self._settling = True
+        try:
+            node.declare_parameter(name, value, ParameterDescriptor(
+                description=description, read_only=read_only, dynamic_typing=free_typed),
+                ignore_override=True)
+        finally:
+            self._settling = False

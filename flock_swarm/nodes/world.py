@@ -130,6 +130,8 @@ class WorldNode(RecordedNode):
         self.subscribers_needed = self.expect_subscribers
         out_dir = params['out_dir']
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
+        # expect_subscribers: -1 reads back the number waited for, once it is known.
+        params.will_settle('expect_subscribers')
         params.declare(out_dir=str(self.out))
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
         self.spool = SpooledRecorder(self.out, self.get_logger().warning)
