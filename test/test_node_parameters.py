@@ -258,7 +258,8 @@ def test_each_node_declares_exactly_its_table_and_the_scenario(kind, tmp_path, r
 
 def test_the_container_reads_back_the_agents_it_hosts(tmp_path, ros_context):
     """``agent_ids`` reads back the ids a node hosts, given as ids and ranges, as ``all`` (the
-    container's default) or through ``agent_id`` alone, and given back they host the same."""
+    container's default) or through ``agent_id`` alone, and given back they host the same;
+    ``agent_id`` reads back the agent hosted, or -1 in a node hosting several."""
     from rclpy.parameter import Parameter
 
     from flock_swarm.nodes.agent import AgentNode
@@ -273,6 +274,8 @@ def test_the_container_reads_back_the_agents_it_hosts(tmp_path, ros_context):
         try:
             assert list(node.get_parameter('agent_ids').value) == ids
             assert node.controller.ids.tolist() == ids
+            # agent_id reads back the one agent hosted, never a 0 a container does not mean.
+            assert node.get_parameter('agent_id').value == (ids[0] if len(ids) == 1 else -1)
         finally:
             node.destroy_node()
         again = AgentNode(context=ros_context, parameter_overrides=[

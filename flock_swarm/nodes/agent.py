@@ -53,7 +53,8 @@ AGENT_IDS = Param('agent_ids', '', "agents this node hosts: '' (agent_id alone),
                   'hosted)', free_typed=True)
 #: The agents' parameters, in the order they are read and checked.
 AGENT_PARAMS = COMMON_PARAMS + (
-    Param('agent_id', 0, 'index i of this agent (0-based)'),
+    Param('agent_id', 0, 'index i of this agent (0-based); reads back -1 in a node hosting '
+          'several agents (agent_ids lists them)'),
     AGENT_IDS,
     _timeout('leader_timeout', 1.0, 'seconds without the leader state (lockstep: for a step '
              'whose odometry is complete) before the agents apply the uninformed law, until '
@@ -80,7 +81,7 @@ class AgentNode(Node):
         params = self.params = NodeParameters(self, table)
         sc = self.scenario = params.load_scenario()
         ids = parse_agent_ids(params['agent_ids'], params['agent_id'], sc.n_agents)
-        params.declare(agent_ids=ids.tolist())
+        params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
                                           leader_start_timeout=params['leader_start_timeout'])
