@@ -340,17 +340,20 @@ def parse_network(value, dt: float) -> NetworkSpec:
     return NetworkSpec(agents, leader, model, max_age)
 
 
-def refuse_in_ros(spec: NetworkSpec) -> None:
-    """Refuse an active section in a ROS run: the nodes do not apply the model yet.
+def refuse_in_ros(spec: NetworkSpec, mode: str = 'lockstep') -> None:
+    """Refuse an active section in a realtime ROS run: the nodes apply the model in lockstep
+    only (there it equals ``sim``; realtime's semantics on top of a real transport are not
+    done).
 
-    A ROS run would otherwise ignore the section and differ from ``sim`` without a word.
+    A realtime run would otherwise ignore the section and differ without a word.
 
     :param spec: the scenario's ``network:`` section.
-    :raises ScenarioError: naming ``network`` when it is active.
+    :param mode: the run's mode, ``lockstep`` or ``realtime``.
+    :raises ScenarioError: naming ``network`` when it is active in realtime mode.
     """
-    if spec.active:
-        raise ScenarioError('network', 'not yet applied by the ROS nodes: run it with sim '
-                            '(docs/network.md)')
+    if spec.active and mode == 'realtime':
+        raise ScenarioError('network', 'not applied in realtime mode yet: run it in lockstep '
+                            'mode or with sim (docs/network.md)')
 
 
 # --------------------------------------------------------------------------------------------
@@ -538,14 +541,14 @@ class NetworkState:
         # count and largest (a record every few steps would otherwise alias with a period).
         self._tally = [0, 0, 0, 0, -1]
 
-    def send(self, k: int, q: np.ndarray, p: np.ndarray, leader: LeaderState,
+    def send(self, k: int, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
              edges: EdgeList, informed: np.ndarray, receivers: np.ndarray | None = None) -> None:
         """Send step ``k``'s messages: every agent's state over the step's links.
 
         :param k: the step (called once per step, in order).
         :param q: true positions of every agent.
         :param p: true velocities of every agent.
-        :param leader: the leader's true state.
+        :param leader: the leader's true state (``None``: lost, nothing sent).
         :param edges: the undirected interaction graph at ``k`` (its pairs are the links).
         :param informed: which agents receive the leader's state.
         :param receivers: the agents whose incoming messages to keep (``None``: all).
@@ -561,11 +564,13 @@ class NetworkState:
             rec, snd, weight = rec[keep], snd[keep], weight[keep]
         self.links.send(k, rec, snd, weight, q[snd], p[snd])
         lrec = np.flatnonzero(informed if receivers is None else informed & receivers)
+        if leader is None:
+            # A lost leader (an agent node past its timeout) sends nothing this step.
+            lrec = lrec[:0]
         m = lrec.size
-        self.leader_links.send(k, lrec, np.full(m, LEADER, dtype=np.int64), np.ones(m),
-                               np.broadcast_to(leader.q, (m, self.dim)),
-                               np.broadcast_to(leader.p, (m, self.dim)),
-                               np.broadcast_to(leader.a, (m, self.dim)))
+        sent = [np.zeros((0, self.dim))] * 3 if leader is None else \
+            [np.broadcast_to(x, (m, self.dim)) for x in (leader.q, leader.p, leader.a)]
+        self.leader_links.send(k, lrec, np.full(m, LEADER, dtype=np.int64), np.ones(m), *sent)
 
     def control(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
                 agents: AgentData, dt: float, t: float = 0.0) -> tuple[np.ndarray, dict]:
@@ -580,23 +585,13 @@ class NetworkState:
         :return: ``u`` of ``ids`` and ``{'network_delivered', 'network_age_mean',
             'network_age_max'}`` of their incoming links (ages in seconds; NaN when none).
         """
-        k, law = self.step, self.law
+        law = self.law
         ids = np.arange(self.n) if ids is None else np.asarray(ids)
         hosted = np.zeros(self.n, dtype=bool)
         hosted[ids] = True
         row = np.full(self.n, -1, dtype=np.int64)
         row[ids] = np.arange(ids.size)
-        held = self.links.held(k, hosted)
-        own_q, own_p = self._own(held.receiver, held.age, q, p)
-        use = np.ones(held.receiver.size, dtype=bool)
-        weight = held.weight
-        if self.neighbourhood != FIXED:
-            dq = held.q - own_q
-            near = within_radius(np.einsum('ek,ek->e', dq, dq), law.radius, law.strict_radius)
-            if self.neighbourhood == DISK:
-                use = near
-            else:
-                weight = np.where(near, self.coupling, 0.0)
+        held, own_q, own_p, use, weight = self._used(hosted, q, p)
         # Column-major, as pair_sums hands them: the laws' per-component arithmetic then runs
         # on contiguous memory (measured: 3x faster squared norms at N = 1000).
         ends = [np.asfortranarray(x[use]) for x in (own_q, own_p, held.q, held.p)]
@@ -607,17 +602,50 @@ class NetworkState:
             s[:, col] = np.bincount(at, weights=to_i[:, col], minlength=ids.size)
         u = self._combine(ids, row, q, p, s, agents, dt,
                           lambda *args: control(law, *args, t=t))
-        ages = held.age[use]
+        return u, self._count(hosted, held.age[use], dt)
+
+    def observe(self, q: np.ndarray, p: np.ndarray, dt: float) -> dict:
+        """Count the current step's statistics of every agent's links, as :meth:`control`
+        of all agents does, without evaluating the law (an observer: the world node).
+
+        :param q: true positions of every agent at the current step (after :meth:`send`).
+        :param p: true velocities of every agent.
+        :param dt: the step.
+        :return: the step's statistics (as :meth:`control`'s).
+        """
+        held, _, _, use, _ = self._used(None, q, p)
+        return self._count(None, held.age[use], dt)
+
+    def _used(self, hosted: np.ndarray | None, q: np.ndarray, p: np.ndarray) -> tuple:
+        """Return the held messages of ``hosted`` (``None``: all), the receivers' own states,
+        which messages make neighbours and their weights."""
+        law = self.law
+        held = self.links.held(self.step, hosted)
+        own_q, own_p = self._own(held.receiver, held.age, q, p)
+        use = np.ones(held.receiver.size, dtype=bool)
+        weight = held.weight
+        if self.neighbourhood != FIXED:
+            dq = held.q - own_q
+            near = within_radius(np.einsum('ek,ek->e', dq, dq), law.radius, law.strict_radius)
+            if self.neighbourhood == DISK:
+                use = near
+            else:
+                weight = np.where(near, self.coupling, 0.0)
+        return held, own_q, own_p, use, weight
+
+    def _count(self, hosted: np.ndarray | None, ages: np.ndarray, dt: float) -> dict:
+        """Fold a step's deliveries and ``ages`` (of the messages used) into the tally;
+        return the step's statistics."""
         got, total = self.links.delivered(hosted)
         tally = self._tally
-        if k % self.spec.agents.period == 0:
+        if self.step % self.spec.agents.period == 0:
             tally[0] += got
             tally[1] += total
         tally[2] += int(ages.sum())
         tally[3] += ages.size
         tally[4] = max(tally[4], int(ages.max()) if ages.size else -1)
-        return u, _statistics([got, total, int(ages.sum()), ages.size,
-                               int(ages.max()) if ages.size else -1], dt)
+        return _statistics([got, total, int(ages.sum()), ages.size,
+                            int(ages.max()) if ages.size else -1], dt)
 
     def recorded(self, dt: float) -> dict:
         """Return the statistics of the steps since the last call, and start anew.

@@ -23,6 +23,7 @@ from flock_swarm.contract import state_labels
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import advance_state, group_control, group_sums
+from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -172,6 +173,12 @@ class AgentController:
         self.latest = StepInputs()
         self.latest_step: int | None = None
         self.non_finite: Counter = Counter()
+        # The messages between the agents (``network:``, lockstep only): every agent's
+        # odometry reaches every host, so each host sends the whole swarm's messages as sim
+        # does and evaluates its own agents on them (the draws are keyed by the link).
+        self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight) if sc.network.active else None
         self.state = self.swarm.subset(self.ids).state
         shapes = {key: value.shape[1:] for key, value in self.state.items()}
         #: The labels of one agent's state (:func:`flock_swarm.contract.state_labels`).
@@ -280,12 +287,19 @@ class AgentController:
         if self.reselector is not None:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
-        t = k * self.sc.dt
-        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt, t)
+        t, dt, net = k * self.sc.dt, self.sc.dt, self.net
+        if net is None:
+            u = group_control(law, ids, q, p, edges, leader, group, dt, t)
+        else:
+            net.send(k, q, p, leader, edges, self.swarm.informed)
+            u = net.control(ids, q, p, group, dt, t)[0]
         if group.state:
             self.state = {key: value.copy() for key, value in group.state.items()}
-            advance_state(law, q[ids], p[ids], leader, group, self.sc.dt,
-                          lambda: group_sums(law, ids, q, p, edges), t)
+            if net is None:
+                advance_state(law, q[ids], p[ids], leader, group, dt,
+                              lambda: group_sums(law, ids, q, p, edges), t)
+            else:
+                net.advance_state(ids, q, p, group, dt, t)
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
         if np.isfinite(u).all():

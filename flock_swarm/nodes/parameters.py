@@ -328,7 +328,7 @@ class NodeParameters:
         sc, _ = prepare(base, seed=None if seed == -1 else seed,
                         extra=scenario_overrides(self.given, self.table, base),
                         allow_unstable=self.values['allow_unstable'])
-        refuse_in_ros(sc.network)
+        refuse_in_ros(sc.network, self.values['mode'])
         self.values['seed'] = sc.seed
         self.scenario = sc
         return sc

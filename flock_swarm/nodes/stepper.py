@@ -26,8 +26,9 @@ from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
-from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary, observed_pairs,
-                                  static_graph)
+from flock_swarm.core.network import NetworkState, neighbourhood_of
+from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
+                                  interaction_graph, observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
@@ -236,6 +237,13 @@ class WorldStepper:
         self.published_at: dict[int, float] = {}
         self.latency = LatencyHistogram()
         self.run_log = RunLog.for_scenario(sc, recorder)
+        # The messages between the agents (``network:``, lockstep only), kept as the agents
+        # keep them, to record the statistics sim records (the agents' links only: no
+        # leader messages, nobody informed).
+        self.net = NetworkState(sc.network, sc.seed, n, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight) \
+            if sc.network.active and self.lockstep else None
         self.metrics_now: dict = {}
         self.done = False
         self.started = False
@@ -492,9 +500,17 @@ class WorldStepper:
         edges = disk_graph(self.q, law.radius, law.strict_radius)
         last = k >= sc.steps
         covered, radius = observed_pairs(sc, self.real, self.q, self.static, edges)
+        net = {}
+        if self.net is not None:
+            self.net.send(k, self.q, self.p, leader,
+                          interaction_graph(sc, self.real, self.q, self.static),
+                          np.zeros(sc.n_agents, dtype=bool))
+            self.net.observe(self.q, self.p, sc.dt)
+            if k % sc.record_every == 0 or last:
+                net = self.net.recorded(sc.dt)
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
-                                   **self.state)
+                                   **self.state, **net)
         if now is not None:
             self.metrics_now = now
         events = self.leader.events
