@@ -31,7 +31,8 @@ ZHOU = ['duration=0.05', 'network={delay: 0.005, loss: 0.1, leader: {delay: 0.01
         'model: input}']
 #: The layouts of a ROS run: keyword arguments of assert_matches_sim.
 LAYOUTS = {'one process': {},
-           'processes, container': {'processes': True, 'container': True}}
+           'processes, container': {'processes': True, 'container': True},
+           'process per agent': {'processes': True}}
 #: Wall-clock bound of one run (a hung run fails instead of blocking the suite).
 RUN_TIMEOUT = 240.0
 
