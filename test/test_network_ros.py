@@ -105,3 +105,23 @@ def test_an_observer_counts_the_statistics_control_counts():
         if k % 4 == 3:
             np.testing.assert_array_equal(list(observer.recorded(sc.dt).values()),
                                           list(ruler.recorded(sc.dt).values()))
+
+
+@pytest.mark.ros
+def test_a_node_started_in_realtime_refuses_an_active_section(tmp_path, ros_context):
+    """A node started by hand (``ros2 run``), not through ``swarm``, refuses it too."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.harness import resolve_scenario
+    from flock_swarm.nodes.leader import LeaderNode
+    path = resolve_scenario('demo', ['n_agents=3', 'informed.count=1', 'network={loss: 0.1}'],
+                            None, tmp_path)
+    with pytest.raises(ScenarioError, match='^network: not applied in realtime mode yet'):
+        LeaderNode(context=ros_context, parameter_overrides=[
+            Parameter('scenario', value=str(path)), Parameter('mode', value='realtime')])
+    node = LeaderNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value=str(path)), Parameter('mode', value='lockstep')])
+    try:
+        assert node.scenario.network.active
+    finally:
+        node.destroy_node()
