@@ -28,6 +28,9 @@ LEADER_ACCEL = 'leader/accel'
 MARKERS = 'swarm/markers'
 METRICS = 'swarm/metrics'
 STATUS = 'swarm/status'
+#: Faults the leader and the agent nodes report to the world (not recorded in the bag:
+#: ``summary.json`` tells them); type :data:`METRICS_TYPE`, QoS :data:`FAULTS_QOS`.
+FAULTS = 'swarm/faults'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
@@ -74,6 +77,10 @@ TELEMETRY_QOS = QosSpec(depth=5)
 #: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
 #: world announced the end of the run still learns it.
 STATUS_QOS = QosSpec(depth=1, latched=True)
+#: /swarm/faults: reliable, and latched (transient local) so that a world that matches a
+#: failed node late still learns its fault; the depth covers a run of non-finite commands
+#: reported step after step.
+FAULTS_QOS = QosSpec(depth=10, latched=True)
 #: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
 #: acknowledgements (it matches the reliable writers of the contract); the depth covers a
 #: step's burst.

@@ -160,13 +160,15 @@ def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):
 
 
 def test_non_finite_command_is_published_as_zero(tmp_path, ros_domain, monkeypatch, capfd):
-    """A law that returns NaN for agent 1 at every step: the agent node publishes a zero
-    command for it (counted, logged once) instead of one the world would reject, so the
-    world misses no command and records agent 1's input as zero."""
+    """A law that returns NaN for agent 1 at every step, the agents run with
+    ``non_finite:=zero``: the agent node publishes a zero command for it (counted, logged
+    once) instead of one the world would reject, so the world misses no command and records
+    agent 1's input as zero."""
     nan_command_for(monkeypatch, 1)
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
                                            'record_every=1'])
-    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+    with InProcessSwarm(path, out, domain_id=ros_domain,
+                        agent_params={'non_finite': 'zero'}) as swarm:
         swarm.spin_to_end(RUN_TIMEOUT)
         counts = dict(swarm.agents.controller.non_finite)
     summary = json.loads((out / 'summary.json').read_text())

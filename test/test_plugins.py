@@ -158,10 +158,11 @@ class Circle(LeaderModel):
 
 
 def install_plugins(site, laws=(), leaders=(), package='flock-test-plugins',
-                    module='fake_plugins'):
-    """Write a distribution registering ``laws`` and ``leaders`` (``name = Class``) in ``site``."""
+                    module='fake_plugins', source=PLUGIN_MODULE):
+    """Write a distribution registering ``laws`` and ``leaders`` (``name = Class``) in ``site``,
+    the classes defined by ``source`` (the module's text)."""
     site.mkdir(exist_ok=True)
-    (site / f'{module}.py').write_text(PLUGIN_MODULE)
+    (site / f'{module}.py').write_text(source)
     info = site / f'{package.replace("-", "_")}-1.0.dist-info'
     info.mkdir()
     (info / 'METADATA').write_text(f'Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n')

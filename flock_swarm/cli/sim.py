@@ -13,11 +13,14 @@ from pathlib import Path
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core import registry
+from flock_swarm.core.faults import RunFault
 from flock_swarm.core.run import simulate
-from flock_swarm.outputs import ensure_writable, write_outputs
+from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
 #: Exit status when the state stopped being finite.
 EXIT_DIVERGED = 1
+#: Exit status when the law or the leader model failed during the run (status ``failed``).
+EXIT_FAILED = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -90,16 +93,21 @@ def main(argv: list[str] | None = None) -> int:
     if say:
         say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
             f'of {sc.dt:g} s, seed {sc.seed}')
-    result = simulate(sc, progress=say)
     try:
-        write_outputs(result, out, sc)
+        result = simulate(sc, progress=say)
+    except RunFault as fault:
+        # The fault came before the first recorded instant: nothing to write.
+        print(f'sim: error: {fault}', file=sys.stderr)
+        return EXIT_FAILED
+    try:
+        written = write_outputs(result, out, sc)
         if args.plots:
             from flock_swarm.plots import plot_timeseries
             for path in plot_timeseries(result.series, out, sc.name):
                 if say:
                     say(f'[sim] wrote {path}')
     except OSError as exc:
-        print(f'sim: error: --out: writing {out} failed: {exc.strerror}', file=sys.stderr)
+        print(f'sim: error: --out: {write_error(exc)}', file=sys.stderr)
         return EXIT_USAGE
     s = result.summary
     if say:
@@ -107,7 +115,10 @@ def main(argv: list[str] | None = None) -> int:
             f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
             f'collisions = {s["collisions"]}, components = {s["components_final"]} '
             f'({s["wall_time_s"]:.1f} s wall)')
-        say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
+        say(f'[sim] wrote {written[-1]} and {written[0]}')
+    if s['status'] == 'failed':
+        print(f'sim: error: {s["failure"]}', file=sys.stderr)
+        return EXIT_FAILED
     if s['status'] == 'diverged':
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)

@@ -19,6 +19,8 @@ import numpy as np
 
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fault,
+                                     non_finite_rows, state_blew_up)
 from flock_swarm.core.laws.base import advance_state, group_control
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
@@ -30,6 +32,9 @@ from flock_swarm.nodes.wire import OdometryBatch
 
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
 MAX_PENDING = 8
+#: What the agents do with a non-finite command of the law (the ``non_finite`` parameter):
+#: fail the run (the default), or apply a zero command instead and go on (counted).
+NON_FINITE_FAIL, NON_FINITE_ZERO = 'fail', 'zero'
 
 
 @dataclass
@@ -130,15 +135,20 @@ class AgentController:
     It also follows the leader (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`): a step
     whose odometry is complete waits for the leader's state at most ``leader_timeout``
     (``leader_start_timeout`` before the leader was first heard), then the uninformed law
-    applies until the leader is back. A command the law returns non-finite is replaced by
-    zero (counted per agent in ``non_finite``, the first of each agent logged).
+    applies until the leader is back. A law that raises or returns the wrong shape raises
+    :class:`~flock_swarm.core.faults.RunFault` (the node reports it and the run fails); so
+    does a non-finite command, unless ``non_finite`` is ``'zero'``: then it is replaced by
+    zero (counted per agent in ``non_finite``, the first of each agent logged). A non-finite
+    command for a state that has blown up (:func:`~flock_swarm.core.faults.state_blew_up`)
+    is zero in both cases: the world tells the divergence.
 
     :ivar answered: the last step answered (``-1`` before the first).
+    :ivar zeroed: the hosted agents whose command of the last answer was replaced by zero.
     """
 
     def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
                  leader_timeout: float = 1.0, leader_start_timeout: float = 30.0,
-                 now: float | None = None) -> None:
+                 now: float | None = None, non_finite: str = NON_FINITE_FAIL) -> None:
         """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``.
 
         :param log: where the leader's loss and non-finite commands are told (default: the
@@ -146,6 +156,7 @@ class AgentController:
         :param leader_timeout: seconds without the leader state before the uninformed law.
         :param leader_start_timeout: the same before the leader was first heard.
         :param now: the time [s, a monotonic clock] the leader's silence counts from.
+        :param non_finite: :data:`NON_FINITE_FAIL` or :data:`NON_FINITE_ZERO` (see above).
         """
         self.sc = sc
         self.ids = np.asarray(ids, dtype=np.intp)
@@ -167,6 +178,8 @@ class AgentController:
         self.latest = StepInputs()
         self.latest_step: int | None = None
         self.non_finite: Counter = Counter()
+        self.non_finite_policy = non_finite
+        self.zeroed: list[int] = []
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered).
@@ -245,7 +258,7 @@ class AgentController:
         for old in [s for s in self.pending if s < k]:
             del self.pending[old]
         self.answered = k
-        return self.command(*box.swarm(self.sc.n_agents))
+        return self.command(*box.swarm(self.sc.n_agents), k)
 
     def realtime_answer(self, now: float) -> np.ndarray | None:
         """Realtime: return the commands for the latest known states (``None`` before every
@@ -256,31 +269,46 @@ class AgentController:
         q, p, leader = latest.swarm(self.sc.n_agents)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
-        return self.command(q, p, None if self.leader.lost else leader)
+        return self.command(q, p, None if self.leader.lost else leader, self.latest_step)
 
-    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None) -> np.ndarray:
-        """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains.
+    def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
+                k: int) -> np.ndarray:
+        """Return ``u`` of the hosted agents for the swarm state ``(q, p)`` of step ``k``;
+        advance gains.
 
-        A non-finite row (the law failed: an overflow, a division by zero) is zero.
+        :raises RunFault: when the law raised, returned the wrong shape, or (unless
+            ``non_finite`` is ``'zero'``) a non-finite command (see the class).
         """
-        law, ids = self.sc.law, self.ids
+        law, ids, dt = self.sc.law, self.ids, self.sc.dt
         edges = interaction_graph(self.sc, self.real, q, self.static)
         if self.reselector is not None:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
-        u = group_control(law, ids, q, p, edges, leader, group, self.sc.dt)
+
+        def alone(row: int) -> np.ndarray:
+            one = ids[row:row + 1]
+            return group_control(law, one, q, p, edges, leader, self.swarm.subset(one), dt)
+        u = evaluate_law(law, k, ids, self.sc.dim,
+                         lambda: group_control(law, ids, q, p, edges, leader, group, dt), alone)
         if group.state:
-            advance_state(law, q[ids], p[ids], leader, group, self.sc.dt)
+            evaluate_state(law, k, ids,
+                           lambda: advance_state(law, q[ids], p[ids], leader, group, dt))
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
+        self.zeroed = []
         if np.isfinite(u).all():
             return u
-        bad = ~np.isfinite(u).all(axis=1)
+        bad = non_finite_rows(u)
+        blew_up = state_blew_up(q, p, leader)
+        if self.non_finite_policy == NON_FINITE_FAIL and not blew_up:
+            self.non_finite.update(ids[bad].tolist())
+            raise non_finite_fault(law, k, ids[bad])
         for i in ids[bad].tolist():
             if not self.non_finite[i]:
                 self.log.warning(f'agent {i}: the law gave a non-finite command; a zero '
                                  'command is published instead (further ones are counted)')
             self.non_finite[i] += 1
+        self.zeroed = [] if blew_up else ids[bad].tolist()
         return np.where(bad[:, None], 0.0, u)
 
 

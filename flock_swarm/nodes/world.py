@@ -8,6 +8,13 @@ and recorded). It then integrates exactly (the same :func:`step_agents` as ``sim
 ``t_{k+1}``. Realtime mode: a wall-clock timer steps with the latest commands (zero-order
 hold).
 
+A fault ends the run as ``failed`` within a bounded time, with one line naming the node or
+component, the agent and the step (docs/ros.md, "Faults"): a fault an agent or the leader
+reports on ``swarm/faults`` (its law or model raised, returned the wrong shape or a
+non-finite value) at once; an agent that answered before and then misses
+``max_missed_steps`` steps in a row (lockstep); an agent's node or the leader gone from the
+ROS graph for ``peer_timeout`` seconds.
+
 Every message the world publishes or receives is written to a rosbag2-compatible MCAP bag
 in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; the run's
 ``summary.json`` and ``timeseries.npz`` go to ``out_dir``. The decisions are those of
@@ -20,18 +27,22 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                  RUNNING, STATUS, STATUS_QOS, cmd_topic, odom_topic,
-                                  qos_profile)
+from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
+                                  LEADER_ODOM, LOCKSTEP_QOS, RUNNING, STATUS, STATUS_QOS,
+                                  cmd_topic, odom_topic, qos_profile)
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.faults import NON_FINITE
+from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.clock import StepClock
-from flock_swarm.nodes.graph import agent_hosts, check_claims
+from flock_swarm.nodes.fault_report import FaultReport
+from flock_swarm.nodes.graph import agent_hosts, check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
@@ -41,7 +52,8 @@ from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation
                                        WorldSettings, WorldStepper)
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
                                     encode_clock)
-from flock_swarm.outputs import SpooledRecorder, write_outputs
+from flock_swarm.outputs import (SpooledRecorder, json_text, write_error, write_outputs,
+                                 write_text)
 
 
 def _split_bound(name: str, default: int | float, description: str) -> Param:
@@ -95,6 +107,11 @@ class WorldNode(RecordedNode):
         self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
         self.duplicates: set[int] = set()
+        # The node that published each agent's commands, as the graph last told.
+        self.hosts: dict[int, str] = {}
+        #: The files of the run's outputs written, and why writing one failed (or ``None``).
+        self.written: list[Path] = []
+        self.write_error: str | None = None
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
                                 self.get_logger().warning)
         self.bag = BagSink(self.out / 'bag', sc, self.stepper.real, self.mode,
@@ -134,6 +151,7 @@ class WorldNode(RecordedNode):
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
+        self.create_subscription(DiagnosticArray, FAULTS, self.on_fault, qos_profile(FAULTS_QOS))
         self.timer = self.create_timer(0.01, self.on_lockstep_timer) if self.lockstep else \
             self.create_timer(params.timer_period(sc.dt), self.on_realtime_timer)
 
@@ -208,9 +226,28 @@ class WorldNode(RecordedNode):
                                       a=np.array(lin[:self.scenario.dim]))
             self._maybe_finish()
 
+    def on_fault(self, msg: DiagnosticArray) -> None:
+        """Take the faults a node reports: count non-finite commands, fail the run on a fatal
+        one (:class:`~flock_swarm.nodes.fault_report.FaultReport`)."""
+        for report in FaultReport.from_msg(msg):
+            self.stepper.fault_reported(report.step, report.agents, report.kind == NON_FINITE)
+            if report.fatal:
+                self.fail(report.line)
+
     def check_claims(self) -> None:
-        """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
-        check_claims(self, self.scenario.n_agents, self.duplicates)
+        """Once a second: report two nodes publishing commands for the same agent (a
+        duplicate agent_id); fail the run when a peer that answered before has been gone
+        from the ROS graph for ``peer_timeout`` seconds."""
+        n = self.scenario.n_agents
+        claims = command_claims(self, n)
+        check_claims(self, n, self.duplicates, claims=claims)
+        for i, nodes in claims.items():
+            self.hosts[i] = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
+        st = self.stepper
+        if st.started and not st.done:
+            leader_gone = self.count_publishers(self.leader_odom_topic) == 0
+            self.fail(st.graph_gone([i for i in range(n) if i not in claims], leader_gone,
+                                    time.monotonic(), lambda i: self.hosts.get(i, '')))
 
     def publish_states(self, t_ns: int) -> None:
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
@@ -290,8 +327,11 @@ class WorldNode(RecordedNode):
             self.finish_step(timed_out=False)
 
     def finish_step(self, timed_out: bool) -> None:
-        """Close the current step: zero commands for absentees, record, integrate, go on."""
+        """Close the current step: zero commands for absentees, record, integrate, go on
+        (or fail, when agents have stopped answering: :meth:`WorldStepper.silent_agents`)."""
         self.go_on(self.stepper.close_step(timed_out, time.monotonic()))
+        if not self.done:
+            self.fail(self.stepper.silent_agents(lambda i: self.hosts.get(i, '')))
         if not self.done:
             self.begin_step()
 
@@ -309,11 +349,23 @@ class WorldNode(RecordedNode):
 
     # -- the end ------------------------------------------------------------------------------
 
-    def finish(self, status: str) -> None:
-        """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent."""
-        if self.stepper.end(status):
+    def finish(self, status: str, failure: str | None = None) -> None:
+        """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent.
+
+        :param status: how the run ended.
+        :param failure: the line telling why it failed (``failed``, ``recording_failed``).
+        """
+        if self.stepper.end(status, failure):
             self.timer.cancel()
             self.write_results()
+
+    def fail(self, line: str | None) -> None:
+        """End the run as ``failed`` with ``line`` (one error line in the log); nothing
+        when ``line`` is ``None`` or the run has ended."""
+        if line is None or self.done:
+            return
+        self.get_logger().error(f'run failed at step {self.k}: {line}')
+        self.finish('failed', line)
 
     def recording_failed(self, reason: str) -> None:
         """Stop the run cleanly when the bag cannot be written (status ``recording_failed``).
@@ -322,7 +374,7 @@ class WorldNode(RecordedNode):
         """
         self.get_logger().error(f'recording failed: {reason}; stopping the run, the bag '
                                 'keeps every chunk written before')
-        self.finish('recording_failed')
+        self.finish('recording_failed', f'recording failed: {reason}')
 
     def write_results(self) -> None:
         """Announce the end on ``swarm/status``; write what was recorded so far (also on an
@@ -344,14 +396,31 @@ class WorldNode(RecordedNode):
             return
         self.result = result
         try:
-            write_outputs(result, self.out, self.scenario)
+            self.written = write_outputs(result, self.out, self.scenario)
         except OSError as exc:
-            self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
-                                    f'{exc.strerror or exc}; the time series stays in '
-                                    f'{self.spool.spool}')
-            self.spool.close()
+            self.outputs_failed(exc)
         else:
             self.spool.discard()
+
+    def outputs_failed(self, exc: OSError) -> None:
+        """A file of the outputs could not be written: log one line naming it, keep the
+        spooled time series, and still write ``summary.json`` if it was not the one that
+        failed, with status ``recording_failed`` and the line (``failure``)."""
+        self.spool.close()
+        line = write_error(exc)
+        self.write_error = line
+        self.get_logger().error(f'{line}; the time series stays in {self.spool.spool}')
+        self.written = [path for path in (self.out / 'timeseries.npz',
+                                          self.out / 'scenario.json')
+                        if path.is_file() and str(path) != exc.filename]
+        summary = self.out / 'summary.json'
+        if str(summary) == exc.filename:
+            return
+        self.result.summary = with_failure(self.result.summary, 'recording_failed', line)
+        try:
+            self.written.append(write_text(summary, json_text(self.result.summary)))
+        except OSError as again:
+            self.get_logger().error(write_error(again))
 
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
@@ -364,12 +433,15 @@ class WorldNode(RecordedNode):
 def main(args: list[str] | None = None) -> int:
     """Run the world node (``ros2 run flock_swarm world``); it exits after the last step.
 
-    The exit status is 2 for invalid configuration, 1 when recording failed, else 0.
+    The exit status is 2 for invalid configuration, 1 when the run failed (a fault of a law,
+    a leader model or a node), when recording failed or an output could not be written,
+    else 0.
     """
     built: list[WorldNode] = []
     status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
                       until=lambda node: node.done)
-    failed = built and (built[0].status == 'recording_failed' or built[0].bag_error)
+    failed = built and (built[0].status in ('recording_failed', 'failed')
+                        or built[0].bag_error or built[0].write_error)
     return 1 if status == 0 and failed else status
 
 
