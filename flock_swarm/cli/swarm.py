@@ -141,22 +141,40 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
                                  realtime_factor=args.realtime_factor,
                                  world_params=world_params, live=live,
                                  allow_unstable=args.allow_unstable)
-    if not summary:
-        print('swarm: error: the world wrote no summary', file=sys.stderr)
+    return _report(args, sc.name, out, summary, say)
+
+
+def _report(args: argparse.Namespace, name: str, out: Path, summary: dict, say) -> int:
+    """Plot, print the summary line and the files written (those that exist, and only
+    those: a full disk may have stopped one); return the exit status."""
+    from flock_swarm.outputs import write_error
+    if not summary or not (out / 'summary.json').is_file():
+        why = summary.get('failure') if summary else None
+        print(f'swarm: error: the world wrote no {out / "summary.json"}'
+              + (f' ({why})' if why else ''), file=sys.stderr)
         return 1
+    status = 0 if summary['status'] == 'completed' else 1
+    written = [path for path in (out / 'summary.json', out / 'timeseries.npz')
+               if path.is_file()]
+    if not args.no_record and (out / 'bag').is_dir():
+        written.insert(0, out / 'bag')
     if not args.no_plots and (out / 'timeseries.npz').is_file():
         import numpy as np
         from flock_swarm.plots import plot_timeseries
-        with np.load(out / 'timeseries.npz') as data:
-            plot_timeseries(dict(data), out, sc.name)
+        try:
+            with np.load(out / 'timeseries.npz') as data:
+                written += plot_timeseries(dict(data), out, name)
+        except OSError as exc:
+            print(f'swarm: error: {write_error(exc)}', file=sys.stderr)
+            status = 1
     say(f'[swarm] {summary["status"]} at t = {summary["t_final"]:g} s: eta = '
         f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
         f'collisions = {summary["collisions"]}, missed commands = '
         f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
-    say('[swarm] wrote ' + ('' if args.no_record else f'{out}/bag, ')
-        + f'{out}/summary.json, {out}/timeseries.npz'
-        + ('' if args.no_plots else f', {out}/trajectories.png, {out}/metrics.png'))
-    return 0 if summary['status'] == 'completed' else 1
+    say('[swarm] wrote ' + ', '.join(str(path) for path in written))
+    if summary.get('failure'):
+        print(f'swarm: error: {summary["failure"]}', file=sys.stderr)
+    return status
 
 
 if __name__ == '__main__':

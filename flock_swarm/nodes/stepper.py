@@ -422,10 +422,11 @@ class WorldStepper:
             self.last_step_s = now - self.step_began
         return self.observe(u, missing)
 
-    def silent_agents(self, hosts: Callable[[int], str] = lambda i: '') -> str | None:
+    def silent_agents(self, k: int, hosts: Callable[[int], str] = lambda i: '') -> str | None:
         """Return the line of a failed run when agents that answered before have missed
-        ``max_missed_steps`` steps in a row (lockstep), else ``None``.
+        ``max_missed_steps`` steps in a row up to step ``k`` (lockstep), else ``None``.
 
+        :param k: the step closed last.
         :param hosts: the node hosting an agent, as the graph last told (``''``: unknown).
         """
         m = self.settings.max_missed_steps
@@ -436,7 +437,7 @@ class WorldStepper:
             return None
         nodes = sorted({hosts(i) for i in silent} - {''})
         return (f'{agents_text(silent)}' + (f' (node {", ".join(nodes)})' if nodes else '')
-                + f' sent no command for {m} steps in a row (steps {self.k - m + 1}-{self.k}, '
+                + f' sent no command for {m} steps in a row (steps {k - m + 1}-{k}, '
                 f'{self.settings.step_timeout:g} s each): its node is gone or stalled')
 
     def graph_gone(self, agents: Sequence[int], leader: bool, now: float,

@@ -329,9 +329,10 @@ class WorldNode(RecordedNode):
     def finish_step(self, timed_out: bool) -> None:
         """Close the current step: zero commands for absentees, record, integrate, go on
         (or fail, when agents have stopped answering: :meth:`WorldStepper.silent_agents`)."""
-        self.go_on(self.stepper.close_step(timed_out, time.monotonic()))
+        obs = self.stepper.close_step(timed_out, time.monotonic())
+        self.go_on(obs)
         if not self.done:
-            self.fail(self.stepper.silent_agents(lambda i: self.hosts.get(i, '')))
+            self.fail(self.stepper.silent_agents(obs.k, lambda i: self.hosts.get(i, '')))
         if not self.done:
             self.begin_step()
 
@@ -364,7 +365,7 @@ class WorldNode(RecordedNode):
         when ``line`` is ``None`` or the run has ended."""
         if line is None or self.done:
             return
-        self.get_logger().error(f'run failed at step {self.k}: {line}')
+        self.get_logger().error(f'run failed: {line}')
         self.finish('failed', line)
 
     def recording_failed(self, reason: str) -> None:
