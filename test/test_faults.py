@@ -9,7 +9,6 @@ import json
 import math
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -39,7 +38,7 @@ from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenar
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from flock_swarm.testing import wait_for
 from broken_law import nan_command_for
-from conftest import start_nodes
+from conftest import small_filesystem, start_nodes
 from ros_messages import make_accel, make_odometry
 
 pytestmark = pytest.mark.ros
@@ -493,16 +492,8 @@ def test_sigkilled_world_bag_is_recovered_by_analyze(tmp_path, ros_domain, capsy
 @pytest.fixture
 def small_disk(tmp_path):
     """A 256 KiB tmpfs (as root); skip with the reason where it cannot be mounted."""
-    where = tmp_path / 'small'
-    where.mkdir()
-    if shutil.which('mount') is None or os.geteuid() != 0:
-        pytest.skip('a small tmpfs needs root and mount(8): not available here')
-    res = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=256k', 'tmpfs', str(where)],
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        pytest.skip(f'cannot mount a tmpfs here: {res.stderr.strip()}')
-    yield where
-    subprocess.run(['umount', '-l', str(where)], check=False)
+    with small_filesystem(tmp_path / 'small', '256k') as where:
+        yield where
 
 
 def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_domain):

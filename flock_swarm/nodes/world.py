@@ -406,7 +406,8 @@ class WorldNode(RecordedNode):
     def outputs_failed(self, exc: OSError) -> None:
         """A file of the outputs could not be written: log one line naming it, keep the
         spooled time series, and still write ``summary.json`` if it was not the one that
-        failed, with status ``recording_failed`` and the line (``failure``)."""
+        failed, with status ``recording_failed`` and the line (``failure``; a run that had
+        failed already keeps its own)."""
         self.spool.close()
         line = write_error(exc)
         self.write_error = line
@@ -417,7 +418,10 @@ class WorldNode(RecordedNode):
         summary = self.out / 'summary.json'
         if str(summary) == exc.filename:
             return
-        self.result.summary = with_failure(self.result.summary, 'recording_failed', line)
+        before = self.result.summary
+        self.result.summary = with_failure(
+            before, before['status'] if 'failure' in before else 'recording_failed',
+            before.get('failure', line))
         try:
             self.written.append(write_text(summary, json_text(self.result.summary)))
         except OSError as again:
