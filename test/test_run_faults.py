@@ -16,8 +16,10 @@ import time
 import numpy as np
 import pytest
 import yaml
+from numpy.testing import assert_array_equal
 
 from flock_swarm.bag import BagReader
+from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.cli.sim import main as sim_main
 from flock_swarm.core.faults import RunFault
 from flock_swarm.core.scenario import parse_scenario
@@ -264,6 +266,14 @@ def test_non_finite_commands_of_a_law_fail_the_run_by_default_and_are_counted(
     flagged = [int(m['step']) for m in metrics if json.loads(m['non_finite_this_step'])]
     assert flagged == list(range(5, sc.steps + 1))
     assert int(metrics[-1]['non_finite_commands']) == counted
+    # analyze counts them from the bag as the world did.
+    assert analyze_main([str(out / 'bag'), '--out', str(tmp_path / 'analysis'),
+                         '--no-anim']) == 0
+    analysed = summary_of(tmp_path / 'analysis')
+    assert analysed['non_finite_commands_per_agent'] == [0, counted, 0, 0]
+    with np.load(tmp_path / 'analysis' / 'timeseries.npz') as again, \
+            np.load(out / 'timeseries.npz') as world:
+        assert_array_equal(again['non_finite_commands'], world['non_finite_commands'])
 
 
 def test_controller_fails_on_a_non_finite_command_by_default(monkeypatch):

@@ -35,11 +35,18 @@ def recompute(run: RunData, record_every: int | None = None,
                  record_every or run.record_every)
     last = len(run.steps) - 1
     tick = Ticker(progress)
+    # The non-finite commands counted so far, per agent, recorded as the world records them.
+    non_finite = None if run.non_finite_at is None else np.zeros(run.n_agents, dtype=int)
     for row, k in enumerate(run.steps):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
+        extra = {}
+        if non_finite is not None:
+            non_finite[run.non_finite_at.get(int(k), [])] += 1
+            extra['non_finite_commands'] = non_finite.copy()
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
-                    disk_graph(q, run.radius, run.strict_radius), run.radius, row == last)
+                    disk_graph(q, run.radius, run.strict_radius), run.radius, row == last,
+                    **extra)
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
     return log.rec.arrays(), log.metrics
 
@@ -87,6 +94,10 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
         'mode': run.mode,
         'missed_commands': int(sum(run.missed_commands_per_agent)),
         'missed_commands_per_agent': run.missed_commands_per_agent,
+        **({} if run.non_finite_at is None else {
+            'non_finite_commands_per_agent': [int(x) for x in np.bincount(
+                [i for ids in run.non_finite_at.values() for i in ids],
+                minlength=run.n_agents)]}),
         'leader_missed': run.leader_missed,
         'bag': str(run.bag),
         'complete_steps': int(len(run.steps)),

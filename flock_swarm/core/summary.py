@@ -205,7 +205,7 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('non_finite_commands_per_agent', BOOKKEEPING, 'commands the law gave non-finite, per '
        'agent, as the agent nodes reported them (`swarm/faults`): the first fails the run, '
        'unless the agents run with `non_finite:=zero` (a zero command is applied instead)',
-       writers=(WORLD,)),
+       writers=(WORLD, ANALYZE)),
     _K('rejected_messages', BOOKKEEPING, 'messages the world\'s input guard rejected, by '
        'reason', writers=(WORLD,)),
     _K('leader_events', BOOKKEEPING, 'when the leader was lost and found again',

@@ -473,10 +473,15 @@ class WorldStepper:
                 f'{timeout:g} s) at step {self.k}: its node exited or died')
 
     def fault_reported(self, k: int, agents: Sequence[int], non_finite: bool) -> None:
-        """Count the non-finite commands an agent node reported for step ``k``."""
-        if non_finite and agents:
+        """Count the non-finite commands an agent node reported for step ``k``.
+
+        A report that comes after its step was observed counts at the open step, and one
+        after the end not at all: so ``/swarm/metrics`` (its ``non_finite_this_step``), the
+        time series and the summary count the same (``analyze`` adds them up from the bag).
+        """
+        if non_finite and agents and not self.done:
             self.non_finite[list(agents)] += 1
-            self.non_finite_at.setdefault(k, []).extend(int(i) for i in agents)
+            self.non_finite_at.setdefault(max(k, self.k), []).extend(int(i) for i in agents)
 
     # -- realtime -----------------------------------------------------------------------------
 
