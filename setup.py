@@ -28,7 +28,6 @@ setup(
         'a reference simulator, and MCAP recording.'
     ),
     license='Apache-2.0',
-    tests_require=['pytest'],
     python_requires='>=3.10',
     entry_points={
         'console_scripts': [
@@ -54,6 +53,7 @@ setup(
             'zhou_pseudo_leader = flock_swarm.core.laws.zhou2012:ZhouPseudoLeader',
             'yu_pinning_observer = flock_swarm.core.laws.yu2010:YuPinningObserver',
             'jadbabaie_leader = flock_swarm.core.laws.jadbabaie2003:JadbabaieLeader',
+            'linear_consensus = flock_swarm.core.laws.linear:LinearConsensus',
         ],
         'flock_swarm.leaders': [
             'constant_velocity = flock_swarm.core.leaders.models:ConstantVelocity',

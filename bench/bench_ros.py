@@ -64,7 +64,8 @@ import time
 from pathlib import Path
 
 from flock_swarm.console import accept_sigint
-from flock_swarm.nodes.harness import process_environment, stop
+from flock_swarm.nodes.harness import process_environment
+from flock_swarm.nodes.supervisor import stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.
 DENSITY = 30 / 400.0

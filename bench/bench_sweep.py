@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.reproduce.execution import run_simulations
+from flock_swarm.reproduce.experiments.su2009_fig3_sweep import FIG3_PAPER_REALISATIONS
+from flock_swarm.reproduce.plan import FIG3_FRACTIONS, FIG3_SIZES, Plan
 from flock_swarm.reproduce.report import append_invocation, git_revision, machine
-from flock_swarm.reproduce.su2009 import (FIG3_FRACTIONS, FIG3_PAPER_REALISATIONS, FIG3_SIZES,
-                                          Plan)
 from flock_swarm.study.execute import DaskBackend, SweepError, terminal_line
 
 #: The issue's target for the full sweep on a 2-core machine [min].
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             'sim_wall_min': round(wall / 60.0, 2), 'ros_runs': 0, 'ros_wall_min': 0.0,
             'nproc': host['nproc'], 'cpu_model': host['cpu_model'],
             'load_average': host['load_average']})
-    runs = len(sims['fig3'])
+    runs = len(sims['sweeps']['su2009_fig3'])
     full_runs = runs // args.realisations * args.full_realisations
     measured = sims['executed'] == runs
     projected = wall / args.realisations * args.full_realisations if measured else None
@@ -140,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
               'executed': sims['executed'], 'wall_s': wall, 'cpu_s': cpu,
               'runs_per_min': sims['executed'] / wall * 60.0,
               'cpu_per_run_s': cpu / max(sims['executed'], 1),
-              'parallel_efficiency': cpu / wall / args.jobs, 'per_size': per_size(sims['fig3']),
+              'parallel_efficiency': cpu / wall / args.jobs,
+              'per_size': per_size(sims['sweeps']['su2009_fig3']),
               'full_realisations': args.full_realisations, 'full_runs': full_runs,
               'projected_full_wall_min': None if projected is None else projected / 60.0}
     print(f'measured: {sims["executed"]} runs ({sims["cached"]} reused) in {wall / 60:.2f} min '

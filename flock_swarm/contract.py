@@ -8,7 +8,9 @@ node needs one. Topic names are relative (namespaces apply) except ``/clock``.
 """
 
 from dataclasses import dataclass
+import math
 import re
+from typing import Mapping
 
 #: The fixed frame of every position (REP-103).
 FRAME = 'world'
@@ -20,6 +22,12 @@ ACCEL_TYPE = 'geometry_msgs/msg/AccelStamped'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 METRICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 STATUS_TYPE = 'std_msgs/msg/String'
+#: A law's adaptive per-agent state: stamped like a command (the world matches it to its step
+#: as it matches commands), the state's labels in ``name`` and its values in ``position``
+#: (``velocity`` and ``effort`` empty). ``std_msgs/Float64MultiArray`` carries no header,
+#: so its step would rest on the order in which DDS delivers two topics, which it does not
+#: keep (docs/ros.md, "Topics").
+STATE_TYPE = 'sensor_msgs/msg/JointState'
 
 #: The simulation clock (REP-2008), global whatever the namespace.
 CLOCK = '/clock'
@@ -28,6 +36,12 @@ LEADER_ACCEL = 'leader/accel'
 MARKERS = 'swarm/markers'
 METRICS = 'swarm/metrics'
 STATUS = 'swarm/status'
+#: The run's scenario, seed and informed set (what the bag's ``flock_swarm`` MCAP metadata
+#: record holds) as a YAML mapping, published once, latched, and recorded at t = 0: it
+#: survives tools that drop MCAP metadata (``rosbags-convert``) and ``ros2 topic echo`` shows
+#: it to a late joiner.
+SCENARIO = 'swarm/scenario'
+SCENARIO_TYPE = STATUS_TYPE
 #: Faults the leader and the agent nodes report to the world (not recorded in the bag:
 #: ``summary.json`` tells them); type :data:`METRICS_TYPE`, QoS :data:`FAULTS_QOS`.
 FAULTS = 'swarm/faults'
@@ -37,7 +51,8 @@ RUNNING = 'running'
 METRICS_STATUS = 'flock_swarm/metrics'
 
 #: An agent topic of the contract, absolute, in any namespace: ``<ns>/agent_<i>/<kind>``.
-AGENT_TOPIC = re.compile(r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel)$')
+AGENT_TOPIC = re.compile(
+    r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel|state)$')
 
 
 def odom_topic(i: int) -> str:
@@ -48,6 +63,45 @@ def odom_topic(i: int) -> str:
 def cmd_topic(i: int) -> str:
     """Return the command topic of agent ``i`` (relative: namespaces apply)."""
     return f'agent_{i}/cmd_accel'
+
+
+def state_topic(i: int) -> str:
+    """Return the adaptive-state topic of agent ``i`` (relative: namespaces apply).
+
+    Optional: only the agents of a law with adaptive state publish it.
+    """
+    return f'agent_{i}/state'
+
+
+def state_slices(shapes: Mapping[str, tuple[int, ...]]
+                 ) -> tuple[tuple[str, tuple[int, ...], slice], ...]:
+    """Return where each adaptive state is among one agent's values (:func:`state_labels`).
+
+    :param shapes: ``{state key: shape of one agent's value}``, in the law's order.
+    :return: ``(key, shape, slice of the values)`` per key, in order.
+    """
+    out, start = [], 0
+    for key, shape in shapes.items():
+        size = math.prod(shape)
+        out.append((key, tuple(shape), slice(start, start + size)))
+        start += size
+    return tuple(out)
+
+
+def state_labels(shapes: Mapping[str, tuple[int, ...]]) -> tuple[str, ...]:
+    """Return the labels of one agent's adaptive state, in order (``JointState.name``).
+
+    A scalar state (``sim``'s series ``K x N``) is labelled by its key (``h``); any other
+    by its key and the flat index of each value, row-major (``e[0]``, ``e[1]``: a state of
+    shape ``(2,)`` per agent, series ``K x N x 2``).
+
+    :param shapes: ``{state key: shape of one agent's value}``, in the law's order.
+    """
+    labels: list[str] = []
+    for key, shape, part in state_slices(shapes):
+        labels += [key] if shape == () else [f'{key}[{j}]'
+                                             for j in range(part.stop - part.start)]
+    return tuple(labels)
 
 
 @dataclass(frozen=True)
@@ -77,6 +131,8 @@ TELEMETRY_QOS = QosSpec(depth=5)
 #: /swarm/status: latched (transient local), so a leader or agent that subscribes after the
 #: world announced the end of the run still learns it.
 STATUS_QOS = QosSpec(depth=1, latched=True)
+#: /swarm/scenario: latched (transient local), published once before the run.
+SCENARIO_QOS = QosSpec(depth=1, latched=True)
 #: /swarm/faults: reliable, and latched (transient local) so that a world that matches a
 #: failed node late still learns its fault; the depth covers a run of non-finite commands
 #: reported step after step.
@@ -118,12 +174,13 @@ class Topic:
     publisher: str
 
 
-def contract(n_agents: int) -> list[Topic]:
+def contract(n_agents: int, state: bool = False) -> list[Topic]:
     """Return every topic of the contract for ``n_agents`` agents, ``/clock`` first.
 
     The recorded topics of a bag, in the order the live view advertises them.
 
     :param n_agents: the number of agents.
+    :param state: whether the law has adaptive state (the agents publish it then).
     """
     topics = [Topic(CLOCK, CLOCK_TYPE, CLOCK_QOS, 'world'),
               Topic(LEADER_ODOM, ODOMETRY_TYPE, LOCKSTEP_QOS, 'leader'),
@@ -131,6 +188,8 @@ def contract(n_agents: int) -> list[Topic]:
     for i in range(n_agents):
         topics += [Topic(odom_topic(i), ODOMETRY_TYPE, LOCKSTEP_QOS, 'world'),
                    Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, f'agent_{i}')]
+        if state:
+            topics.append(Topic(state_topic(i), STATE_TYPE, LOCKSTEP_QOS, f'agent_{i}'))
     topics += [Topic(MARKERS, MARKERS_TYPE, TELEMETRY_QOS, 'world'),
                Topic(METRICS, METRICS_TYPE, TELEMETRY_QOS, 'world')]
     return topics
@@ -147,10 +206,12 @@ def absolute(name: str, namespace: str = '/') -> str:
     return f"{namespace.rstrip('/')}/{name}"
 
 
-def contract_topics(n_agents: int, namespace: str = '/') -> list[tuple[str, str]]:
+def contract_topics(n_agents: int, namespace: str = '/',
+                    state: bool = False) -> list[tuple[str, str]]:
     """Return ``(absolute topic, pkg/msg/Type)`` of the contract's topics, ``/clock`` first.
 
     :param n_agents: number of agents.
     :param namespace: the namespace the nodes run in (``/``: none).
+    :param state: whether the law has adaptive state (:func:`contract`).
     """
-    return [(absolute(t.name, namespace), t.type) for t in contract(n_agents)]
+    return [(absolute(t.name, namespace), t.type) for t in contract(n_agents, state)]

@@ -26,6 +26,7 @@ when it is full, and the bridge subscribes best-effort, so it never holds a writ
 
 import struct
 import threading
+import time
 from typing import Iterable
 
 from flock_swarm.bag.msgdefs import encoded_definition, type_name_of
@@ -50,9 +51,10 @@ _TIME = {0: struct.Struct('>iI'), 1: struct.Struct('<iI')}
 def message_stamp_ns(type_name: str, data: bytes) -> int | None:
     """Return the simulation-time stamp [ns] of a serialised contract message.
 
-    ``Clock``, ``Odometry``, ``AccelStamped`` and ``DiagnosticArray`` begin with their time
-    (the clock, or the header's stamp); a ``MarkerArray`` with its length and then the first
-    marker's header. The world records each message at that stamp.
+    ``Clock``, ``Odometry``, ``AccelStamped``, ``JointState`` (the agents' adaptive state)
+    and ``DiagnosticArray`` begin with their time (the clock, or the header's stamp); a
+    ``MarkerArray`` with its length and then the first marker's header. The world records
+    each message at that stamp.
 
     :param type_name: ``pkg/msg/Type`` of the message.
     :param data: the CDR bytes.
@@ -88,10 +90,18 @@ class LiveServer:
         self.context = foxglove.Context()
         self.channels: dict[str, object] = {}
         self.time_ns = -1
+        #: Set once a client has subscribed to a channel (:meth:`wait_for_viewer`).
+        self.viewer = threading.Event()
+        viewer = self.viewer
+
+        class Listener(foxglove.ServerListener):
+            def on_subscribe(self, client, channel) -> None:
+                viewer.set()
         try:
             self.server = foxglove.start_server(
                 name=SERVER_NAME, host=host, port=port, context=self.context,
-                capabilities=[foxglove.Capability.Time], message_backlog_size=backlog)
+                capabilities=[foxglove.Capability.Time], message_backlog_size=backlog,
+                server_listener=Listener())
         except RuntimeError as exc:
             raise OSError(f'cannot serve on {host}:{port}: {" ".join(str(exc).split())}'
                           ) from None
@@ -141,6 +151,18 @@ class LiveServer:
         channel = self.channels.get(topic)
         if channel is not None:
             channel.log(data, log_time=t_ns)
+
+    def wait_for_viewer(self, timeout: float | None = None) -> bool:
+        """Wait until a client has subscribed to a channel (``swarm --wait-for-viewer``).
+
+        :param timeout: seconds to wait at most (``None``: no limit; Ctrl-C still ends it).
+        :return: whether a viewer subscribed.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self.viewer.wait(0.2):
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+        return True
 
     def set_time(self, t_ns: int) -> None:
         """Broadcast ``t_ns`` as the server's time, unless it is the time last broadcast."""

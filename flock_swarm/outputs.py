@@ -169,6 +169,9 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> list[Path]:
     (:func:`write_atomically`), ``summary.json`` last: its presence means the other files
     are complete, and a failed write (a full disk) leaves no file that looks valid.
 
+    A run that recorded no instant (stopped before its first step) has no time series: no
+    ``timeseries.npz`` is written, rather than an archive without arrays.
+
     :param result: the run.
     :param out: the output directory (created).
     :param sc: the scenario (its mapping is written as ``scenario.json`` for provenance).
@@ -177,9 +180,9 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> list[Path]:
         before it are written.
     """
     out.mkdir(parents=True, exist_ok=True)
-    return [write_timeseries(out / 'timeseries.npz', result.series),
-            write_text(out / 'scenario.json', json_text(sc.raw)),
-            write_text(out / 'summary.json', json_text(result.summary))]
+    series = [write_timeseries(out / 'timeseries.npz', result.series)] if result.series else []
+    return series + [write_text(out / 'scenario.json', json_text(sc.raw)),
+                     write_text(out / 'summary.json', json_text(result.summary))]
 
 
 def write_atomically(path: Path, write: Callable[[BinaryIO], None]) -> Path:

@@ -16,8 +16,8 @@ import yaml
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import StepViolation
 from flock_swarm.core.run import check_law_output, check_step
-from flock_swarm.core.scenario import (Realization, Scenario, apply_override, parse_scenario,
-                                       parse_yaml, realize)
+from flock_swarm.core.scenario import Realization, Scenario, parse_scenario, realize
+from flock_swarm.scenario_yaml import apply_override, read_yaml_file
 
 PACKAGE = 'flock_swarm'
 
@@ -68,6 +68,8 @@ def resolve(name_or_path: str, folder: str = '', key: str = 'scenario') -> Path:
     """
     candidate = Path(name_or_path)
     if candidate.suffix in ('.yaml', '.yml') or os.sep in name_or_path:
+        if candidate.is_dir():
+            raise ScenarioError(key, f'{name_or_path} is a directory, not a YAML file')
         if not candidate.is_file():
             raise ScenarioError(key, f'no such file: {name_or_path}')
         return candidate
@@ -89,22 +91,7 @@ def load_mapping(name_or_path: str) -> dict:
         say), is not YAML, is empty, or holds no mapping.
     """
     path = resolve(name_or_path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ScenarioError('scenario', f'{path}: {exc.strerror}') from None
-    try:
-        # utf-8-sig: a byte order mark, as some editors write it, is not part of the text.
-        text = raw.decode('utf-8-sig')
-    except UnicodeDecodeError as exc:
-        raise ScenarioError('scenario', f'{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} '
-                            f'at offset {exc.start}); a scenario is a YAML file') from None
-    try:
-        data = parse_yaml(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        raise ScenarioError('scenario', f'{path}: invalid YAML{where}') from None
+    data = read_yaml_file(path, 'scenario', 'a scenario')
     if data is None:
         raise ScenarioError('scenario', f'{path}: empty (no YAML document); a scenario is a '
                             'mapping of keys such as n_agents and protocol')
@@ -135,10 +122,21 @@ def _resolved(data: dict, overrides: Iterable[str], seed: int | None,
     """Return ``data`` with the ``--set`` overrides, then ``extra``, then the seed applied."""
     for assignment in overrides:
         data = apply_override(data, assignment)
-    for key, value in (extra or {}).items():
-        data = apply_override(data, f'{key}={yaml.safe_dump(value, default_flow_style=True)}')
+    data = set_values(data, extra or {})
     if seed is not None:
         data['seed'] = seed
+    return data
+
+
+def set_values(data: dict, values: Mapping[str, Any]) -> dict:
+    """Return ``data`` with ``{dotted.key: value}`` set in order, values already parsed.
+
+    :param data: the scenario mapping (not modified).
+    :param values: the values (a sweep's ``set`` or point, ROS parameters).
+    :return: the new mapping.
+    """
+    for key, value in values.items():
+        data = apply_override(data, f'{key}={yaml.safe_dump(value, default_flow_style=True)}')
     return data
 
 

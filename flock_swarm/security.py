@@ -12,8 +12,8 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (CLOCK, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS, STATUS,
-                                  cmd_topic, odom_topic)
+from flock_swarm.contract import (CLOCK, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS, SCENARIO,
+                                  STATUS, cmd_topic, odom_topic, state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -28,17 +28,22 @@ NODE_SERVICES = ('~describe_parameters', '~get_parameter_types', '~get_parameter
 def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     """Return ``{node: (published, subscribed)}`` topics of the swarm's own traffic.
 
+    Each agent may publish its adaptive state (``agent_<i>/state``, a topic only for a law
+    with one): the policy does not depend on the law.
+
     :param n_agents: the swarm's size.
     :return: the world's, the leader's and each ``agent_<i>``'s topics.
     """
     odom = [odom_topic(i) for i in range(n_agents)]
     out = {
-        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS],
-                  [*(cmd_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL]),
+        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO],
+                  [*(cmd_topic(i) for i in range(n_agents)),
+                   *(state_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL]),
         'leader': ([LEADER_ODOM, LEADER_ACCEL], [CLOCK, STATUS]),
     }
     for i in range(n_agents):
-        out[f'agent_{i}'] = ([cmd_topic(i)], [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
+        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i)],
+                             [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 
 

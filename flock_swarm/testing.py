@@ -135,15 +135,22 @@ def compare_runs(want: dict, want_series: dict, got: dict, got_series: dict,
 def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str] = (),
                        seed: int | None = None, atol: float = 0.0,
                        domain_id: int | None = None, timeout: float = RUN_TIMEOUT,
+                       processes: bool = False, container: bool = False,
                        **swarm_args) -> SwarmRun:
     """Run a scenario through the nodes (lockstep) and assert it equals ``sim``'s run.
 
-    The summary (every key ``sim`` writes but :data:`SIM_ONLY`) and every recorded time series
-    must agree to ``atol``; ``atol=0`` demands bit for bit. The ROS run must be complete:
-    every agent answered every step and the leader was never missed (otherwise it is not the
-    run ``sim`` computes, and the comparison would say nothing).
+    The summary (every key ``sim`` writes but :data:`SIM_ONLY`, the law's adaptive state
+    included) and every recorded time series must agree to ``atol``; ``atol=0`` demands bit
+    for bit. The ROS run must be complete: every agent answered every step and the leader
+    was never missed (otherwise it is not the run ``sim`` computes, and the comparison would
+    say nothing).
 
     :param atol: the absolute tolerance.
+    :param processes: run every node as its own process, as ``swarm --processes`` does
+        (:func:`~flock_swarm.nodes.harness.run_processes`; ``swarm_args`` are then its
+        keyword arguments), instead of in this process.
+    :param container: with ``processes``, host every agent in one process (``swarm
+        --processes --container``) instead of one process per agent.
     :return: the ROS run's outputs.
     :raises AssertionError: listing every difference.
 
@@ -152,8 +159,17 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
     from flock_swarm.core.run import simulate
     from flock_swarm.outputs import json_text
 
-    run = run_swarm(scenario, out, overrides, seed, domain_id, timeout, mode='lockstep',
-                    **swarm_args)
+    if processes:
+        from flock_swarm.nodes.harness import resolve_scenario, run_processes
+
+        path = resolve_scenario(str(scenario), list(overrides), seed, Path(out))
+        run_processes(path, Path(out), mode='lockstep',
+                      domain_id=unique_domain() if domain_id is None else domain_id,
+                      timeout=timeout, container=container, **swarm_args)
+        run = SwarmRun(out)
+    else:
+        run = run_swarm(scenario, out, overrides, seed, domain_id, timeout, mode='lockstep',
+                        **swarm_args)
     summary = run.summary
     incomplete = {key: summary.get(key) for key in ('missed_commands', 'leader_missed')
                   if summary.get(key)}
@@ -168,6 +184,152 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
         raise AssertionError(f'the ROS run of {run.scenario.name} differs from sim in '
                              f'{len(problems)} place(s):\n  ' + '\n  '.join(problems))
     return run
+
+
+#: What :func:`check_law` runs a bare law in: a small 2-D swarm behind a leader at constant
+#: velocity, half of it informed, in a box of the law's radius (so it has neighbours).
+CHECK_STEPS = 20
+#: The relative tolerance between one agent's ``local_control`` and the swarm's row: it sums
+#: its neighbours' terms in another order than the simulator's ``bincount``.
+LOCAL_RTOL = 1e-9
+
+
+def check_law(law_or_scenario: Any, overrides: Iterable[str] = (), steps: int = CHECK_STEPS,
+              seed: int | None = None) -> dict:
+    """Check a law the way a plugin's own tests should, without ROS; raise on the first fault.
+
+    On the scenario's realisation, for ``steps`` steps of the simulator:
+
+    - its ``antisymmetric`` claim (on random states, when the scenario is loaded);
+    - the shapes and finiteness of ``pair``, ``combine`` and ``state_rate`` at every step;
+    - every agent alone (:func:`~flock_swarm.core.laws.base.local_control`, a robot that
+      knows its neighbours' states) equals its row of the simulator's ``u``
+      (:func:`~flock_swarm.core.laws.base.swarm_control`) to :data:`LOCAL_RTOL`, and each
+      half of the swarm as a container hosts it
+      (:func:`~flock_swarm.core.laws.base.group_control`) equals its rows bit for bit.
+
+    :param law_or_scenario: a law instance (run in a small 2-D swarm around it, see
+        :data:`CHECK_STEPS`), or a scenario (preset name, file or mapping) that uses it.
+    :param overrides: ``key=value`` overrides of the scenario (``sim --set``).
+    :param steps: how many steps to check (the scenario's own count if it is shorter).
+    :param seed: replaces the scenario's seed.
+    :return: ``{'steps': checked, 'agents': n, 'largest_local_deviation': relative}``.
+    :raises AssertionError: naming the law, the step and what differs (a
+        :class:`~flock_swarm.core.errors.ScenarioError` of the scenario or the law is
+        turned into one too).
+    """
+    import numpy as np
+
+    from flock_swarm.core.dynamics import step_agents
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.core.laws.base import Law, advance_state, output_problem, pair_sums
+    from flock_swarm.core.leaders.base import VirtualLeader
+    from flock_swarm.core.run import interaction_graph, static_graph
+    from flock_swarm.presets import prepare
+
+    scenario = _law_scenario(law_or_scenario) if isinstance(law_or_scenario, Law) \
+        else law_or_scenario
+    try:
+        sc, real = prepare(scenario, overrides, seed)
+    except ScenarioError as exc:
+        raise AssertionError(f'the scenario or the law is refused: {exc}') from None
+    law, n, dt = sc.law, sc.n_agents, sc.dt
+    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
+    intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
+    static = static_graph(sc, real)
+    q, p, agents = real.q0.copy(), real.p0.copy(), real.agents
+    halves = (np.arange(n // 2), np.arange(n // 2, n))
+    worst = 0.0
+    count = min(steps, sc.steps)
+    # A diverging law is reported by the checks below, not by NumPy's warnings.
+    with np.errstate(all='ignore'):
+        for k in range(count):
+            t, state = k * dt, leader.state
+            edges = interaction_graph(sc, real, q, static)
+            try:
+                u, deviation = _check_step(law, q, p, edges, state, agents, dt, t, halves)
+            except ScenarioError as exc:
+                raise AssertionError(f'step {k}: {exc.reason}') from None
+            except AssertionError as exc:
+                raise AssertionError(f'step {k} (t = {t:g} s): {exc}') from None
+            worst = max(worst, deviation)
+            advance_state(law, q, p, state, agents, dt, lambda: pair_sums(law, q, p, edges), t)
+            for key, value in agents.state.items():
+                problem = output_problem(law, f'state {key!r}', value, value.shape)
+                if problem is not None:
+                    raise AssertionError(f'step {k} (t = {t:g} s): {problem}')
+            q, p = step_agents(q, p, u, dt, intrinsic)
+            leader.step(dt)
+    return {'steps': count, 'agents': n, 'largest_local_deviation': worst}
+
+
+def _check_step(law, q, p, edges, state, agents, dt: float, t: float, halves):
+    """Return ``u`` of one step and the largest relative deviation of an agent alone.
+
+    :raises AssertionError: for a non-finite ``u``, a container's rows that differ from the
+        swarm's, or an agent alone beyond :data:`LOCAL_RTOL`.
+    """
+    import numpy as np
+
+    from flock_swarm.core.laws.base import (group_control, local_control, output_problem,
+                                            swarm_control)
+
+    u = swarm_control(law, q, p, edges, state, agents, dt, t)
+    problem = output_problem(law, 'combine()', u, q.shape)
+    if problem is not None:
+        raise AssertionError(problem)
+    for ids in halves:
+        if ids.size and not np.array_equal(
+                group_control(law, ids, q, p, edges, state, agents.subset(ids), dt, t), u[ids]):
+            raise AssertionError(f'{law.name}: group_control of agents {ids[0]}..{ids[-1]} '
+                                 '(a container) differs from swarm_control (sim)')
+    scale = float(np.abs(u).max()) or 1.0
+    worst = 0.0
+    for i in range(q.shape[0]):
+        nb, w = _neighbours(edges, i)
+        alone = local_control(law, q[i], p[i], q[nb], p[nb], w, state,
+                              agents.subset(np.array([i])), dt, t)
+        deviation = float(np.abs(alone - u[i]).max()) / scale
+        worst = max(worst, deviation)
+        if not deviation <= LOCAL_RTOL:
+            raise AssertionError(f'{law.name}: agent {i} alone (local_control) gives '
+                                 f'{alone.tolist()}, the swarm (swarm_control) {u[i].tolist()}')
+    return u, worst
+
+
+def _neighbours(edges, i: int):
+    """Return agent ``i``'s neighbours and the weights of the edges to them."""
+    import numpy as np
+    as_i, as_j = edges.i == i, edges.j == i
+    return (np.concatenate((edges.j[as_i], edges.i[as_j])),
+            np.concatenate((edges.weight[as_i], edges.weight[as_j])))
+
+
+def _law_scenario(law) -> dict:
+    """Return the scenario :func:`check_law` runs a bare law in (see :data:`CHECK_STEPS`)."""
+    import dataclasses
+    import math
+
+    protocol = {'name': law.name}
+    for f in dataclasses.fields(law):
+        if f.init:
+            value = getattr(law, f.name)
+            protocol[f.name] = _plain(value)
+    size = law.radius if math.isfinite(law.radius) and law.radius > 0 else 1.0
+    return {'name': f'check_{law.name}', 'dim': 2, 'n_agents': 8, 'dt': 0.01,
+            'duration': CHECK_STEPS * 0.01, 'seed': 0, 'protocol': protocol,
+            'informed': {'select': 'first', 'count': 4},
+            'initial': {'position_box': [[0.0, size], [0.0, size]],
+                        'velocity_box': [[-1.0, 1.0], [-1.0, 1.0]]},
+            'leader': {'model': 'constant_velocity', 'position': [size / 2, size / 2],
+                       'velocity': [1.0, 0.0]}}
+
+
+def _plain(value: Any) -> Any:
+    """Return a law field as YAML would give it (tuples as lists)."""
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value
 
 
 # -- the pytest plugin -----------------------------------------------------------------------

@@ -2,11 +2,15 @@
 
 ros2 launch flock_swarm swarm_launch.py scenario:=su2009_fig6
 ros2 launch flock_swarm swarm_launch.py scenario:=demo n_agents:=12 mode:=realtime
+ros2 launch flock_swarm swarm_launch.py n_agents:=4 informed_count:=2 \
+    overrides:='duration=10; protocol.c1=0.8'
 ros2 launch flock_swarm swarm_launch.py scenario:=demo container:=false   # a process per agent
 ros2 launch flock_swarm swarm_launch.py scenario:=demo foxglove:=true     # and the live view
 
 Arguments (``--show-args``): ``scenario`` (preset name or YAML path), ``n_agents`` (0: the
-scenario's), ``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and
+scenario's), ``informed_count`` and ``informed_select`` (the informed set; 0 / empty: the
+scenario's), ``overrides`` (further ``key=value`` assignments separated by ``;``, as ``swarm
+--set``), ``mode`` (lockstep or realtime), ``out_dir`` (where the world writes bag/ and
 summary.json), ``container`` (default true: every agent in one ``agents`` process; false:
 one ``agent`` process per agent, which takes minutes for the demo on two cores),
 ``foxglove`` and ``foxglove_port`` (the live view, ``foxglove_server``). The launch ends

@@ -105,3 +105,19 @@ def run_installed(ws: Path, command: list[str], env: dict[str, str]):
     return subprocess.run(['bash', '-c', 'source install/setup.bash && exec "$@"', 'bash',
                            *command], cwd=ws, env=env, capture_output=True, text=True,
                           timeout=RUN_TIMEOUT)
+
+
+def imported_modules(path) -> set[str]:
+    """Return every absolute module name a source file imports, at any depth of the file.
+
+    ``from a.b import c`` counts as ``a.b`` and ``a.b.c`` (``c`` may be a module).
+    """
+    import ast
+    found = set()
+    for node in ast.walk(ast.parse(Path(path).read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found.update(f'{node.module}.{alias.name}' for alias in node.names)
+    return found

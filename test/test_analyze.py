@@ -7,7 +7,6 @@ truncated file and a bag without the ``flock_swarm`` metadata record.
 """
 
 import json
-import os
 from pathlib import Path
 import subprocess
 import sys
@@ -22,7 +21,7 @@ from flock_swarm.cli.analyze import main
 from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.plots import plot_analysis
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
@@ -42,8 +41,8 @@ MIN_FIGURE_BYTES = 8_000
 
 def record(out: Path, preset: str, overrides: list[str]) -> Path:
     """Fly a scenario through the ROS nodes, recording a bag; return the output directory."""
-    # Module-scoped, so not the function-scoped ros_domain fixture; same spreading scheme.
-    domain = 1 + (os.getpid() * 37 + len(preset) * 11 + len(overrides)) % 200
+    # Module-scoped, so not the function-scoped ros_domain fixture: the same helper.
+    domain = unique_domain()
     scenario = resolve_scenario(preset, overrides, None, out)
     summary = run_in_process(scenario, out, domain_id=domain, timeout=RUN_TIMEOUT)
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
@@ -77,15 +76,19 @@ def world_outputs(run: Path) -> tuple[dict, dict]:
 
 def copy_bag(source: Path, target: Path, metadata: dict[str, str] | None,
              chunk_size: int = 1 << 20) -> Path:
-    """Copy a bag message by message; ``metadata`` replaces the flock_swarm record (None: drop)."""
+    """Copy a bag message by message; ``metadata`` replaces the flock_swarm record (None: drop
+    it and the /swarm/scenario topic, which holds the same: a bag without its scenario)."""
     reader = BagReader(source)
+    dropped = set() if metadata is not None else {'/swarm/scenario'}
     with BagWriter(target, chunk_size=chunk_size) as writer:
         if metadata is not None:
             writer.add_metadata('flock_swarm', metadata)
         for topic, type_name in reader.topics().items():
-            writer.add_topic(topic, type_name)
+            if topic not in dropped:
+                writer.add_topic(topic, type_name)
         for message in reader.messages():
-            writer.write_serialized(message.topic, message.data, message.log_time_ns)
+            if message.topic not in dropped:
+                writer.write_serialized(message.topic, message.data, message.log_time_ns)
     return target
 
 
@@ -224,6 +227,22 @@ def test_truncated_bag_is_analysed_up_to_its_last_complete_step(flat, tmp_path, 
         assert_allclose(ours['q'], series['q'][:k], rtol=0, atol=0)
 
 
+def test_a_bag_cut_after_its_data_section_is_truncated_though_every_step_survived(
+        flat, tmp_path, capsys):
+    run, _, _ = flat
+    copy = copy_bag(run / 'bag', tmp_path / 'cut', BagReader(run / 'bag').metadata(
+        'flock_swarm'), chunk_size=8_000)
+    mcap = copy / 'cut_0.mcap'
+    with mcap.open('r+b') as stream:
+        stream.truncate(mcap.stat().st_size - 20)  # inside the summary: only the index lost
+    assert main([str(copy), '--out', str(tmp_path / 'out'), '--no-anim', '--quiet']) == 0
+    assert 'is truncated after its data section' in capsys.readouterr().err
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    world, _ = world_outputs(run)
+    assert summary['steps'] == world['steps']
+    assert summary['status'] == 'truncated' and 'only the index' in summary['bag_warning']
+
+
 def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
     """Any rosbag2 bag with /agent_<i>/odom: radius and tolerances come from the command line."""
     run, _, _ = flat
@@ -237,7 +256,8 @@ def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
     assert status == 0
     assert 'from the options' in capsys.readouterr().err
     summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
-    assert summary['scenario'] is None and summary['informed'] == []
+    # Nothing in the bag says which agents were informed: "unknown", not an empty list.
+    assert summary['scenario'] is None and summary['informed'] == 'unknown'
     for key in ('n_agents', 'steps', 'eta', 'velocity_mismatch_max', 'com_position_error',
                 'min_pair_distance', 'collisions', 'components_final'):
         assert summary[key] == pytest.approx(world[key], rel=0, abs=1e-9), key
@@ -246,6 +266,24 @@ def test_bag_without_scenario_uses_the_options(flat, tmp_path, capsys):
         for name in ('q', 'p', 'u', 'leader_q', 'leader_p', 'leader_a',
                      *(f'metric_{m}' for m in STEP_METRICS)):
             assert_allclose(ours[name], series[name], rtol=0, atol=0, err_msg=name)
+
+
+def test_a_bag_whose_plugin_law_is_not_installed_names_the_plugin(flat, tmp_path, capsys):
+    """Issue 24: not 'the bag has no flock_swarm scenario metadata' but the missing law."""
+    run, _, _ = flat
+    metadata = BagReader(run / 'bag').metadata('flock_swarm')
+    scenario = json.loads(metadata['scenario'])
+    scenario['protocol']['name'] = 'cucker_smale'
+    bag = copy_bag(run / 'bag', tmp_path / 'plugin',
+                   dict(metadata, scenario=json.dumps(scenario)))
+    assert main([str(bag), '--out', str(tmp_path / 'x'), '--quiet']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "recorded with the law 'cucker_smale' (protocol.name)" in err[0]
+    assert 'install the package that provides it, or give --radius' in err[0]
+    # With --radius it is analysed like a bag without its scenario.
+    assert main([str(bag), '--out', str(tmp_path / 'y'), '--radius', '4', '--no-anim',
+                 '--quiet']) == 0
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:

@@ -840,6 +840,28 @@ def test_split_by_duration_keeps_a_batch_in_one_file(tmp_path):
     assert all(b - a > 250_000_000 for a, b in zip(starts, starts[1:]))
 
 
+def test_split_by_size_keeps_a_step_in_one_file(tmp_path):
+    """A step written message by message (the world writes its states, then the commands,
+    at the same time) stays in one file, also when a chunk fills in its middle: a split
+    waits for the next time (docs/ros.md, "Splitting the bag")."""
+    with BagWriter(tmp_path / 'bag', chunk_size=500, max_bagfile_size=1000) as writer:
+        writer.add_topic('/clock', Clock)
+        writer.add_topic('/odom', Odometry)
+        for k in range(60):
+            writer.write('/clock', Clock(clock=Time(sec=k)), k * STEP_NS)
+            for i in range(3):
+                writer.write('/odom', odometry(k * STEP_NS, f'agent_{i}', k, 0), k * STEP_NS)
+    _, files = split_layout(tmp_path / 'bag')
+    assert len(files) >= 3
+    file_of: dict[int, Path] = {}
+    for path in files:
+        times = file_times(path)
+        assert len(times) % 4 == 0
+        for _, t in times:
+            assert file_of.setdefault(t, path) == path, f'step at {t} ns in two files'
+    assert len(file_of) == 60
+
+
 def test_every_file_carries_schemas_channels_and_custom_records(tmp_path):
     with BagWriter(tmp_path / 'bag', chunk_size=500, max_bagfile_duration=0.1,
                    custom_metadata={'flock_swarm': {'scenario': 'demo'}}) as writer:

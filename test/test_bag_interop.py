@@ -9,7 +9,6 @@ refused in one line.
 """
 
 import json
-import os
 from pathlib import Path
 import subprocess
 import sys
@@ -32,11 +31,12 @@ from rosbags.rosbag2 import StoragePlugin, Writer as RosbagsWriter
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from flock_swarm.analysis import load_run
 from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.bag import BagReader
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.nodes.player import Player
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
 
 pytestmark = pytest.mark.ros
 
@@ -65,8 +65,8 @@ LISTEN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=500,
 def split_run(tmp_path_factory):
     """A lockstep run whose world splits the bag every MAX_DURATION seconds."""
     out = tmp_path_factory.mktemp('split') / 'run'
-    # Module-scoped, so not the function-scoped ros_domain fixture; same spreading scheme.
-    domain = 1 + (os.getpid() * 37 + 131) % 200
+    # Module-scoped, so not the function-scoped ros_domain fixture: the same helper.
+    domain = unique_domain()
     summary = run_in_process(resolve_scenario('demo', OVERRIDES, None, out), out,
                              domain_id=domain, timeout=RUN_TIMEOUT,
                              world_params={'bag_max_duration': MAX_DURATION})
@@ -319,3 +319,52 @@ def test_analyze_notes_missing_optional_topics(split_run, tmp_path):
                          '--no-anim', '--quiet')
     assert result.returncode == 0, result.stderr
     assert 'optional topic(s) not in the bag: /leader/accel' in result.stderr
+
+
+# -- rosbags-convert -----------------------------------------------------------------------
+
+
+def rosbags_convert(source: Path, target: Path, storage: str, *exclude: str) -> Path:
+    """Convert a bag with the real ``rosbags-convert`` (the venv's console script)."""
+    exe = Path(sys.executable).parent / 'rosbags-convert'
+    args = [str(exe), '--src', str(source), '--dst', str(target), '--dst-storage', storage]
+    if exclude:
+        args += ['--exclude-topic', *exclude]
+    result = subprocess.run(args, capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return target
+
+
+def test_the_scenario_survives_a_rosbags_convert_round_trip(split_run, tmp_path):
+    """MCAP -> sqlite3 -> MCAP drops the MCAP metadata records and metadata.yaml's custom
+    data; the scenario, seed and informed set stay on /swarm/scenario, and analyze reads them
+    there: its summary is the world's."""
+    sqlite = rosbags_convert(split_run / 'bag', tmp_path / 'sqlite', 'sqlite3')
+    back = rosbags_convert(sqlite, tmp_path / 'mcap', 'mcap')
+    reader = BagReader(back)
+    assert reader.metadata('flock_swarm') is None
+    assert reader.topics()['/swarm/scenario'] == 'std_msgs/msg/String'
+    world, _ = world_outputs(split_run)
+    run = load_run(back)
+    assert run.scenario is not None and run.scenario.name == world['scenario']
+    assert run.informed_known and np.flatnonzero(run.informed).tolist() == world['informed']
+    assert any('from /swarm/scenario' in note for note in run.notes)
+    result = run_analyze(str(back), '--out', str(tmp_path / 'out'), '--quiet', '--no-anim')
+    assert result.returncode == 0, result.stderr
+    ours = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    for key in ('scenario', 'seed', 'informed', 'protocol', 'n_agents', 'eta',
+                'velocity_mismatch_max', 'steps'):
+        assert ours[key] == world[key], key
+
+
+def test_a_converted_bag_without_the_scenario_topic_says_informed_unknown(split_run, tmp_path):
+    sqlite = rosbags_convert(split_run / 'bag', tmp_path / 'sqlite', 'sqlite3',
+                             '/swarm/scenario')
+    back = rosbags_convert(sqlite, tmp_path / 'mcap', 'mcap')
+    result = run_analyze(str(back), '--out', str(tmp_path / 'x'), '--quiet', '--no-anim')
+    assert result.returncode == 2 and 'give --radius' in result.stderr
+    result = run_analyze(str(back), '--out', str(tmp_path / 'out'), '--radius', DEMO_RADIUS,
+                         '--quiet', '--no-anim')
+    assert result.returncode == 0, result.stderr
+    ours = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    assert ours['scenario'] is None and ours['informed'] == 'unknown'

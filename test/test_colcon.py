@@ -55,7 +55,16 @@ def workspace(tmp_path_factory) -> Path:
         env=subprocess_env(COLCON_HOME=str(ws / 'colcon_home')), capture_output=True, text=True,
         timeout=BUILD_TIMEOUT)
     assert result.returncode == 0, f'colcon build failed:\n{result.stdout}\n{result.stderr}'
+    (ws / 'build_output.txt').write_text(result.stdout + result.stderr)
     return ws
+
+
+def test_colcon_build_gives_no_setuptools_warning(workspace):
+    # setuptools warns on options it does not know (tests_require was dropped from it); the
+    # test dependency is in package.xml (test_depend) and requirements/test.txt.
+    output = (workspace / 'build_output.txt').read_text()
+    assert 'Unknown distribution option' not in output, output
+    assert 'tests_require' not in output, output
 
 
 def test_colcon_build_installs_package(workspace):

@@ -7,11 +7,14 @@ it (``python -m flock_swarm.reproduce``'s ``__main__`` is itself a way in to a c
 
 import ast
 import json
+import os
 from pathlib import Path
 import subprocess
 import sys
 
 import pytest
+
+from conftest import imported_modules
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / 'flock_swarm'
@@ -25,18 +28,6 @@ UNSTABLE = ['--set', 'n_agents=3', '--set', 'informed.count=1', '--set', 'durati
             '--set', 'dt=0.2']
 #: Wall-clock bound of one command.
 TIMEOUT = 120.0
-
-
-def imported_modules(path: Path) -> set[str]:
-    """Return every module ``path`` imports (at any depth of the file, absolute names)."""
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            found.update(f'{node.module}.{alias.name}' for alias in node.names)
-    return found
 
 
 def console_scripts() -> dict[str, str]:
@@ -110,3 +101,18 @@ def test_swarm_allow_unstable_runs_it_as_sim_allow_unstable_does(tmp_path, ros_d
     assert sim.returncode == 0, sim.stderr
     want = json.loads((tmp_path / 'sim' / 'summary.json').read_text())
     assert summary['steps'] == want['steps'] and summary['eta'] == want['eta']
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('node', ['world', 'leader', 'agent', 'agents'])
+def test_every_node_refuses_the_dt_sim_refuses_with_the_same_line(tmp_path, node, ros_domain):
+    sim = command('sim', ['demo', *UNSTABLE, '--out', str(tmp_path / 'sim'), '--quiet'])
+    params = ['-p', 'scenario:=demo', '-p', 'n_agents:=3', '-p', 'informed.count:=1',
+              '-p', 'duration:=1.0', '-p', 'dt:=0.2']
+    if node == 'world':
+        params += ['-p', f'out_dir:={tmp_path / "world"}']
+    run = subprocess.run([node, '--ros-args', *params], capture_output=True, text=True,
+                         timeout=TIMEOUT, env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)))
+    assert sim.returncode == run.returncode == 2, run.stderr
+    assert run.stderr == sim.stderr.replace('sim: ', f'{node}: ', 1)
+    assert not (tmp_path / 'world').exists()

@@ -114,7 +114,8 @@ def test_the_examples_own_tests_pass(site, source):
     result = run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider', 'test'],
                  with_plugin(site), source)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
-    assert re.search(r'\b5 passed\b', result.stdout), result.stdout[-2000:]
+    # The example's five tests and its check_law test (issue 24).
+    assert re.search(r'\b6 passed\b', result.stdout), result.stdout[-2000:]
 
 
 def test_colcon_builds_the_example_and_its_ros_run_equals_sim(workspace, tmp_path, ros_domain):

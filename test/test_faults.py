@@ -34,7 +34,8 @@ from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, stop
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from flock_swarm.testing import wait_for
 from broken_law import nan_command_for

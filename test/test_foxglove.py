@@ -23,9 +23,10 @@ import pytest
 from flock_swarm.testing import wait_for
 from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.contract import contract_topics
 from flock_swarm.foxglove_ws import CLOSE_TIMEOUT, LiveServer, message_stamp_ns, start_live
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, unique_domain
 
 pytestmark = pytest.mark.ros
 
@@ -175,7 +176,7 @@ def subscribed_client(url: str, topics=tuple(CONTRACT), **kwargs) -> FoxgloveCli
 def recorded(tmp_path_factory):
     """A run served on a live server while it records, and the client that watched it."""
     tmp_path = tmp_path_factory.mktemp('live')
-    domain = 1 + (os.getpid() * 37 + 101) % 200
+    domain = unique_domain()
     with start_live(port=0) as live:
         def connect(swarm):
             client = subscribed_client(live.url)
@@ -192,8 +193,10 @@ def test_one_process_run_is_served_with_the_recorded_bytes(recorded):
     summary, client, bag = recorded
     decoders = check_advertised(client, bag_messages(bag)[1])
     check_received(client, bag, decoders)
-    # Subscribed before the start, the client saw every message of the run (TCP, no drops).
-    recorded_count = sum(len(v) for v in bag_messages(bag)[0].values())
+    # Subscribed before the start, the client saw every message of the run (TCP, no drops):
+    # every recorded message of the contract's topics (/swarm/scenario is recorded, not served).
+    recorded_count = sum(len(v) for (topic, _), v in bag_messages(bag)[0].items()
+                         if topic in CONTRACT)
     assert len(client.messages) == recorded_count
     clock_times = {t for topic, t in bag_messages(bag)[0] if topic == '/clock'}
     assert set(client.times) == clock_times and len(clock_times) == summary['steps'] + 1
@@ -216,7 +219,7 @@ def test_replay_serves_the_bag(recorded, ros_domain):
         check_received(client, bag, decoders)
         proc.send_signal(signal.SIGINT)
         proc.stderr.read()
-        assert proc.wait(timeout=TIMEOUT) == 0
+        assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -250,7 +253,7 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
         decoders = check_advertised(client, bag_messages(bag)[1])
         check_received(client, bag, decoders, wire=True)
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=TIMEOUT) == 0
+        assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
         assert 'Traceback' not in proc.stderr.read()
     finally:
         if proc.poll() is None:
@@ -332,7 +335,8 @@ def test_a_stalled_client_does_not_stall_the_world(tmp_path, ros_domain):
         live.close()
         # The client never saw the close frame; the server is left to stop on its own.
         closing = time.monotonic() - started
-    sent = sum(len(v) for v in bag_messages(bag)[0].values())
+    sent = sum(len(v) for (topic, _), v in bag_messages(bag)[0].items()
+               if not topic.endswith('/swarm/scenario'))  # recorded, not served
     stalled.pump(2.0)
     stalled.close()
     assert summary['steps'] == 1500
@@ -394,3 +398,82 @@ def test_message_stamp_of_every_contract_type():
             msg.header.stamp = stamp
         assert message_stamp_ns(type_name, serialize_message(msg)) == 12_340_000_000, type_name
     assert message_stamp_ns('nav_msgs/msg/Odometry', b'\x00\x01') is None
+
+
+# -- pacing and waiting for a viewer (issue 24) ------------------------------------------------
+
+
+def test_pace_holds_a_lockstep_run_to_real_time_or_a_factor(tmp_path, ros_domain):
+    """``pace`` (``swarm --pace``): a lockstep run takes at least its duration / pace of wall
+    time, and is still ``sim``'s run bit for bit (pacing only waits between steps)."""
+    from flock_swarm.testing import assert_matches_sim
+    run = assert_matches_sim('demo', tmp_path / 'run', RUN, domain_id=ros_domain, atol=0,
+                             world_params={'pace': 2.0})
+    # 1 s of simulation at twice real time: 0.5 s of wall time at least.
+    assert run.summary['wall_time_s'] >= 0.49
+
+
+def test_swarm_waits_for_the_first_viewer(tmp_path, ros_domain):
+    """``--wait-for-viewer``: the run starts once a client subscribed, so the viewer sees it
+    from step 0, even a run too short to be caught otherwise."""
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        announced(proc, r'waiting for a viewer to subscribe')
+        assert not (out / 'summary.json').exists()
+        client = subscribed_client(url)
+        client.pump(TIMEOUT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    clock = [t for topic, t, _ in client.messages if topic == '/clock']
+    assert clock and clock[0] == 0 and clock[-1] == 100_000_000
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--pace', '-1'], '--pace: must be finite and >= 0, got -1.0'),
+    (['--pace', 'inf'], '--pace: must be finite and >= 0, got inf'),
+    (['--pace', '1', '--mode', 'realtime'], '--pace: paces lockstep runs; realtime runs take '
+     '--realtime-factor'),
+    (['--wait-for-viewer'], '--wait-for-viewer: goes with --foxglove'),
+])
+def test_swarm_refuses_a_bad_pace_or_wait_in_one_line(tmp_path, argv, message):
+    res = subprocess.run(executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), *argv],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert res.returncode == 2
+    assert res.stderr == f'swarm: error: {message}\n'
+
+
+def test_swarm_ends_within_the_close_bound_after_a_client_closed(tmp_path, ros_domain):
+    """A client that closes its connection cleanly during the run: ``swarm`` still exits
+    within CLOSE_TIMEOUT (+1 s of process exit) of its last line (docs/foxglove.md)."""
+    from websockets.sync.client import connect
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=4',
+                                     '--out', str(out), '--no-plots', '--no-record',
+                                     '--foxglove', '0', '--domain-id', str(ros_domain)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        ws = connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=TIMEOUT)
+        assert '"serverInfo"' in ws.recv(timeout=TIMEOUT)
+        started = time.monotonic()
+        ws.close()
+        assert time.monotonic() - started < 1.0  # the server answers the close at once
+        last = time.monotonic()
+        for _ in proc.stderr:
+            last = time.monotonic()
+        assert proc.wait(timeout=TIMEOUT) == 0
+        assert time.monotonic() - last < CLOSE_TIMEOUT + 1.0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from flock_swarm.core.scenario import parse_scenario, parse_yaml
+from flock_swarm.core.scenario import parse_scenario
+from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, run_in_process
 
 pytestmark = pytest.mark.ros

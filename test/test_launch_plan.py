@@ -65,11 +65,40 @@ def test_arguments_reach_every_node():
     ({'container': 'maybe'}, 'container'),
     ({'foxglove': 'true', 'foxglove_port': '70000'}, 'foxglove_port'),
     ({'scenario': 'no_such_preset'}, 'scenario'),
+    ({'informed_count': 'some'}, 'informed_count'),
+    ({'n_agents': '4'}, 'informed.count'),  # the demo informs 10: say how many of the 4
+    ({'overrides': 'duration'}, 'overrides'),
+    ({'overrides': '=5'}, 'overrides'),
+    ({'overrides': 'duration=-5'}, 'duration'),
+    ({'overrides': 'no_such_key=1'}, 'no_such_key'),
+    ({'informed_select': 'best'}, 'informed.select'),
 ])
 def test_invalid_arguments_name_the_argument(kwargs, key):
     with pytest.raises(ScenarioError) as info:
         swarm_processes(**kwargs)
     assert info.value.key == key and '\n' not in str(info.value)
+
+
+def test_informed_set_and_overrides_reach_every_node():
+    """``n_agents:=4`` on the demo (which informs 10 agents) works with ``informed_count``;
+    ``overrides`` are ``swarm --set`` assignments, a list of lists passed as its YAML text."""
+    specs = swarm_processes(n_agents='4', informed_count='2', informed_select='first',
+                            container='false', overrides='duration=10; protocol.c1=0.8;'
+                            ' initial.position_box=[[0, 5], [0, 5]]; n_agents=7')
+    assert [spec.name for spec in specs] == ['world', 'leader'] + [f'agent_{i}'
+                                                                   for i in range(4)]
+    for spec in specs:
+        params = spec.parameters
+        assert params['n_agents'] == 4  # the argument wins over the same key in overrides
+        assert params['informed.count'] == 2 and params['informed.select'] == 'first'
+        assert params['duration'] == 10 and params['protocol.c1'] == 0.8
+        assert params['initial.position_box'] == '[[0, 5], [0, 5]]'
+
+
+def test_the_overrides_argument_reads_like_set():
+    from flock_swarm.launch_plan import parse_overrides
+    assert parse_overrides('') == {} and parse_overrides(' ; ') == {}
+    assert parse_overrides('a.b=[1, 2]; c=true;d=x') == {'a.b': [1, 2], 'c': True, 'd': 'x'}
 
 
 @pytest.mark.parametrize('text, value', [('true', True), ('True', True), ('1', True),

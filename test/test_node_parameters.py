@@ -15,6 +15,7 @@ import pytest
 import yaml
 from numpy.testing import assert_array_equal
 
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.harness import executable
 
 RUN_TIMEOUT = 240.0
@@ -172,7 +173,7 @@ def test_dumped_parameters_reproduce_the_run(tmp_path, ros_domain, ros_context, 
                 dumps[target] = read_parameters(node, executor, target)
             for proc in others:
                 proc.send_signal(signal.SIGINT)
-                assert proc.wait(timeout=60) == 0
+                assert proc.wait(timeout=60) == EXIT_INTERRUPTED
             # The file changes; the dumps hold every key, so they do not depend on it.
             changed = dict(SCENARIO, seed=11, dt=0.1, n_agents=5,
                            protocol=dict(SCENARIO['protocol'], c1=0.3))
@@ -240,7 +241,14 @@ def test_each_node_declares_exactly_its_table_and_the_scenario(kind, tmp_path, r
         assert node.get_parameter('metrics.eta_tolerance').value == 0.2
         for param in table:
             descriptor = node.describe_parameter(param.name)
-            assert descriptor.read_only and descriptor.description == param.description
+            assert descriptor.description == param.description
+            if param.name in node.params.settled:
+                # Settled by the node once known (expect_subscribers: -1 reads back the number
+                # waited for): declared writable for the node alone, refused to anyone else.
+                value = node.get_parameter(param.name).value
+                assert not node.set_parameters([Parameter(param.name, value=value)])[0].successful
+            else:
+                assert descriptor.read_only
     finally:
         close = getattr(node, 'close', None)
         if close is not None:

@@ -8,6 +8,7 @@ import subprocess
 
 import pytest
 
+from flock_swarm.console import EXIT_SIGNAL
 from flock_swarm.nodes.harness import executable, resolve_scenario
 from flock_swarm.testing import wait_for
 
@@ -67,8 +68,9 @@ def test_nodes_started_by_hand_end_with_the_run(tmp_path, ros_domain):
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_to_every_node_stops_them_cleanly(tmp_path, ros_domain, sig):
-    """SIGINT / SIGTERM to every process mid-run (as Ctrl-C in a launch terminal): status 0,
-    no FATAL, no traceback; the world keeps what it recorded."""
+    """SIGINT / SIGTERM to every process mid-run (as Ctrl-C in a launch terminal): the
+    signal's exit status (130, 143) from every node, no FATAL, no traceback; the world keeps
+    what it recorded."""
     out = tmp_path / 'run'
     scenario = resolve_scenario('demo', SMALL + ['duration=1000'], None, out)
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
@@ -82,7 +84,7 @@ def test_a_signal_to_every_node_stops_them_cleanly(tmp_path, ros_domain, sig):
         statuses = [proc.wait(timeout=60) for proc in procs]
     finally:
         reap(procs)
-    assert statuses == [0] * len(procs), statuses
+    assert statuses == [EXIT_SIGNAL[sig]] * len(procs), statuses
     assert json.loads((out / 'summary.json').read_text())['status'] == 'interrupted'
     assert_clean(tmp_path)
 

@@ -21,11 +21,13 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 
 from flock_swarm.bag import BagReader
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_SIGNAL
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.harness import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
                                        process_environment, resolve_scenario, run_in_process,
-                                       run_processes, stop)
+                                       run_processes)
+from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import simulate
 from flock_swarm.testing import Swarm, spin_until, wait_for
 from conftest import start_nodes
@@ -34,6 +36,7 @@ pytestmark = pytest.mark.ros
 
 #: Wall-clock bound of one run in these tests (a run that hangs fails instead of blocking CI).
 RUN_TIMEOUT = 240.0
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def ros_run(tmp_path, domain, preset, overrides, **kwargs):
@@ -147,6 +150,43 @@ def test_swarm_converges_without_collisions(tmp_path, ros_domain):
     assert summary['components_final'] == 1
 
 
+def test_the_demo_leads_with_what_fig6_is_about(tmp_path, ros_domain):
+    """scripts/demo (Su 2009 Fig. 6): its last line gives the COM error against the paper's
+    claim, and /swarm/metrics' first values are the COM errors (issue 24)."""
+    out = tmp_path / 'demo'
+    run = subprocess.run([str(ROOT / 'scripts' / 'demo'), str(out), '--set', 'duration=0.1',
+                          '--no-plots'], env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)),
+                         capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    s = json.loads((out / 'summary.json').read_text())
+    line = next(x for x in run.stderr.splitlines() if x.startswith('[swarm] completed'))
+    assert line == (
+        f'[swarm] completed at t = 0.1 s: COM position error = {s["com_position_error"]:.3g} m, '
+        f'COM velocity error = {s["com_velocity_error"]:.3g} m/s '
+        f'(Su 2009 Fig. 6: -> 0 exponentially); collisions = {s["collisions"]}, '
+        f'missed commands = {s["missed_commands"]} ({s["wall_time_s"]:.1f} s wall)')
+    assert 'eta' in s and 'eta' not in line
+    statuses = [msg.status[0] for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics'])]
+    assert statuses
+    for st in statuses:
+        keys = [kv.key for kv in st.values]
+        assert keys[:2] == ['com_position_error', 'com_velocity_error']
+        assert {'eta', 'velocity_mismatch_max', 'step', 'missed_commands'} <= set(keys)
+    last = {kv.key: kv.value for kv in statuses[-1].values}
+    assert float(last['com_position_error']) == s['com_position_error']
+
+
+def test_a_scenario_without_a_headline_publishes_eta_first(tmp_path, ros_domain):
+    """The metrics' values in the order they always had when a scenario names no headline."""
+    sc, summary, out = ros_run(tmp_path, ros_domain, 'demo', [
+        'n_agents=4', 'informed.count=2', 'duration=0.1', 'metrics={eta_tolerance: 0.05}'])
+    assert sc.headline.keys == ('eta', 'velocity_mismatch_max')
+    statuses = [msg.status[0] for _, msg in BagReader(out / 'bag').decoded(['/swarm/metrics'])]
+    assert statuses and all([kv.key for kv in st.values][:6] == [
+        'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
+        'min_pair_distance', 'components'] for st in statuses)
+
+
 def test_absent_agent_gets_zero_commands_and_is_counted(tmp_path, ros_domain):
     sc, summary, out = ros_run(
         tmp_path, ros_domain, 'demo', ['n_agents=4', 'informed.count=2', 'duration=0.2',
@@ -243,14 +283,18 @@ def test_a_large_container_run_flies_with_the_profile(tmp_path, ros_domain):
     scenario = resolve_scenario('su2009_fig3', [
         f'n_agents={n}', f'initial.position_box=[[0, {side}], [0, {side}]]', 'duration=0.2',
         'record_every=1'], None, out)
-    with open(tmp_path / 'nodes.log', 'w') as log:
-        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
-                                log=log, container=True, world_params={'record': False})
-    assert summary['status'] == 'completed', (tmp_path / 'nodes.log').read_text()[-2000:]
+    summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                            container=True, world_params={'record': False})
+    assert summary['status'] == 'completed', process_logs(out)[-2000:]
     assert summary['missed_commands'] == 0
     ref = simulate(parse_scenario(yaml.safe_load(scenario.read_text()))).series
     with np.load(out / 'timeseries.npz') as ros:
         assert ros['q'].tobytes() == ref['q'].tobytes()
+
+
+def process_logs(out: Path) -> str:
+    """Return the logs of a run's processes (``out/logs/*.log``: world, leader, agents)."""
+    return ''.join(path.read_text() for path in sorted((out / 'logs').glob('*.log')))
 
 
 @pytest.mark.parametrize('container', [False, True], ids=['agent-per-process', 'container'])
@@ -264,10 +308,9 @@ def test_separate_processes(tmp_path, ros_domain, container):
         'n_agents=3', 'protocol.name=su_accel', 'informed={select: all}',
         'initial.position_box=[[0, 5], [0, 5]]', 'dt=0.05', 'duration=15', 'record_every=10'],
         None, out)
-    with open(tmp_path / 'nodes.log', 'w') as log:
-        summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
-                                log=log, container=container)
-    logged = (tmp_path / 'nodes.log').read_text()
+    summary = run_processes(scenario, out, domain_id=ros_domain, timeout=RUN_TIMEOUT,
+                            container=container)
+    logged = process_logs(out)
     assert summary['status'] == 'completed', logged[-2000:]
     # The leader and agents end with the run (swarm/status): no FATAL, no traceback.
     assert 'FATAL' not in logged and 'Traceback' not in logged, logged[-2000:]
@@ -312,7 +355,7 @@ def test_signal_finalises_the_bag(tmp_path, ros_domain, sig):
             if proc.poll() is None:
                 proc.kill()
             proc.wait()
-    assert world.returncode == 0, err
+    assert world.returncode == EXIT_SIGNAL[sig], err
     assert 'Traceback' not in err
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'interrupted' and summary['steps'] > 100
@@ -356,7 +399,7 @@ def test_sigint_stops_a_world_started_with_sigint_ignored(tmp_path, ros_domain):
         if world.poll() is None:
             world.kill()
             world.wait()
-    assert world.returncode == 0, err
+    assert world.returncode == EXIT_INTERRUPTED, err
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['status'] == 'interrupted'
     assert not BagReader(out / 'bag').recovered  # finalised: summary section and index

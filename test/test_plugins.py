@@ -140,6 +140,79 @@ class NotALaw:
 
 
 @dataclass(frozen=True)
+class MeanClaimed(Damped):
+    """The neighbour-mean pattern (a count column) wrongly claiming antisymmetry."""
+
+    name: ClassVar[str] = 'mean_claimed'
+    antisymmetric: ClassVar[bool] = True
+
+    def pair(self, qi, pi, qj, pj, w):
+        return np.concatenate((pj - pi, np.ones((pj.shape[0], 1))), axis=1)
+
+    def combine(self, q, p, s, leader, agents, dt):
+        mean = s[:, :-1] / np.maximum(s[:, -1:], 1.0)
+        return mean if leader is None else mean - self.k * (p - leader.p)
+
+
+@dataclass(frozen=True)
+class MeanDefault(MeanClaimed):
+    """The neighbour-mean pattern keeping the default (antisymmetric = False)."""
+
+    name: ClassVar[str] = 'mean_default'
+    antisymmetric: ClassVar[bool] = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class Required(Damped):
+    """A law with a field without default (keyword-only: after the inherited defaults)."""
+
+    name: ClassVar[str] = 'required'
+    gain: float
+
+    def combine(self, q, p, s, leader, agents, dt):
+        return s if leader is None else s - self.gain * (p - leader.p)
+
+
+@dataclass(frozen=True)
+class Vectored(Damped):
+    """Per-axis gains: a vector-valued field."""
+
+    name: ClassVar[str] = 'vectored'
+    gains: tuple[float, ...] = (1.0, 1.0)
+
+    def combine(self, q, p, s, leader, agents, dt):
+        return s if leader is None else s - np.asarray(self.gains) * (p - leader.p)
+
+
+@dataclass(frozen=True)
+class LateShape(Damped):
+    """Right at first, a wrong shape from t = 1 s on (time-aware combine)."""
+
+    name: ClassVar[str] = 'late_shape'
+
+    def combine(self, q, p, s, leader, agents, dt, t):
+        u = super().combine(q, p, s, leader, agents, dt)
+        return u if t < 1.0 else u[:, :1]
+
+
+@dataclass(frozen=True)
+class Orbit(LeaderModel):
+    """A leader on a circle of radius rho about centre, starting at its east point."""
+
+    name: ClassVar[str] = 'orbit'
+    autonomous: ClassVar[bool] = False
+    omega: float = 0.5
+    rho: float = 2.0
+    centre: tuple = (3.0, 3.0)
+
+    def initial_state(self, dim):
+        return ([self.centre[0] + self.rho, self.centre[1]], [0.0, self.rho * self.omega])
+
+    def acceleration(self, t, q, p):
+        return -self.omega ** 2 * (q - np.asarray(self.centre))
+
+
+@dataclass(frozen=True)
 class Circle(LeaderModel):
     """A leader on a circle of radius v / omega (a test model, time-dependent)."""
 
@@ -159,8 +232,10 @@ class Circle(LeaderModel):
 
 def install_plugins(site, laws=(), leaders=(), package='flock-test-plugins',
                     module='fake_plugins', source=PLUGIN_MODULE):
-    """Write a distribution registering ``laws`` and ``leaders`` (``name = Class``) in ``site``,
-    the classes defined by ``source`` (the module's text)."""
+    """Write a distribution registering ``laws`` and ``leaders`` (``name = Class``) in ``site``.
+
+    ``source`` is the text of the module ``module`` that defines them.
+    """
     site.mkdir(exist_ok=True)
     (site / f'{module}.py').write_text(source)
     info = site / f'{package.replace("-", "_")}-1.0.dist-info'
@@ -343,8 +418,12 @@ def test_a_law_written_for_the_scenario_hooks_gets_one_line_saying_what_to_chang
     assert_one_line_error(proc, f'protocol.name: flock_swarm.laws:{name} ', 'LawSetup',
                           f'change {old} to {hook}(self, setup)', 'docs/extending.md')
     assert not (tmp_path / 'out' / 'summary.json').exists()
-    # Listing the plugins names it the same way, with exit status 2.
-    assert_one_line_error(sim(site, '--list'), f'flock_swarm.laws:{name}', f'change {old}')
+    # Listing the plugins names it the same way, as broken (issue 24: a broken plugin fails
+    # only the runs that use it, so the listing itself succeeds).
+    listing = sim(site, '--list')
+    assert listing.returncode == 0, listing.stderr
+    line = [ln for ln in listing.stdout.splitlines() if ln.split()[:1] == [name]][0]
+    assert 'BROKEN' in line and f'flock_swarm.laws:{name}' in line and f'change {old}' in line
 
 
 def test_the_plugin_facade_exports_every_type_its_hooks_mention():
@@ -445,3 +524,103 @@ def test_each_core_module_imports_alone_in_a_fresh_interpreter(module):
     proc = subprocess.run([sys.executable, '-c', f'import {module}'], capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
+
+
+# -- issue 24: a plugin API without traps -----------------------------------------------------
+
+
+def test_a_false_antisymmetric_claim_is_one_line_when_the_law_is_loaded(tmp_path):
+    """The neighbour-mean pattern claiming antisymmetry would be silently wrong: refused."""
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('mean_claimed', 'MeanClaimed'),
+                                ('mean_default', 'MeanDefault')])
+    proc = sim(site, scenario(tmp_path, {'name': 'mean_claimed'}), out=tmp_path / 'out')
+    assert_one_line_error(proc, 'protocol.name: mean_claimed: declares antisymmetric = True',
+                          'pair(i <- j) + pair(j <- i)', 'antisymmetric: ClassVar[bool] = False')
+    assert not (tmp_path / 'out' / 'summary.json').exists()
+    # Without the claim (the default), it runs.
+    proc = sim(site, scenario(tmp_path, {'name': 'mean_default'}), out=tmp_path / 'ok')
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_a_required_law_field_missing_from_the_yaml_is_one_line(tmp_path):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('required', 'Required')])
+    proc = sim(site, scenario(tmp_path, {'name': 'required'}))
+    assert_one_line_error(proc, 'protocol.gain: missing (protocol required has no default')
+    proc = sim(site, scenario(tmp_path, {'name': 'required', 'gain': 2.0}), out=tmp_path / 'o')
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_a_vector_valued_law_field_reads_a_yaml_list(tmp_path):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('vectored', 'Vectored')])
+    proc = sim(site, scenario(tmp_path, {'name': 'vectored', 'gains': [1.0, 3]}),
+               out=tmp_path / 'out')
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / 'out' / 'summary.json').read_text())['status'] == 'completed'
+    proc = sim(site, scenario(tmp_path, {'name': 'vectored', 'gains': [1.0, 'x']}))
+    assert_one_line_error(proc, "protocol.gains[1]: expected a number, got 'x'")
+    proc = sim(site, scenario(tmp_path, {'name': 'vectored', 'gains': 2.0}))
+    assert_one_line_error(proc, 'protocol.gains: expected a non-empty list of numbers')
+
+
+def test_a_wrong_shape_at_a_later_step_is_one_line_naming_the_law_and_time(tmp_path):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('late_shape', 'LateShape')])
+    proc = sim(site, scenario(tmp_path, {'name': 'late_shape'}), out=tmp_path / 'out')
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in proc.stderr, proc.stderr
+    assert ('protocol.name: late_shape: combine() returned shape (12, 1), not (12, 2) '
+            'at t = 1 s') in lines[0]
+
+
+def test_a_leader_model_may_set_its_own_initial_state(tmp_path):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('damped', 'Damped')], leaders=[('orbit', 'Orbit')])
+    path = scenario(tmp_path, {'name': 'damped'}, {'model': 'orbit', 'rho': 2.0,
+                                                   'centre': [1.0, 1.0]})
+    proc = sim(site, path, '--set', 'record_every=1', out=tmp_path / 'out')
+    assert proc.returncode == 0, proc.stderr
+    series = np.load(tmp_path / 'out' / 'timeseries.npz')
+    np.testing.assert_array_equal(series['leader_q'][0], [3.0, 1.0])
+    np.testing.assert_array_equal(series['leader_p'][0], [0.0, 1.0])
+    # On its circle all along (RK4): |q - centre| = rho.
+    np.testing.assert_allclose(np.linalg.norm(series['leader_q'] - 1.0, axis=1), 2.0,
+                               rtol=1e-6)
+    path = scenario(tmp_path, {'name': 'damped'}, {'model': 'orbit', 'position': [0, 0]})
+    assert_one_line_error(sim(site, path), 'leader.position: set by the orbit model')
+
+
+def test_a_broken_or_duplicate_plugin_fails_only_the_runs_that_use_it(tmp_path):
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('damped', 'Damped'), ('no_combine', 'NoCombine')],
+                    leaders=[('circle', 'Circle')])
+    install_plugins(site, laws=[('damped', 'Damped')], leaders=[('circle', 'Circle')],
+                    package='other-plugins', module='other_plugins')
+    ep = site / 'flock_test_plugins-1.0.dist-info' / 'entry_points.txt'
+    # The leaders' section is the file's last: a leader model that cannot be imported.
+    ep.write_text(ep.read_text() + 'broken = missing_module:Model\n')
+    builtin = scenario(tmp_path, {'name': 'olfati_saber_2006'})
+    proc = sim(site, builtin, out=tmp_path / 'out')
+    assert proc.returncode == 0, proc.stderr
+    listing = sim(site, '--list')
+    assert listing.returncode == 0, listing.stderr
+    rows = {line.split()[0]: line for line in listing.stdout.splitlines()
+            if line.startswith('  ')}
+    assert 'BROKEN' in rows['no_combine'] and 'does not define combine' in rows['no_combine']
+    assert 'BROKEN' in rows['broken'] and 'ModuleNotFoundError' in rows['broken']
+    assert 'BROKEN' in rows['damped'] and 'also registered by package' in rows['damped']
+    assert 'BROKEN' in rows['circle'] and 'also registered by package' in rows['circle']
+    assert 'BROKEN' not in rows['olfati_saber_2006'] and 'BROKEN' not in rows['lorenz']
+    assert_one_line_error(sim(site, scenario(tmp_path, {'name': 'no_combine'})),
+                          'does not define combine')
+    path = scenario(tmp_path, {'name': 'olfati_saber_2006'},
+                    {'model': 'circle', 'position': [0, 0], 'velocity': [1, 0]})
+    assert_one_line_error(sim(site, path), 'flock_swarm.leaders:circle',
+                          'also registered by package')
+    # An intrinsic model naming a broken plugin gets its reason, not 'unknown value'.
+    path = scenario(tmp_path, {'name': 'olfati_saber_2006'})
+    path.write_text(path.read_text() + 'intrinsic: {model: broken}\n')
+    assert_one_line_error(sim(site, path), 'flock_swarm.leaders:broken', 'cannot be imported')

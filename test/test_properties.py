@@ -32,11 +32,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, event, given, settings, strategies as st
+from hypothesis import HealthCheck, event, example, given, settings, strategies as st
 
 from flock_swarm.cli import sim
 from flock_swarm.core.errors import ScenarioError, one_line
-from flock_swarm.core.scenario import TOP_KEYS, apply_override, parse_yaml
+from flock_swarm.core.scenario import TOP_KEYS
+from flock_swarm.core.summary import SUMMARY_KEYS
+from flock_swarm.scenario_yaml import apply_override, parse_yaml
 from flock_swarm.presets import load_mapping, preset_names
 
 #: Steps every generated run is cut to (the property is about input, not long runs).
@@ -47,6 +49,7 @@ CLI_KEYS = ('scenario', '<scenario>', '--seed', '--set', '--out')
 #: Budgets: the whole file stays under about a minute on two cores.
 SIM_EXAMPLES = 600
 CLI_EXAMPLES = 200
+HEADLINE_EXAMPLES = 100
 
 
 def short(data: dict) -> dict:
@@ -355,6 +358,13 @@ def changed(name: str, changes: dict) -> dict:
     ('demo', {'duration': 1e12}, 'duration'),
     # summary.json held min_pair_distance = Infinity (not JSON) for a single agent.
     ('su2009_fig5', {'n_agents': 1}, 'n_agents'),
+    # Issue 24: a seed beyond int64 ran in sim but died in swarm and the nodes.
+    ('demo', {'seed': 2 ** 64}, 'seed'),
+    # Issue 24: values the informed selection or an explicit initial state ignored silently.
+    ('demo', {'informed.select': 'all'}, 'informed.count'),
+    ('zhou2012_sec51', {'informed.fraction': 0.5}, 'informed.fraction'),
+    ('su2009_fig2', {'informed.select': 'first', 'informed.ids': [1, 2]}, 'informed.ids'),
+    ('demo', {'initial.velocities': [[0.0, 0.0]] * 30}, 'initial.velocity_box'),
     # Two lines: an unknown key holding a line break was printed as it was.
     ('os2003_sink', {'graph.a\nb': 1}, 'graph.a\\nb'),
     ('demo', {'\x1a\u2028': 1}, '\\x1a\\u2028'),
@@ -406,6 +416,18 @@ def test_regression_name_is_one_directory(name, tmp_path, monkeypatch, capsys):
     (None, ['--seed', 'abc'], '--seed'),
     (None, ['--seed', '1.5'], '--seed'),
     (None, ['--set'], '--set'),
+    # Issue 24: a billion laughs (MemoryError after 56 s), a key given twice (last one won),
+    # an alias to itself, --out '' (wrote into the current directory), a seed beyond int64.
+    ('l0: &l0 [a, a, a, a, a, a, a, a, a, a]\n' + ''.join(
+        f'l{k}: &l{k} [{", ".join([f"*l{k - 1}"] * 10)}]\n' for k in range(1, 9))
+     + 'description: *l8\n', [], 'scenario'),
+    ('dt: 0.1\ndt: 0.2\n', [], 'scenario'),
+    ('dt: &a [*a]\n', [], 'scenario'),
+    (None, ['--set', 'description=[&a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1], &b [*a, *a, *a, *a, *a, '
+            '*a, *a, *a, *a, *a], &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b], [*c, *c, *c, *c, '
+            '*c, *c, *c, *c, *c, *c]]'], '--set'),
+    (None, ['--out', ''], '--out'),
+    (None, ['--seed', str(2 ** 63)], 'seed'),
 ])
 def test_regression_cli(text, extra, key):
     """Malformed YAML or arguments: one line naming the file or the option, status 2."""
@@ -443,6 +465,39 @@ def test_overrides_and_seed_run_or_name_the_key(case):
     assert_runs_or_names_key(BASES[name], args)
 
 
+#: Items of a headline: every summary key (measures and not), near misses, and bad values.
+HEADLINE_ITEMS = st.one_of(
+    st.sampled_from([k.name for k in SUMMARY_KEYS]
+                    + ['com_error', 'ETA', '', 'components', 'metric_eta', 'eta ']),
+    BAD_VALUES)
+#: ``metrics.headline``: lists of items (repeats too), or anything else.
+HEADLINES = st.one_of(st.lists(HEADLINE_ITEMS, max_size=4), BAD_VALUES)
+#: ``metrics.claim``: any text (line breaks, control and format characters, too long), or not
+#: text at all.
+CLAIMS = st.one_of(st.text(st.characters(exclude_categories=('Cs',)), max_size=120),
+                   BAD_VALUES)
+
+
+@settings(derandomize=True, database=None, max_examples=HEADLINE_EXAMPLES, deadline=None)
+@given(st.sampled_from(sorted(BASES)), HEADLINES, st.one_of(st.none(), CLAIMS))
+@example('su2009_fig6', ['com_position_error', 'com_error'], None)
+@example('su2009_fig6', ['eta', 'eta'], None)
+@example('demo', 'eta', None)
+@example('demo', [], None)
+@example('os2003_sink', ['seed'], 'one flock')
+@example('demo', None, 'Su 2009:\n-> 0')
+@example('demo', None, 'x' * 101)
+@example('demo', ['x' * 10 ** 6], None)
+def test_any_headline_runs_or_names_the_key(name, headline, claim):
+    """``metrics.headline`` and ``metrics.claim`` (issue 24): the same property."""
+    data = copy.deepcopy(BASES[name])
+    if headline is not None:
+        data['metrics']['headline'] = headline
+    if claim is not None:
+        data['metrics']['claim'] = claim
+    assert_runs_or_names_key(data)
+
+
 # --------------------------------------------------------------------------------------------
 # ROS parameters of the nodes
 
@@ -454,17 +509,18 @@ NODE_AGENTS = 3
 NODE_PARAMS = {
     'world': ('out_dir', 'record', 'step_timeout', 'start_timeout', 'marker_every',
               'metrics_every', 'expect_subscribers', 'expect_telemetry_subscribers',
-              'staleness', 'max_abs_position',
+              'staleness', 'pace', 'max_abs_position',
               'max_abs_velocity', 'max_abs_accel'),
     'leader': ('expect_subscribers', 'start_timeout'),
     'agent': ('agent_id', 'agent_ids', 'leader_timeout', 'leader_start_timeout',
               'max_abs_position', 'max_abs_velocity', 'max_abs_accel'),
 }
-COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor')
+COMMON_NODE_PARAMS = ('scenario', 'seed', 'mode', 'realtime_factor', 'use_sim_time')
 #: Scenario keys given as ROS parameters (overrides of single values), and unknown ones.
 OVERRIDE_PARAMS = ('n_agents', 'dt', 'duration', 'dim', 'protocol.c1', 'protocol.name',
                    'protocol.h', 'informed.count', 'informed.select', 'leader.position',
-                   'leader.model', 'metrics.eta_tolerance', 'record_every', 'gain',
+                   'leader.model', 'metrics.eta_tolerance', 'metrics.headline',
+                   'metrics.claim', 'record_every', 'gain',
                    'protocol.gain', 'leader.position.x')
 
 INT64 = st.integers(-2 ** 63, 2 ** 63 - 1)
@@ -544,6 +600,11 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
 
 
 @pytest.mark.parametrize('kind, overrides, key', [
+    # The world publishes /clock: following it, it never started and logged nothing.
+    ('world', {'use_sim_time': True}, 'use_sim_time'),
+    ('leader', {'use_sim_time': 'yes'}, 'use_sim_time'),
+    ('world', {'pace': -1.0}, 'pace'),
+    ('world', {'pace': float('inf')}, 'pace'),
     # TypeError: a list compared with a number, or made into a path.
     ('world', {'start_timeout': [True, False]}, 'start_timeout'),
     ('world', {'out_dir': [2, 2]}, 'out_dir'),
@@ -553,6 +614,9 @@ def assert_builds_or_names_key(kind: str, context, overrides: dict, scenario: Pa
     # ValueError: a timer period of NaN (an infinite factor gave a busy 0 ns timer).
     ('agent', {'realtime_factor': float('nan'), 'mode': 'realtime'}, 'realtime_factor'),
     ('agent', {'realtime_factor': float('inf'), 'mode': 'realtime'}, 'realtime_factor'),
+    # Issue 24: an infinite timeout was taken (a missing agent then held the world forever).
+    ('world', {'step_timeout': float('inf')}, 'step_timeout'),
+    ('world', {'start_timeout': float('inf')}, 'start_timeout'),
 ])
 def test_node_parameter_regression(kind, overrides, key, ros_context, node_scenario, tmp_path):
     """Each override once broke a node's construction (or was taken); now it names its key."""
@@ -571,6 +635,8 @@ def test_node_parameter_regression(kind, overrides, key, ros_context, node_scena
     # Through the whole executable: a value of the wrong type.
     ('agent', ['-p', 'seed:=abc'], 'seed'),
     ('world', ['-p', 'step_timeout:=[1, 2]'], 'step_timeout'),
+    # Issue 24: .inf was accepted while .nan was refused.
+    ('world', ['-p', 'step_timeout:=.inf'], 'step_timeout'),
 ])
 def test_node_main_bad_arguments(kind, ros_args, key, ros_domain, monkeypatch, capfd,
                                  node_scenario):
@@ -596,3 +662,76 @@ def test_node_parameters_build_or_name_the_key(kind, ros_context, node_scenario,
     """
     overrides = data.draw(node_parameters(kind), label='overrides')
     assert_builds_or_names_key(kind, ros_context, overrides, node_scenario)
+
+
+# --------------------------------------------------------------------------------------------
+# Sweep expressions (issue 24): any expression of the language evaluates or is refused, fast
+
+#: Operands that make results grow: big exponents, long lists, large integers.
+EXPR_ATOMS = st.sampled_from(['2', '10', '999', '1000', '0.5', '1e300', 'n', '[1]', '[n, 1]',
+                              '[[0.0] * 1000]', '10 ** 1000', '-3'])
+
+
+@st.composite
+def expressions(draw, depth: int = 0) -> str:
+    """Draw an expression of the sweep language, nested up to four levels."""
+    if depth >= 4 or draw(st.integers(0, 3)) == 0:
+        return draw(EXPR_ATOMS)
+    kind = draw(st.integers(0, 2))
+    if kind == 0:
+        op = draw(st.sampled_from(['+', '-', '*', '/', '//', '%', '**']))
+        return f'({draw(expressions(depth + 1))}) {op} ({draw(expressions(depth + 1))})'
+    if kind == 1:
+        return f'[{draw(expressions(depth + 1))}, {draw(expressions(depth + 1))}]'
+    func = draw(st.sampled_from(['sqrt', 'exp', 'log', 'floor', 'abs', 'round', 'int', 'max']))
+    args = [draw(expressions(depth + 1)) for _ in range(2 if func in ('round', 'max') else 1)]
+    return f'{func}({", ".join(args)})'
+
+
+@settings(derandomize=True, database=None, max_examples=300, deadline=2000)
+@given(expressions())
+def test_expressions_evaluate_or_are_refused_within_the_budget(text):
+    """A value within the budget, or one ExpressionError line; never a hang or a traceback."""
+    from flock_swarm.study.expr import MAX_INT_BITS, MAX_ITEMS, Expression, ExpressionError
+    try:
+        value = Expression(text).evaluate({'n': 7})
+    except ExpressionError as exc:
+        assert '\n' not in one_line(str(exc))
+        return
+
+    def check(v):
+        if isinstance(v, list):
+            return sum(check(item) for item in v)
+        assert not isinstance(v, int) or v.bit_length() <= 2 * MAX_INT_BITS
+        return 1
+    assert check(value) <= MAX_ITEMS
+
+
+# Launch arguments (launch/swarm_launch.py, decided by flock_swarm.launch_plan)
+
+#: Launch argument texts: numbers, flags, informed selections and override lists, good and bad.
+LAUNCH_TEXTS = st.one_of(
+    st.text(max_size=10),
+    st.sampled_from(['0', '1', '2', '4', '-1', '1e3', 'true', 'false', 'first', 'random',
+                     'lockstep', 'realtime', 'duration=1', 'duration=-5; n_agents=3', ';', '=',
+                     'protocol.c1=[1, 2]', 'n_agents=abc', 'informed.count=2; n_agents=4',
+                     'initial.position_box=[[0, 5], [0, 5]]', 'a.b.c=1', 'duration=']))
+#: The arguments drawn (not ``container``: false with a huge n_agents plans a process each).
+LAUNCH_KEYS = ('scenario', 'n_agents', 'informed_count', 'informed_select', 'overrides',
+               'mode', 'foxglove')
+
+
+@given(st.dictionaries(st.sampled_from(LAUNCH_KEYS), LAUNCH_TEXTS, max_size=4))
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_launch_arguments_plan_or_name_the_argument(args):
+    """Any launch arguments: the processes are planned, or one line names an argument or a
+    scenario key (never another exception)."""
+    from flock_swarm.launch_plan import swarm_processes
+    try:
+        specs = swarm_processes(**args)
+    except ScenarioError as exc:
+        event('launch: error')
+        assert '\n' not in str(exc) and exc.key
+        return
+    event('launch: planned')
+    assert [spec.name for spec in specs][:2] == ['world', 'leader']

@@ -28,6 +28,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from flock_swarm.bag import BagReader, BagWriter
+from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.player import (
     CLOCK_TOPIC, format_ns, Player, REPLAY_DEPTH, replay_qos, ReplayError, select_topics)
 from flock_swarm.nodes.harness import resolve_scenario, run_in_process
@@ -487,6 +488,26 @@ def test_cli_bad_input_is_one_line_and_status_2(tmp_path, args, message):
     assert 'Traceback' not in proc.stderr and proc.stdout == ''
 
 
+@pytest.mark.parametrize('topic, hint', [
+    ('/leader/odm', 'did you mean /leader/odom?'),
+    ('leader/odom', 'did you mean /leader/odom?'),
+    ('/swarm/marker', 'did you mean /swarm/markers?'),
+])
+def test_a_mistyped_topic_gets_the_closest_recorded_names(topic, hint):
+    with pytest.raises(ReplayError) as info:
+        select_topics(BAG_TOPICS, topics=[topic])
+    assert str(info.value).startswith(f'--topics: not in the bag: {topic} ({hint} the bag has ')
+
+
+def test_a_bag_without_topics_is_named_in_one_line(tmp_path):
+    with BagWriter(tmp_path / 'empty'):
+        pass
+    proc = run_cli([str(tmp_path / 'empty')])
+    assert proc.returncode == 2
+    assert proc.stderr == (f'replay: error: BAG: {tmp_path / "empty"} holds no topics, so '
+                           'nothing to replay (a recording stopped before its first message?)\n')
+
+
 def test_ctrl_c_stops_a_loop_cleanly(tmp_path):
     bag = write_bag(tmp_path / 'bag')
     # The console script (setup.py), as installed by scripts/env.sh.
@@ -511,6 +532,6 @@ def test_ctrl_c_stops_a_loop_cleanly(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 0, stderr
+    assert proc.returncode == EXIT_INTERRUPTED, stderr
     assert 'Traceback' not in stderr
     assert stderr.splitlines()[-1].startswith('[replay] stopped: ')

@@ -4,22 +4,29 @@ The quick run (tiny sizes and durations, no ROS) writes report, figures and JSON
 ``tmp_path``; the report must have a section per experiment whose numbers are exactly those
 of the JSON results. The Fig. 3 sweep is checked on its own: the mean over realisations, and
 a resumable cache (a second invocation runs nothing again; more realisations run only the
-new ones).
+new ones). An experiment is one object: the docs' worked example, saved as the only module of a
+package, is all the report needs. Su Fig. 7 with f_gamma to every agent is Fig. 2 in the
+leader's frame, as the report says of that variant.
 """
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
 from flock_swarm.cli import reproduce
-from flock_swarm.reproduce import execution, su2009
-from flock_swarm.reproduce.catalogue import EXPERIMENTS
+from flock_swarm.reproduce import catalogue, execution
+from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import FIG_MAX_BYTES, fmt
 from flock_swarm.reproduce.execution import run_simulations
-from flock_swarm.reproduce.su2009 import Plan, aggregate_fig3, delta_for_eta, fig3_tasks
+from flock_swarm.reproduce.experiment import Experiment
+from flock_swarm.reproduce.experiments import su2009_fig3_sweep as su2009
+from flock_swarm.reproduce.experiments.su2009_fig3_sweep import (aggregate_fig3, delta_for_eta,
+                                                                 fig3_tasks)
+from flock_swarm.reproduce.plan import Plan
 from flock_swarm.study import execute
 from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.study.execute import make_jobs, run_job
@@ -48,19 +55,19 @@ def quick_run(tmp_path_factory):
 def test_report_has_a_section_per_experiment(quick_run):
     text = (quick_run / 'report.md').read_text()
     found = sections(text)
-    for exp in EXPERIMENTS:
+    for exp in all_experiments():
         assert exp.title in found, exp.key
         body = found[exp.title]
         assert '**Paper**' in body
         assert f'{exp.key}.png' in body
     assert 'python -m flock_swarm.reproduce --quick --skip-ros' in text
     assert 'nproc' in text and 'CPU model' in text
-    assert 'averages **1 realisation**' in found[EXPERIMENTS[1].title]
+    assert 'averages **1 realisation**' in found[all_experiments()[1].title]
 
 
 def test_report_numbers_are_the_json_results(quick_run):
     found = sections((quick_run / 'report.md').read_text())
-    for exp in EXPERIMENTS:
+    for exp in all_experiments():
         result = json.loads((quick_run / 'out' / 'results' / f'{exp.key}.json').read_text())
         rows = {m['key']: m['ours'] for m in map(ROW.search, found[exp.title].splitlines())
                 if m}
@@ -81,7 +88,7 @@ def test_fig3_table_is_the_cached_runs(quick_run):
     result = json.loads((quick_run / 'out' / 'results' / 'su2009_fig3.json').read_text())
     plan = Plan.make(True, None)
     assert len(records) == len(plan.sizes) * len(plan.fractions) * plan.realisations
-    text = sections((quick_run / 'report.md').read_text())[EXPERIMENTS[1].title]
+    text = sections((quick_run / 'report.md').read_text())[all_experiments()[1].title]
     for row in result['rows']:
         eta = [r['eta'] for r in records
                if r['n_agents'] == row['n_agents'] and r['delta'] == row['delta']]
@@ -91,7 +98,7 @@ def test_fig3_table_is_the_cached_runs(quick_run):
 
 def test_figures_exist_and_are_small(quick_run):
     figures = sorted((quick_run / 'figures').glob('*.png'))
-    assert {p.stem for p in figures} == {e.key for e in EXPERIMENTS}
+    assert {p.stem for p in figures} == {e.key for e in all_experiments()}
     for path in figures:
         assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
         assert 1000 < path.stat().st_size < FIG_MAX_BYTES, path.name
@@ -142,18 +149,18 @@ def test_fig3_sweep_is_resumable(tmp_path, monkeypatch):
     first = run_simulations(plan, tmp_path, 1, False, quiet)
     fig3_first = [r for r in ran if r[0] == 'fig3']
     assert len(fig3_first) == 4 and first['cached'] == 0
-    assert len(first['fig3']) == 4
+    assert len(first['sweeps']['su2009_fig3']) == 4
 
     ran.clear()
     second = run_simulations(plan, tmp_path, 1, False, quiet)
     assert ran == [] and second['executed'] == 0
-    assert second['fig3'] == first['fig3']
+    assert second['sweeps']['su2009_fig3'] == first['sweeps']['su2009_fig3']
 
     more = Plan(True, 3, (12,), (0.25, 0.5), ('duration=0.5',))
     third = run_simulations(more, tmp_path, 1, False, quiet)
     assert sorted(ran) == [('fig3', 12, 0.25, 2), ('fig3', 12, 0.5, 2)]
-    assert len(third['fig3']) == 6
-    rows = aggregate_fig3(third['fig3'])
+    assert len(third['sweeps']['su2009_fig3']) == 6
+    rows = aggregate_fig3(third['sweeps']['su2009_fig3'])
     assert [r['count'] for r in rows] == [3, 3]
 
 
@@ -179,7 +186,7 @@ def test_fig3_sweep_alone_stacks_runs_and_resumes(tmp_path, monkeypatch):
     jobs.clear()
     second = run_simulations(plan, tmp_path, 1, False, quiet, presets=False)
     assert jobs == [] and second['executed'] == 0 and second['cached'] == 12
-    assert second['fig3'] == first['fig3']
+    assert second['sweeps']['su2009_fig3'] == first['sweeps']['su2009_fig3']
 
 
 def test_a_stacked_fig3_run_equals_its_own_run():
@@ -191,3 +198,110 @@ def test_a_stacked_fig3_run_equals_its_own_run():
     for a, b in zip(stacked, alone):
         assert {k: v for k, v in a.items() if k != 'wall_time_s'} \
             == {k: v for k, v in b.items() if k != 'wall_time_s'}
+
+
+def test_fig7_with_feedforward_to_all_is_fig2_in_the_leaders_frame():
+    """Su Fig. 7 with f_gamma fed to every agent is Fig. 2 seen from the leader: each agent's
+    acceleration relative to the leader's is the same, so the relative trajectories of a seed
+    agree to rounding while the absolute ones part (the report says so of that variant)."""
+    from flock_swarm.core.run import simulate
+    from flock_swarm.presets import load
+    for seed in (1, 2, 3):
+        fig2 = simulate(load('su2009_fig2', ['duration=20'], seed)).series
+        fig7 = simulate(load('su2009_fig7', ['duration=20', 'protocol.feedforward_to=all'],
+                             seed)).series
+        assert_allclose(fig7['t'], fig2['t'], rtol=0, atol=0)
+        for state in ('q', 'p'):
+            rel2 = fig2[state] - fig2[f'leader_{state}'][:, None]
+            rel7 = fig7[state] - fig7[f'leader_{state}'][:, None]
+            assert_allclose(rel7, rel2, rtol=0, atol=1e-6)
+        # Not the same run: the leader of Fig. 7 accelerates away from Fig. 2's.
+        assert np.abs(fig7['leader_p'][-1] - fig2['leader_p'][-1]).max() > 5.0
+        assert_allclose(fig7['metric_eta'], fig2['metric_eta'], rtol=0, atol=0)
+
+
+def docs_example() -> str:
+    """Return the worked example of docs/reproduction/README.md ("Adding an experiment")."""
+    text = (Path(__file__).resolve().parents[1] / 'docs' / 'reproduction'
+            / 'README.md').read_text()
+    section = text.split('## Adding an experiment', 1)[1]
+    return re.search(r'```python\n(.*?)```', section, flags=re.DOTALL).group(1)
+
+
+def test_the_docs_example_experiment_is_one_module(tmp_path, monkeypatch):
+    """The docs' example, saved as the only module of an experiments package, is all the
+    report needs: it runs the experiment and its seeds, and renders its summary row, section,
+    criterion, verdict and figure (no other file names it)."""
+    package = tmp_path / 'lib' / 'myexperiments'
+    package.mkdir(parents=True)
+    (package / '__init__.py').write_text('')
+    (package / 'su2009_thm2_overdamped.py').write_text(docs_example())
+    monkeypatch.syspath_prepend(str(tmp_path / 'lib'))
+    monkeypatch.setattr(catalogue, 'PACKAGES', ('myexperiments',))
+    [exp] = all_experiments()
+    assert exp.key == 'su2009_thm2_overdamped'
+    out = tmp_path / 'out'
+    assert reproduce.main(['--quick', '--skip-ros', '--jobs', '1', '--out', str(out),
+                           '--report', str(tmp_path / 'report.md'),
+                           '--figures', str(tmp_path / 'figures'),
+                           '--seeds-cache', str(tmp_path / 'seeds')]) == 0
+    text = (tmp_path / 'report.md').read_text()
+    result = json.loads((out / 'results' / f'{exp.key}.json').read_text())
+    assert result['command'] == 'sim su2009_fig6 --set protocol.c2=2.0 --set duration=1'
+    body = sections(text)[exp.title]
+    assert body.index('**Criterion**') < body.index('**Run.**')
+    assert f'(`closed_form_position_dev`) | 0 | ' \
+        f'{fmt(result["metrics"]["closed_form_position_dev"])} |' in body
+    assert '| c1 = 0.5, c2 = 2 | 2 (2) |' in body
+    verdict = result['seeds']['setups'][0]['judged']['verdict']
+    assert verdict in ('reproduced', 'not reproduced', 'inconclusive')
+    row = next(line for line in text.splitlines() if line.startswith(f'| [{exp.title}]'))
+    assert row.endswith(f'| **{verdict}** |')
+    assert (tmp_path / 'figures' / f'{exp.key}.png').is_file()
+    assert len(read_cache(tmp_path / 'seeds' / 'reproduce_su2009_thm2_overdamped.jsonl')) == 2
+
+
+def test_the_catalogue_orders_registered_experiments_and_refuses_a_second_key(monkeypatch):
+    class Tiny(Experiment):
+        key, title, order = 'tiny', 'A tiny experiment', 105.0
+
+    monkeypatch.setattr(catalogue, '_REGISTERED', [])
+    catalogue.register(Tiny())
+    keys = [e.key for e in all_experiments()]
+    assert keys[:3] == ['su2009_fig2', 'tiny', 'su2009_fig3']
+    assert catalogue.experiment('tiny').title == 'A tiny experiment'
+    catalogue.register(Tiny())
+    with pytest.raises(ValueError, match="two experiments named 'tiny'"):
+        all_experiments()
+
+
+def test_yu_connectivity_finds_the_first_split_and_who_is_cut_off():
+    from types import SimpleNamespace
+    from flock_swarm.reproduce.experiments.yu2010_sec41 import connectivity
+    sc = SimpleNamespace(law=SimpleNamespace(radius=1.0, strict_radius=False))
+    q = np.zeros((3, 4, 2))
+    q[:, :, 0] = [0.0, 0.8, 1.6, 2.4]       # a chain of neighbours 0.8 m apart
+    q[1:, 3, 0] = 5.0                       # agent 3 cut off from the second instant on
+    series = {'t': np.array([0.0, 0.1, 0.2]), 'q': q,
+              'metric_components': np.array([1, 2, 2])}
+    assert connectivity(sc, series) == {'connectivity_lost_t': 0.1, 'cut_off_agents': 1}
+    series['metric_components'] = np.array([1, 1, 1])
+    assert connectivity(sc, series) == {'connectivity_lost_t': None, 'cut_off_agents': 0}
+
+
+def test_a_preset_run_from_before_its_headline_is_reused(tmp_path):
+    """A cached preset run whose scenario.json has no headline (issue 24) is the same run."""
+    from flock_swarm.core.run import simulate
+    from flock_swarm.outputs import write_outputs
+    from flock_swarm.presets import load
+    sc = load('su2009_fig6', ['duration=0.02'])
+    result = simulate(sc)
+    write_outputs(result, tmp_path, sc)
+    ran = json.loads((tmp_path / 'scenario.json').read_text())
+    assert ran['metrics'].pop('headline') and ran['metrics'].pop('claim')
+    (tmp_path / 'scenario.json').write_text(json.dumps(ran))
+    assert execution.cached_preset(tmp_path, sc) == result.summary
+    # A changed run is not reused; nor is a scenario.json that is not a mapping.
+    assert execution.cached_preset(tmp_path, load('su2009_fig6', ['duration=0.04'])) is None
+    (tmp_path / 'scenario.json').write_text('[1, 2]')
+    assert execution.cached_preset(tmp_path, sc) is None

@@ -1,7 +1,7 @@
-"""The experiments over seeds (:mod:`flock_swarm.reproduce.seeds`): distributions, fractions
-meeting a claim and verdicts on tiny synthetic records, the settling time on a synthetic series,
-a ``--quick`` report rendered from partial caches, the Fig. 3 curves judged at the
-paper's anchors, and an interrupted reproduction."""
+"""The experiments over seeds (:mod:`flock_swarm.reproduce.seeds`, :mod:`~.stats`):
+distributions, confidence intervals and the three-word verdicts on tiny synthetic records, the
+settling time on a synthetic series, a ``--quick`` report rendered from partial caches, the
+Fig. 3 curves judged at the paper's anchors, and an interrupted reproduction."""
 
 import json
 import signal
@@ -12,10 +12,14 @@ import numpy as np
 import pytest
 
 from flock_swarm.cli import reproduce
-from flock_swarm.reproduce.seeds import (STUDY_OF, distribution, longer_run, settling_time,
-                                         summarise, verdict)
-from flock_swarm.reproduce.su2009 import (FIG3_CURVES, delta_for_eta, fig3_curves_anchors,
-                                          fig3_curves_tested)
+from flock_swarm.reproduce.catalogue import experiment
+from flock_swarm.reproduce.experiments.su2009_fig3_curves import (FIG3_CURVES,
+                                                                  fig3_curves_anchors,
+                                                                  fig3_curves_tested)
+from flock_swarm.reproduce.experiments.su2009_fig3_sweep import delta_for_eta, judge_anchors
+from flock_swarm.reproduce.experiments.zhou2012_sec52 import longer_run
+from flock_swarm.reproduce.seeds import distribution, settling_time, summarise
+from flock_swarm.reproduce.stats import combine, decide, t_interval, wilson
 from flock_swarm.study.cache import cache_line, read_cache
 from flock_swarm.testing import wait_for
 
@@ -29,33 +33,69 @@ def test_distribution_of_a_few_values():
                                  'min': 5.0, 'max': 5.0}
 
 
-def setup(label, seeds, met):
-    """A summarised set-up with ``met`` of ``seeds`` seeds meeting the claim."""
-    return {'label': label, 'seeds': seeds, 'met': met,
-            'fraction': met / seeds if seeds else None}
+def test_wilson_interval_matches_its_closed_form():
+    # Wilson 1927 at 95 % (z = 1.95996): the textbook values for 0, 5 and 10 of 10.
+    assert wilson(0, 10) == (0.0, pytest.approx(0.27753, abs=1e-5))
+    assert wilson(5, 10) == (pytest.approx(0.23659, abs=1e-5), pytest.approx(0.76341, abs=1e-5))
+    assert wilson(10, 10) == (pytest.approx(0.72247, abs=1e-5), 1.0)
+    assert wilson(50, 50)[0] == pytest.approx(50 / (50 + 1.959964 ** 2), abs=1e-8)
+    assert wilson(0, 0) == (0.0, 1.0)
 
 
-def test_verdicts():
-    assert verdict([setup('paper', 20, 10)]) == 'reproduced'
-    assert verdict([setup('paper', 20, 9), setup('A', 20, 3), setup('B', 10, 5)]) \
-        == 'reproduced under variant: B'
-    assert verdict([setup('paper', 20, 0), setup('A', 20, 9)]) == 'not reproduced'
-    assert verdict([setup('paper', 0, 0), setup('A', 20, 20)]) == 'not run yet'
+def test_t_interval_of_a_mean():
+    # Two values: t_{0.975, 1} = 12.7062; the half-width is t s / sqrt(n).
+    low, high = t_interval(1.0, 2.0, 2)
+    assert (high - low) / 2 == pytest.approx(12.7062 * 2.0 / np.sqrt(2), rel=1e-5)
+    assert (low + high) / 2 == pytest.approx(1.0, abs=1e-12)
+    assert t_interval(1.0, 0.0, 1) is None
 
 
-def test_summarise_counts_seeds_meeting_the_claim():
-    study = STUDY_OF['su2009_fig2']
-    # The claim is eta >= 0.86: 0.86 and 0.9 meet it, 0.85 does not.
+def test_verdicts_follow_the_interval():
+    band = (0.9, 1.0)
+    assert decide((0.93, 1.0), band) == 'reproduced'
+    assert decide((0.4, 0.7), band) == 'not reproduced'
+    assert decide((0.84, 1.0), band) == 'inconclusive'
+    assert decide(None, band) == 'inconclusive'
+    assert decide((0.82, 0.86), (0.81, 0.91)) == 'reproduced'
+    assert decide((0.92, 0.95), (0.81, 0.91)) == 'not reproduced'
+    assert combine(['reproduced', 'reproduced']) == 'reproduced'
+    assert combine(['reproduced', 'inconclusive']) == 'inconclusive'
+    assert combine(['inconclusive', 'not reproduced']) == 'not reproduced'
+    assert combine(['not run yet', 'not run yet']) == 'not run yet'
+
+
+def test_a_fraction_claim_counts_seeds_and_keeps_the_premise_apart():
+    claim = experiment('yu2010_sec41').criterion
+    # eta = 1 on seeds 1-4 and 6; seed 5 is cut off at 0.1 s (premise failing), seed 6 misses.
+    records = [{'seed': s, 'metrics': {'eta': e, 'connectivity_lost_t': lost}}
+               for s, e, lost in ((1, 1.0, None), (2, 1.0, None), (3, 1.0, None),
+                                  (4, 1.0, None), (5, 0.95, 0.1), (6, 0.9, None))]
+    judged = claim.judge(records)
+    assert (judged['n'], judged['met'], judged['premise_failed']) == (5, 4, [5])
+    assert judged['interval'] == list(wilson(4, 5))
+    assert judged['verdict'] == 'inconclusive'  # Wilson [0.38, 0.96] straddles 0.9
+    everyone = [dict(r, seed=s) for s in range(1, 51) for r in records[:1]]
+    assert claim.judge(everyone)['verdict'] == 'reproduced'  # [0.929, 1]
+
+
+def test_summarise_judges_every_set_up_by_the_criterion():
+    exp = experiment('su2009_fig2')
+    # The claim: the mean eta within 0.05 of 0.86.
     records = [{'seed': s, 'metrics': {'eta': e, 'linked_to_informed': 80 + s,
-                                       'components_final': 3}}
+                                       'components_final': 3}, 'wall_time_s': 2.0}
                for s, e in ((1, 0.9), (2, 0.85), (3, 0.86))]
-    res = summarise(study, [('as printed', records, 20)])
+    res = summarise(exp, [('as printed', records, 20)])
     [s] = res['setups']
-    assert (s['seeds'], s['planned'], s['met'], s['seed_list']) == (3, 20, 2, [1, 2, 3])
-    assert s['fraction'] == pytest.approx(2 / 3)
-    assert s['stats']['eta']['mean'] == pytest.approx((0.9 + 0.85 + 0.86) / 3)
+    assert (s['seeds'], s['planned'], s['seed_list'], s['cost_s']) == (3, 20, [1, 2, 3], 2.0)
+    mean = (0.9 + 0.85 + 0.86) / 3
+    assert s['stats']['eta']['mean'] == pytest.approx(mean)
     assert s['stats']['linked_to_informed']['min'] == 81.0
-    assert res['verdict'] == 'reproduced'
+    judged = s['judged']
+    assert judged['estimate'] == pytest.approx(mean)
+    assert judged['interval'] == pytest.approx(list(t_interval(mean, np.std(
+        [0.9, 0.85, 0.86], ddof=1), 3)))
+    assert judged['verdict'] == 'inconclusive'  # [0.80, 0.94] reaches past 0.81 and 0.91
+    assert res['criterion'].startswith('The mean of eta at t_final')
 
 
 def test_settling_time_is_the_last_entry_below_the_tolerance():
@@ -126,19 +166,20 @@ def test_fig3_curves_are_judged_at_the_papers_anchors():
     assert 'falls from N = 100 to N = 1000 in: near.' in text  # far never reaches 0.8
 
 
-def test_the_fig3_verdict_names_a_variant_that_meets_the_anchors():
-    from flock_swarm.reproduce.report import fig3_verdict
-    paper = {'delta_for_eta80_N100': 0.29, 'delta_for_eta80_N1000': 0.13}
-    far = {'delta_for_eta80_N100': 0.73, 'delta_for_eta80_N1000': 0.70}
-    half = {'delta_for_eta80_N100': 0.43, 'delta_for_eta80_N1000': 0.13}
-    curves = [dict(far, label='linear', complete=True),
-              dict(half, label='bounded', complete=True),
-              dict(paper, label='unfinished', complete=False)]
-    assert fig3_verdict(paper, []) == 'reproduced'
-    assert fig3_verdict(far, curves) == 'not reproduced (one anchor only: N = 1000 under bounded)'
-    assert fig3_verdict(far, curves + [dict(paper, label='both', complete=True)]) == \
-        'reproduced under variant: both'
-    assert fig3_verdict(far, curves[:1]) == 'not reproduced'
+def test_fig3_is_judged_by_the_mean_at_both_anchors():
+    def rows(mean100, std100, mean1000, std1000, count=50):
+        return [{'n_agents': 100, 'delta': 0.27, 'mean': mean100, 'std': std100,
+                 'count': count},
+                {'n_agents': 1000, 'delta': 0.1, 'mean': mean1000, 'std': std1000,
+                 'count': count}]
+    assert judge_anchors(rows(0.80, 0.05, 0.79, 0.05))['verdict'] == 'reproduced'
+    # One anchor far off decides, whatever the other.
+    assert judge_anchors(rows(0.80, 0.05, 0.21, 0.05))['verdict'] == 'not reproduced'
+    # Three realisations: an interval too wide to decide.
+    judged = judge_anchors(rows(0.80, 0.05, 0.79, 0.05, count=3))
+    assert judged['verdict'] == 'inconclusive'
+    assert judged['anchors'][0]['interval'] == pytest.approx(list(t_interval(0.80, 0.05, 3)))
+    assert judge_anchors(rows(0.8, 0.05, 0.8, 0.05)[:1])['verdict'] == 'inconclusive'
 
 
 def test_a_longer_run_is_compared_with_the_shorter_seed_by_seed():

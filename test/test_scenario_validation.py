@@ -9,7 +9,8 @@ import yaml
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import check_step
-from flock_swarm.core.scenario import apply_override, parse_scenario, parse_value, realize
+from flock_swarm.core.scenario import parse_scenario, realize
+from flock_swarm.scenario_yaml import apply_override, parse_value
 from flock_swarm.core.stability import packing_degree, pd_dt_max, pd_stable
 from flock_swarm.presets import load, load_mapping, preset_names
 
@@ -106,6 +107,47 @@ def test_invalid_law_parameters(section, key):
     assert err.value.key == key
 
 
+@pytest.mark.parametrize('metrics, key, reason', [
+    ({'headline': 'com_position_error'}, 'metrics.headline',
+     "expected a non-empty list of summary keys (one or more of: eta, "),
+    ({'headline': []}, 'metrics.headline', 'expected a non-empty list'),
+    ({'headline': {'eta': 1}}, 'metrics.headline', 'expected a non-empty list'),
+    ({'headline': ['eta', 'com_error']}, 'metrics.headline[1]',
+     "'com_error' is not a summary key (expected one of: eta, velocity_mismatch_max, "
+     'com_position_error, com_velocity_error, min_pair_distance, collisions, '
+     'components_final)'),
+    ({'headline': ['seed']}, 'metrics.headline[0]',
+     "'seed' is a summary key that does not measure the run"),
+    ({'headline': [0.5]}, 'metrics.headline[0]', 'expected a summary key'),
+    ({'headline': [['eta']]}, 'metrics.headline[0]', 'expected a summary key'),
+    ({'headline': ['eta', 'eta']}, 'metrics.headline[1]', 'eta is named twice'),
+    ({'headline': ['x' * 10 ** 6]}, 'metrics.headline[0]', "'xxxxxxxx"),
+    ({'claim': 'Su 2009 Fig. 6:\n-> 0'}, 'metrics.claim', 'must be one line'),
+    ({'claim': 'a\u2028b'}, 'metrics.claim', 'must be one line'),
+    ({'claim': 'x' * 101}, 'metrics.claim', 'at most 100 characters'),
+    ({'claim': ['Fig. 6']}, 'metrics.claim', 'expected text'),
+    ({'claim': float('nan')}, 'metrics.claim', 'expected text'),
+])
+def test_a_bad_headline_names_its_key(metrics, key, reason):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('metrics', metrics))
+    assert err.value.key == key
+    assert reason in err.value.reason
+    # One short line, whatever the value held.
+    assert '\n' not in str(err.value) and len(str(err.value)) < 300
+
+
+def test_the_headline_defaults_to_eta_and_the_velocity_mismatch():
+    sc = parse_scenario(BASE)
+    assert sc.headline.keys == ('eta', 'velocity_mismatch_max') and sc.headline.claim == ''
+    sc = parse_scenario(with_value('metrics', {
+        'eta_tolerance': 0.2, 'headline': ['com_position_error', 'eta'],
+        'claim': 'Su 2009 Fig. 6: -> 0'}))
+    assert sc.headline.keys == ('com_position_error', 'eta')
+    assert sc.headline.claim == 'Su 2009 Fig. 6: -> 0' and sc.eta_tolerance == 0.2
+    assert sc.raw['metrics']['headline'] == ['com_position_error', 'eta']
+
+
 def test_lorenz_needs_three_dimensions():
     data = with_value('leader', {'model': 'lorenz', 'position': [0, 0], 'velocity': [1, 1]})
     with pytest.raises(ScenarioError) as err:
@@ -178,6 +220,25 @@ def test_every_preset_is_valid_and_stable(name):
     assert load_mapping(name).get('reference'), 'every preset cites its source'
 
 
+@pytest.mark.parametrize('name', preset_names())
+def test_every_preset_names_the_metrics_that_matter_for_it(name):
+    """The paper's statistic (docs/reproduction.md) leads; a paper's preset says its claim."""
+    metrics = load_mapping(name)['metrics']
+    assert metrics['headline'] == list(load(name).headline.keys)
+    if name != 'demo':
+        assert load(name).headline.claim.startswith(load_mapping(name)['reference'].split(',')[0])
+
+
+@pytest.mark.parametrize('name, keys', [
+    ('su2009_fig6', ('com_position_error', 'com_velocity_error')),
+    ('su2009_fig5', ('com_position_error', 'com_velocity_error')),
+    ('su2009_fig2', ('eta', 'components_final')),
+    ('os2003_sink', ('components_final', 'collisions')),
+])
+def test_a_papers_preset_leads_with_its_claims_statistic(name, keys):
+    assert load(name).headline.keys == keys
+
+
 def test_presets_cover_every_paper_experiment():
     expected = {'demo', 'su2009_fig2', 'su2009_fig3', 'su2009_fig5', 'su2009_fig6',
                 'su2009_fig7', 'os2003_sink', 'zhou2012_sec51', 'zhou2012_sec52',
@@ -232,6 +293,8 @@ def run_sim(*args, cwd=None):
     (['demo', '--set', 'nonsense'], '--set'),
     (['no_such_preset'], 'scenario'),
     (['zhou2012_sec51', '--set', 'dt=0.01'], 'dt'),
+    (['su2009_fig6', '--set', 'metrics.headline=[eta, com]'], 'metrics.headline[1]'),
+    (['su2009_fig6', '--set', 'metrics.claim=[1, 2]'], 'metrics.claim'),
 ])
 def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path):
     res = run_sim(*args, '--out', str(tmp_path / 'o'))
@@ -306,3 +369,136 @@ def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith(start), res.stderr
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 24: bounded inputs, no silent acceptance
+
+#: A "billion laughs": nine levels of ten aliases, 10**9 strings from a few hundred bytes.
+LAUGHS = 'l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n' + ''.join(
+    f'l{k}: &l{k} [{", ".join([f"*l{k - 1}"] * 10)}]\n' for k in range(1, 9))
+
+
+def billion_laughs(field: str) -> str:
+    """Return a scenario file (demo's keys) whose ``field`` is the last level of laughs."""
+    lines = yaml.safe_dump(load_mapping('demo'), default_flow_style=True, width=10 ** 6)
+    return f'{LAUGHS}scenario_keys: {lines}{field}: *l8\n'
+
+
+@pytest.mark.parametrize('field', ['description', 'dt'])
+def test_yaml_aliases_expanding_too_far_are_one_line(field, tmp_path):
+    path = tmp_path / 'laughs.yaml'
+    path.write_text(billion_laughs(field))
+    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.startswith(f'sim: error: scenario: {path}: invalid YAML at line 2: '
+                                 'aliases would expand the document by ')
+    assert len(res.stderr.strip().splitlines()) == 1 and 'MemoryError' not in res.stderr
+
+
+def test_yaml_aliases_are_bounded_in_set_values_too():
+    value = '[' + ', '.join(f'&l{k} [' + ', '.join([f'*l{k - 1}' if k else '1'] * 10) + ']'
+                            for k in range(9)) + ']'
+    with pytest.raises(ScenarioError, match=r'^--set: cannot parse value .*aliases would '
+                       r'expand the document by \d+ nodes \(at most 10000\); refused$'):
+        apply_override({}, f'description={value}')
+
+
+def test_a_few_small_aliases_still_read():
+    data = parse_value('{a: &box [[0.0, 5.0], [0.0, 5.0]], b: *box}')
+    assert data == {'a': [[0.0, 5.0], [0.0, 5.0]], 'b': [[0.0, 5.0], [0.0, 5.0]]}
+
+
+def test_a_node_that_contains_itself_is_refused():
+    with pytest.raises(ScenarioError, match='an alias refers to a node that contains it'):
+        parse_value('&a [1, *a]')
+
+
+def test_duplicate_yaml_keys_are_refused_with_their_line(tmp_path):
+    path = tmp_path / 'twice.yaml'
+    path.write_text(yaml.safe_dump(BASE) + 'dt: 0.02\n')
+    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr.strip() == (f"sim: error: scenario: {path}: invalid YAML at line "
+                                  f"{len(path.read_text().splitlines())}: duplicate key 'dt' "
+                                  '(a key may be given once)')
+    with pytest.raises(ScenarioError, match="duplicate key 'x'"):
+        parse_value('{x: 1, x: 2}')
+    # A key merged with << may be overridden: that is what YAML's merge means.
+    assert parse_value('{base: &b {x: 1}, c: {<<: *b, x: 2}}')['c'] == {'x': 2}
+
+
+def test_huge_values_in_errors_are_cut_to_one_readable_line():
+    data = with_value('description', list(range(300_000)))
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert len(str(err.value)) < 500 and str(err.value).startswith('description: expected')
+    cut = ScenarioError('description', 'got ' + repr(list(range(300_000))))
+    assert len(str(cut)) <= 420 and str(cut).endswith(' characters in all)')
+
+
+@pytest.mark.parametrize('seed, ok', [(0, True), (2 ** 63 - 1, True), (2 ** 63, False),
+                                      (10 ** 30, False), (-1, False)])
+def test_one_seed_range_for_every_front_end(seed, ok):
+    data = with_value('seed', seed)
+    if ok:
+        assert parse_scenario(data).seed == seed
+    else:
+        with pytest.raises(ScenarioError, match='^seed: must be'):
+            parse_scenario(data)
+
+
+@pytest.mark.parametrize('tool', ['sim', 'swarm'])
+def test_a_seed_beyond_int64_is_one_line_in_sim_and_swarm(tool, tmp_path):
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', 'demo', '--seed',
+                          str(2 ** 64), '--out', str(tmp_path / 'o')],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == (f'{tool}: error: seed: must be <= 2**63 - 1 (a ROS int64 '
+                                  f'parameter), got {2 ** 64}')
+
+
+@pytest.mark.parametrize('informed, key, other', [
+    ({'select': 'ids', 'ids': [0, 1], 'count': 5}, 'informed.count', 'select: ids'),
+    ({'select': 'all', 'count': 3}, 'informed.count', 'select: all'),
+    ({'select': 'first', 'fraction': 0.5, 'ids': [1, 2]}, 'informed.ids', 'select: first'),
+    ({'select': 'pseudo_leaders', 'fraction': 0.5}, 'informed.fraction',
+     'select: pseudo_leaders'),
+])
+def test_informed_keys_the_selection_ignores_are_refused(informed, key, other):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value('informed', informed))
+    assert err.value.key == key and f'not used by informed.{other}' in err.value.reason
+
+
+def test_null_removes_an_informed_key():
+    sc = load('demo', ['informed.select=all', 'informed.count=null'])
+    assert sc.informed.select == 'all' and 'count' not in sc.raw['informed']
+
+
+@pytest.mark.parametrize('given, box', [('positions', 'position_box'),
+                                        ('velocities', 'velocity_box')])
+def test_explicit_initial_state_and_its_box_are_refused_together(given, box):
+    data = with_value(f'initial.{given}', [[0.0, 0.0]] * 5)
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data)
+    assert err.value.key == f'initial.{box}' and f'initial.{given}' in err.value.reason
+
+
+def test_a_scenario_path_that_is_a_directory_says_so(tmp_path):
+    (tmp_path / 'dir.yaml').mkdir()
+    res = run_sim(str(tmp_path / 'dir.yaml'))
+    assert res.returncode == 2
+    assert res.stderr.strip() == (f'sim: error: scenario: {tmp_path / "dir.yaml"} is a '
+                                  'directory, not a YAML file')
+
+
+@pytest.mark.parametrize('tool, args', [('sim', ['demo']), ('swarm', ['demo']),
+                                        ('sweep', ['su2009_fig3']), ('analyze', ['bag']),
+                                        ('reproduce', [])])
+def test_an_empty_out_is_refused(tool, args, tmp_path):
+    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', *args, '--out', ''],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert '--out: must name a directory, got an empty path' in res.stderr
+    assert 'Traceback' not in res.stderr and list(tmp_path.iterdir()) == []

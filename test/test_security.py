@@ -34,13 +34,18 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     """Return ``{node: (published, subscribed)}``, from the topic names of the contract."""
     odom = {contract.odom_topic(i) for i in range(n)}
     cmds = {contract.cmd_topic(i) for i in range(n)}
+    # Each agent's adaptive state (a topic only for a law with one): to the world.
+    states = {contract.state_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
-    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS} | odom | status,
-                       cmds | leader),
+    # The world also publishes the run's scenario (latched, recorded at t = 0).
+    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
+                       | odom | status,
+                       cmds | states | leader),
              'leader': (leader, {contract.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({contract.cmd_topic(i)}, odom | leader | status)
+        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i)},
+                               odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
 
@@ -91,8 +96,11 @@ def test_policy_grants_each_node_exactly_its_topics():
 
 
 @pytest.mark.ros
-def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain):
-    """World, leader and an agent as built: the ROS graph shows exactly the policy's names."""
+@pytest.mark.parametrize('scenario, adaptive', [('su2009_fig6', False),
+                                                ('zhou2012_sec51', True)])
+def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario, adaptive):
+    """World, leader and an agent as built: the ROS graph shows exactly the policy's names
+    (the agents' adaptive-state topics only for a law with adaptive state, Zhou's)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.parameter import Parameter
@@ -103,7 +111,9 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain):
     read = read_policy(POLICY)
     context = Context()
     rclpy.init(context=context, domain_id=ros_domain)
-    base = [Parameter('scenario', value='su2009_fig6')]
+    base = [Parameter('scenario', value=scenario)]
+    optional = set() if adaptive else {absolute(contract.state_topic(i))
+                                       for i in range(N_AGENTS)}
     nodes = []
     try:
         nodes.append(WorldNode(context=context, parameter_overrides=base + [
@@ -121,8 +131,8 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain):
         for node in nodes:
             name = node.get_name()
             grant = read[f'/flock_swarm/{name}']
-            want = ({absolute(t) for t in grant['publish']},
-                    {absolute(t) for t in grant['subscribe']},
+            want = ({absolute(t) for t in grant['publish']} - optional,
+                    {absolute(t) for t in grant['subscribe']} - optional,
                     {f'/{name}/{s[1:]}' for s in grant['reply']})
             deadline = time.monotonic() + 10.0
             while graph(name) != want and time.monotonic() < deadline:

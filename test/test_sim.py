@@ -6,6 +6,7 @@ import resource
 
 import numpy as np
 import pytest
+import yaml
 from numpy.testing import assert_allclose
 
 from flock_swarm.core.dynamics import step_agents
@@ -179,8 +180,8 @@ def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypat
     # fault, told apart from a divergence).
     real_control, real_step, informed = run.swarm_control, run.step_agents, []
 
-    def failing(law, q, p, edges, leader, agents, dt):
-        u = real_control(law, q, p, edges, leader, agents, dt)
+    def failing(law, q, p, edges, leader, agents, dt, *t):
+        u = real_control(law, q, p, edges, leader, agents, dt, *t)
         informed[:] = [(q[:, 0] > 25.0) & agents.informed]
         if fault == 'law':
             u[informed[0]] = np.nan
@@ -266,7 +267,7 @@ def test_prepare_refuses_the_dt_sim_refuses_with_the_same_line(capsys, preset, o
 
 def yaml_value(text):
     """Return a ``--set`` value as a node's parameter holds it (parsed)."""
-    from flock_swarm.core.scenario import parse_value
+    from flock_swarm.scenario_yaml import parse_value
     return parse_value(text)
 
 
@@ -281,3 +282,43 @@ def test_prepare_returns_what_sim_runs():
     from_mapping, _ = prepare(load_mapping('demo'), ['n_agents=6', 'informed.count=2'], 11)
     assert from_mapping.raw == sc.raw
     assert prepare({**load_mapping('demo'), 'name': 'x'})[0].name == 'x'
+
+
+def test_the_last_line_leads_with_the_scenarios_headline(tmp_path, capsys):
+    """Su 2009 Fig. 6 is about the centre of mass: its line gives the COM error and the claim."""
+    assert main(['su2009_fig6', '--set', 'duration=1', '--out', str(tmp_path / 'f6')]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    s = json.loads((tmp_path / 'f6' / 'summary.json').read_text())
+    assert lines[-2] == (
+        f'[sim] completed at t = 1 s: COM position error = {s["com_position_error"]:.3g} m, '
+        f'COM velocity error = {s["com_velocity_error"]:.3g} m/s '
+        f'(Su 2009 Fig. 6: -> 0 exponentially); collisions = 0, components = '
+        f'{s["components_final"]} ({s["wall_time_s"]:.1f} s wall)')
+    # eta stays in the summary (and off the line of a run that is not about it).
+    assert 'eta' in s and 'eta' not in lines[-2]
+
+
+def test_without_a_headline_the_last_line_is_as_it_was(tmp_path, capsys):
+    """A scenario that names no headline (a user's file from before) prints eta and mismatch."""
+    from flock_swarm.presets import load_mapping
+    data = load_mapping('demo')
+    del data['metrics']['headline']
+    path = tmp_path / 'mine.yaml'
+    path.write_text(yaml.safe_dump(data))
+    assert main([str(path), '--set', 'duration=1', '--out', str(tmp_path / 'o')]) == 0
+    line = capsys.readouterr().err.splitlines()[-2]
+    s = json.loads((tmp_path / 'o' / 'summary.json').read_text())
+    assert line == (f'[sim] completed at t = 1 s: eta = {s["eta"]:.3f}, velocity mismatch = '
+                    f'{s["velocity_mismatch_max"]:.3g}, collisions = {s["collisions"]}, '
+                    f'components = {s["components_final"]} ({s["wall_time_s"]:.1f} s wall)')
+    assert json.loads((tmp_path / 'o' / 'scenario.json').read_text()) == dict(data, duration=1)
+
+
+@pytest.mark.parametrize('preset, shown, hidden', [
+    ('su2009_fig6', '  COM error = ', 'eta = '),
+    ('demo', '  eta = ', 'COM'),
+])
+def test_progress_lines_lead_with_the_headline(preset, shown, hidden):
+    lines = []
+    simulate(load(preset, ['duration=0.04']), progress=lines.append, progress_every=0.0)
+    assert lines and all(shown in line and hidden not in line for line in lines)

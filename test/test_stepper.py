@@ -227,7 +227,12 @@ def test_the_summary_of_a_run_to_its_end():
     the series every step from the initial state."""
     sc = small()
     st = started(sc)
-    assert st.result(0.0, {}, [], None, None) is None
+    # Before anything was recorded (a world stopped before its first step): no time series,
+    # and no measure in the summary, but everything the run knows (issue 23).
+    empty = st.result(0.0, {}, [], None, None)
+    assert empty.series == {} and empty.summary['steps'] == 0
+    assert empty.summary['t_final'] is None and empty.summary['eta'] is None
+    assert empty.summary['n_agents'] == 4 and empty.summary['missed_commands'] == 0
     real = realize(sc)
     for k in range(sc.steps + 1):
         for i in range(4 if k != 1 else 3):
@@ -404,3 +409,15 @@ def test_controller_publishes_zero_for_a_non_finite_command(monkeypatch, caplog)
             assert_array_equal(u[1], want[2])
     assert ctrl.non_finite == {1: 2}
     assert caplog.text.count('agent 1: the law gave a non-finite command') == 1
+
+
+@pytest.mark.parametrize('preset, shown, hidden', [
+    ('su2009_fig6', '  COM error = ', 'eta = '),
+    ('demo', '  eta = 0.00  mismatch = 0  missed = 0', 'COM'),
+])
+def test_the_worlds_progress_line_leads_with_the_headline(preset, shown, hidden):
+    """The demo's progress lines give what its experiment is about (eta before a headline)."""
+    sc = load(preset, ['duration=0.04'])
+    st = WorldStepper(sc, WorldSettings(), LOG, now=0.0)
+    line = st.progress_line(10.0, every=0.0)
+    assert line.startswith('[world] t = 0.00/0.04 s') and shown in line and hidden not in line

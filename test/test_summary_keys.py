@@ -21,9 +21,14 @@ from flock_swarm.study import execute, spec
 DOCS = Path(__file__).resolve().parents[1] / 'docs' / 'outputs.md'
 NAMES = [k.name for k in SUMMARY_KEYS]
 #: Runs that between them write every key the core computes (the certificate needs a
-#: pseudo-leader selection, the adaptive gains Zhou's law).
+#: pseudo-leader selection, the adaptive gains Zhou's law, the network statistics a
+#: ``network:`` section).
 RUNS = [(name, []) for name in preset_names()] + [
-    ('zhou2012_sec52', ['informed={select: pseudo_leaders}'])]
+    ('zhou2012_sec52', ['informed={select: pseudo_leaders}']),
+    ('demo', ['network={delay: 0.04, loss: 0.1}'])]
+#: Keys only a run with their section writes.
+CONDITIONAL = {'pseudo_leader_certificate', 'network_delivered', 'network_age_mean',
+               'network_age_max'}
 
 
 @pytest.fixture(scope='module')
@@ -67,7 +72,7 @@ def test_every_key_sim_writes_is_in_the_table_in_its_order(summaries):
         assert set(s) <= set(NAMES)
         written |= set(s)
         # Every key the core computes for any run is there unless the run has nothing for it.
-        assert computed - {'pseudo_leader_certificate'} <= set(s)
+        assert computed - CONDITIONAL <= set(s)
     # ... and between them the runs write every row whose writers include sim.
     assert written == {k.name for k in SUMMARY_KEYS if summary.SIM in k.writers}
 
@@ -81,7 +86,8 @@ def test_the_summary_of_the_table_with_every_given_key_is_the_whole_table():
               'h': np.ones((2, 3)), **{f'metric_{m}': np.zeros(2) for m in
                                        ('eta', 'velocity_mismatch_max', 'com_position_error',
                                         'com_velocity_error', 'min_pair_distance',
-                                        'components')}}
+                                        'components')},
+              **{f'network_{m}': np.ones(2) for m in ('delivered', 'age_mean', 'age_max')}}
     given = {k.name: k.name for k in SUMMARY_KEYS if k.value is None and k.kind != 'law state'}
     out = summary.summary_of(summary.SummaryInputs(facts, series, RunMetrics(0.3), 1,
                                                    'completed'), **given)
@@ -96,21 +102,24 @@ def test_the_summary_of_the_table_with_every_given_key_is_the_whole_table():
 def test_the_sweep_metrics_and_the_comparisons_come_from_the_table():
     assert spec.SUMMARY_METRICS == summary.sweep_metrics() == (
         'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
-        'min_pair_distance', 'collisions', 'components_final', 'n_agents', 't_final',
-        'steps', 'pseudo_leader_reselections')
+        'min_pair_distance', 'collisions', 'components_final', 'network_delivered',
+        'network_age_mean', 'network_age_max', 'n_agents', 't_final', 'steps',
+        'pseudo_leader_reselections')
     assert spec.TIMED_METRICS == summary.timed_series() == {
         'eta': 'metric_eta', 'velocity_mismatch_max': 'metric_velocity_mismatch_max',
         'com_position_error': 'metric_com_position_error',
         'com_velocity_error': 'metric_com_velocity_error',
         'min_pair_distance': 'metric_min_pair_distance',
-        'components_final': 'metric_components'}
+        'components_final': 'metric_components', 'network_delivered': 'network_delivered',
+        'network_age_mean': 'network_age_mean', 'network_age_max': 'network_age_max'}
     assert spec.DEFAULT_METRICS == summary.default_metrics() == (
         'eta', 'velocity_mismatch_max', 'collisions', 'components_final')
     assert set(testing.SIM_ONLY) == set(summary.sim_only_keys()) == {
         'wall_time_s', 'pseudo_leader_reselections'}
     assert summary.compared_metrics() == (
         'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
-        'min_pair_distance', 'collisions', 'components_final')
+        'min_pair_distance', 'collisions', 'components_final', 'network_delivered',
+        'network_age_mean', 'network_age_max')
 
 
 def speed_final(inputs):

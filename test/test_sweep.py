@@ -15,6 +15,7 @@ import csv
 import json
 import math
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -25,8 +26,10 @@ import numpy as np
 import pytest
 
 from flock_swarm.testing import wait_for
+from flock_swarm.console import EXIT_SIGNAL
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.reproduce.su2009 import Plan, fig3_tasks
+from flock_swarm.reproduce.experiments.su2009_fig3_sweep import fig3_tasks
+from flock_swarm.reproduce.plan import Plan
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 from flock_swarm.study.cache import cache_line, read_cache
@@ -34,8 +37,10 @@ from flock_swarm.study.execute import Job, Progress, make_jobs
 from flock_swarm.study.expr import Expression, ExpressionError
 from flock_swarm.study.spec import Run, parse_spec, plan_runs, points, read_spec
 from flock_swarm.cli.sweep import main, spec_path
+from flock_swarm.console import EXIT_RUNTIME
 
 BIN = Path(sys.executable).parent
+ROOT = Path(__file__).resolve().parent.parent
 #: The small study: 2 x 2 points, 3 seeds, 1 s runs of 10 and 16 agents.
 SMALL = {
     'name': 'small', 'scenario': 'su2009_fig3', 'set': {'duration': 1.0},
@@ -144,6 +149,20 @@ def test_the_shipped_fig3_spec_is_the_reproductions_sweep():
     runs = plan_runs(spec)
     assert len(runs) == 40 and spec.seeds == (0,)
     assert [r.digest for r in runs] == [r.digest for r in fig3_tasks(Plan(False, 1))]
+
+
+@pytest.mark.parametrize('spec', ['reproduce_su2009_fig6', 'reproduce_os2003_sink',
+                                  'reproduce_jadbabaie2003_linked'])
+def test_a_headline_reruns_nothing(spec):
+    """The presets' headlines (issue 24) changed no run: the committed caches hold them all."""
+    runs = plan_runs(read_spec(spec_path(spec)))
+    cached = read_cache(ROOT / 'docs' / 'reproduction' / 'runs' / f'{spec}.jsonl')
+    assert runs and all(r.digest in cached for r in runs)
+    # Any other headline or claim: the same digests.
+    other = plan_runs(read_spec(spec_path(spec), overrides=(
+        'metrics.headline=[min_pair_distance]', 'metrics.claim=another claim')))
+    assert [r.digest for r in other] == [r.digest for r in runs]
+    assert other[0].scenario().headline.keys == ('min_pair_distance',)
 
 
 def test_plan_is_seed_major_largest_first_with_common_seeds():
@@ -285,7 +304,7 @@ def test_local_pool_gives_the_same_tables(small_serial):
 def dask_cluster(tmp_path: Path, workers: int = 2):
     """Run a real ``dask scheduler`` and ``workers`` ``dask worker`` processes on 127.0.0.1.
 
-    :return: (context) the scheduler's address and the worker processes.
+    :return: (context) the scheduler's address, the worker processes and the scheduler's.
     """
     info = tmp_path / 'scheduler.json'
     env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON='False')
@@ -302,7 +321,7 @@ def dask_cluster(tmp_path: Path, workers: int = 2):
                 [str(BIN / 'dask'), 'worker', address, '--nthreads', '1', '--no-nanny',
                  '--host', '127.0.0.1', '--no-dashboard'],
                 env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        yield address, procs[1:]
+        yield address, procs[1:], procs[0]
     finally:
         for proc in reversed(procs):
             proc.terminate()
@@ -316,7 +335,7 @@ def dask_cluster(tmp_path: Path, workers: int = 2):
 
 
 def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
-    with dask_cluster(tmp_path) as (address, _):
+    with dask_cluster(tmp_path) as (address, _, _):
         out = tmp_path / 'dask'
         assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
                      '--out', str(out), '--quiet', '--no-plots']) == 0
@@ -327,7 +346,7 @@ def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
 
 def test_a_killed_dask_worker_has_its_runs_redone(long_serial, tmp_path):
     out = tmp_path / 'dask-killed'
-    with dask_cluster(tmp_path) as (address, workers):
+    with dask_cluster(tmp_path) as (address, workers, _):
         status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1,
                                     lambda proc: workers[0].kill(),
                                     '--scheduler', address)
@@ -377,6 +396,18 @@ def test_a_killed_worker_process_has_its_runs_redone(long_serial):
     assert read_csv(out / 'runs.csv') == read_csv(long_serial / 'serial' / 'runs.csv')
 
 
+def test_sigterm_stops_a_sweep_as_ctrl_c_does(long_serial):
+    """SIGTERM to sweep: the finished runs are kept, one line says so, exit status 143."""
+    out = long_serial / 'terminated'
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 2,
+                                lambda proc: proc.send_signal(signal.SIGTERM))
+    assert status == EXIT_SIGNAL[signal.SIGTERM], err
+    assert err.rstrip().splitlines()[-1].startswith('sweep: interrupted; every finished run')
+    problems = []
+    kept = read_cache(out / 'runs.jsonl', report=problems.append)
+    assert problems == [] and 2 <= len(kept) < 16
+
+
 def test_an_interrupted_sweep_resumes_to_the_same_table(long_serial):
     out = long_serial / 'interrupted'
     status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 2,
@@ -423,3 +454,174 @@ def test_scenario_errors_name_the_point():
     spec = parse_spec({**SMALL, 'grid': {'n_agents': [10, 0]}})
     with pytest.raises(ScenarioError, match='n_agents=0'):
         plan_runs(spec)
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 24: bounded inputs, no silent acceptance
+
+
+def sweep_error(tmp_path: Path, capsys, spec: dict, *args: str) -> str:
+    """Run ``sweep`` on a spec that must be refused; return its one error line."""
+    path = write_spec(tmp_path / 'spec.yaml', spec)
+    assert main([str(path), '--jobs', '1', '--out', str(tmp_path / 'out'), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('sweep: error: '), err
+    assert not (tmp_path / 'out' / 'runs.jsonl').exists()
+    return err.strip()
+
+
+def test_a_binary_spec_is_one_line_like_a_binary_scenario(tmp_path, capsys):
+    path = tmp_path / 'spec.yaml'
+    path.write_bytes(b'\x89PNG\r\n\x1a\n\x00\xff')
+    assert main([str(path), '--out', str(tmp_path / 'out')]) == 2
+    assert capsys.readouterr().err == (f'sweep: error: spec: {path}: not UTF-8 text (byte 0x89 '
+                                       'at offset 0); a sweep spec is a YAML file\n')
+
+
+def test_a_spec_with_a_key_twice_is_refused(tmp_path, capsys):
+    path = tmp_path / 'spec.yaml'
+    path.write_text('name: a\nscenario: demo\nseeds: 2\nseeds: 3\n')
+    assert main([str(path), '--out', str(tmp_path / 'out')]) == 2
+    assert capsys.readouterr().err == (f"sweep: error: spec: {path}: invalid YAML at line 4: "
+                                       "duplicate key 'seeds' (a key may be given once)\n")
+
+
+@pytest.mark.parametrize('text, why', [
+    ('[1] * 1000000000', 'a list of 1000000000 numbers: the budget of an expression is 100000'),
+    ('[1] * 10000000', 'a list of 10000000 numbers'),
+    ('[[0.0] * 1000] * 1000', 'a list of 1000000 numbers'),
+    ('(10 ** 1000) ** 1000', 'an integer of about 3322000 bits: the budget of an expression '
+                             'is 10000 bits'),
+    ('(10 ** 999) * (10 ** 999) * (10 ** 999) * (10 ** 999)', 'an integer of about'),
+    ('2 ** 2 ** 2 ** 2 ** 2', 'exponent 65536 is larger than 1000'),
+    ('((2 ** 1000) ** 1000) ** 1000', 'an integer of about 1001000 bits'),
+    ('round(n_agents, -10 ** 9)', 'round to -1000000000 digits: at most 1000'),
+    ('1' * 1001, '1001 characters: an expression has at most 1000'),
+    ('+'.join(['1'] * 150), 'operations and operands: an expression has at most 200'),
+])
+def test_expressions_beyond_the_budget_are_refused_before_computing(text, why):
+    with pytest.raises(ExpressionError, match=re.escape(why)):
+        Expression(text).evaluate({'n_agents': 10})
+
+
+def test_a_derived_value_beyond_the_budget_is_one_line(tmp_path, capsys):
+    err = sweep_error(tmp_path, capsys, {**SMALL, 'derived': {'description': '[1] * 10 ** 9'}})
+    assert err.startswith("sweep: error: derived.description: '[1] * 10 ** 9': a list of ")
+
+
+def test_a_grid_above_the_bound_is_refused_before_it_is_expanded(tmp_path, capsys):
+    grid = {f'protocol.{key}': [0.1 * k for k in range(1, 21)]
+            for key in ('c1', 'c2', 'a', 'b', 'h', 'eps')}
+    err = sweep_error(tmp_path, capsys, {**SMALL, 'grid': grid, 'derived': {}})
+    assert err == ("sweep: error: grid: 64000000 points (the product of the axes' lengths): at "
+                   'most 10000 per sweep (split the study into several specs)')
+
+
+@pytest.mark.parametrize('seeds, why', [
+    (10 ** 30, 'seeds: 1000000000000000000000000000000 seeds: at most 1000000 runs in all'),
+    ({'first': 2 ** 63 - 1, 'count': 2}, 'seeds: a seed must be <= 2**63 - 1'),
+    ([0, 2 ** 64], 'seeds: a seed must be <= 2**63 - 1'),
+    (300_000, 'seeds: 4 points x 300000 seeds = 1200000 runs: at most 1000000 per sweep'),
+])
+def test_seeds_are_bounded_like_the_scenarios(seeds, why, tmp_path, capsys):
+    assert why in sweep_error(tmp_path, capsys, {**SMALL, 'seeds': seeds})
+
+
+def test_seeds_option_beyond_the_bound_is_one_line(tmp_path, capsys):
+    assert 'at most 1000000 runs in all' in sweep_error(tmp_path, capsys, SMALL, '--seeds',
+                                                        str(10 ** 12))
+
+
+def test_planning_shows_its_progress(monkeypatch):
+    import flock_swarm.study.spec as spec_module
+    monkeypatch.setattr(spec_module, 'PLAN_EVERY', 2)
+    lines = []
+    plan_runs(parse_spec(SMALL), say=lines.append)
+    assert lines == ['[sweep] planning: 2/4 points checked',
+                     '[sweep] planning: 4/4 points checked']
+
+
+@pytest.mark.parametrize('key', ['n_agents', 'informed.fraction', 'informed',
+                                 'initial.position_box', 'initial.position_box.x'])
+def test_set_on_a_key_the_points_set_is_refused(key, tmp_path, capsys):
+    err = sweep_error(tmp_path, capsys, SMALL, '--set', f'{key}=1')
+    assert err.startswith(f'sweep: error: --set: {key} is set per point by the spec (')
+
+
+def test_set_wins_over_the_specs_set_and_is_validated(tmp_path, capsys):
+    runs = plan_runs(parse_spec(SMALL, ('duration=0.5',)))
+    assert {run.data['duration'] for run in runs} == {0.5}
+    assert sweep_error(tmp_path, capsys, SMALL, '--set', 'duration=-5').endswith(
+        'duration: must be > 0, got -5')
+    assert 'protocol.c1' in sweep_error(tmp_path, capsys, SMALL, '--set', 'protocol.c1=abc')
+
+
+def test_times_after_a_shortened_run_are_dropped_with_a_notice(tmp_path, capsys):
+    spec = write_spec(tmp_path / 'spec.yaml', {**SMALL, 'times': [0.0, 0.5], 'seeds': 1})
+    assert main([str(spec), '--jobs', '1', '--out', str(tmp_path / 'out'), '--no-plots',
+                 '--set', 'duration=0.2']) == 0
+    err = capsys.readouterr().err
+    assert '[sweep] times: 0.5 s dropped: after the end of the runs set by --set duration' in err
+    header = (tmp_path / 'out' / 'runs.csv').read_text().splitlines()[0]
+    assert 'eta@0' in header and 'eta@0.5' not in header
+    # A spec whose own times lie after its own runs' end is still refused.
+    (tmp_path / 'again').mkdir()
+    assert 'times: 5 s is after the end' in sweep_error(tmp_path / 'again', capsys,
+                                                        {**SMALL, 'times': [5.0]})
+
+
+@pytest.mark.parametrize('value', ['-1', '0', 'inf', 'nan'])
+def test_connect_timeout_must_be_positive(value, tmp_path, capsys):
+    err = sweep_error(tmp_path, capsys, SMALL, '--connect-timeout', value)
+    assert err.startswith('sweep: error: --connect-timeout: must be a number of seconds > 0')
+
+
+def test_unusable_cache_lines_are_reported_once(small_serial, tmp_path, capsys):
+    cache = tmp_path / 'out' / 'runs.jsonl'
+    cache.parent.mkdir()
+    lines = (small_serial / 'serial' / 'runs.jsonl').read_text().splitlines(keepends=True)
+    cache.write_text(''.join(lines[:-1]) + lines[-1][:30])
+    args = [str(small_serial / 'small.yaml'), '--jobs', '1', '--out', str(cache.parent),
+            '--no-plots']
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert err.count('unusable cache line') == 1
+    assert (Path(f'{cache}.unusable')).read_text() == lines[-1][:30] + '\n'
+    assert main(args) == 0
+    assert 'unusable cache line' not in capsys.readouterr().err
+
+
+def test_a_scheduler_without_workers_is_one_line_with_the_runtime_status(tmp_path, capsys):
+    spec = write_spec(tmp_path / 'small.yaml', SMALL)
+    with dask_cluster(tmp_path, workers=0) as (address, _, _):
+        status = main([str(spec), '--scheduler', address, '--connect-timeout', '2',
+                       '--out', str(tmp_path / 'out'), '--quiet'])
+    err = capsys.readouterr().err
+    assert status == EXIT_RUNTIME == 3
+    assert err.startswith(f'sweep: error: --scheduler: no Dask worker for 2 s at {address} (0 '
+                          'of ') and err.count('\n') == 1
+    assert err.endswith(' jobs done, kept in the cache); start workers and run the same command '
+                        'again\n')
+
+
+#: The study whose Dask scheduler is killed: 16 runs of about a second, one run per job.
+LOST = dict(LONG, name='lost', set={'duration': 40.0})
+
+
+def test_a_lost_scheduler_is_one_line_and_the_rerun_reuses_the_cache(long_serial, tmp_path):
+    spec = write_spec(tmp_path / 'lost.yaml', LOST)
+    out = tmp_path / 'lost'
+    with dask_cluster(tmp_path) as (address, _, scheduler):
+        status, err = hit_mid_sweep(spec, out, 1, lambda proc: scheduler.kill(),
+                                    '--scheduler', address)
+    assert status == EXIT_RUNTIME, err
+    last = err.rstrip().splitlines()[-1]
+    assert last.startswith(f'sweep: error: --scheduler: lost the Dask scheduler at {address} (')
+    assert last.endswith('jobs done, kept in the cache); run the same command again to go on')
+    assert 'Traceback' not in err
+    kept = read_cache(out / 'runs.jsonl')
+    assert 1 <= len(kept) < 16
+    resumed = subprocess.run([str(BIN / 'sweep'), str(spec), '--jobs', '2', '--out', str(out),
+                              '--no-plots'], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f'{len(kept)} reused' in resumed.stderr

@@ -39,6 +39,12 @@ def test_foxglove_layout_panels_use_published_topics_and_keys():
     assert keys and keys <= set(STEP_METRICS)
     diag = next(v for k, v in panels.items() if k.startswith('DiagnosticStatusPanel!'))
     assert diag['topicToRender'] == '/' + METRICS
+    # The headline leads (issue 24): a plot of the first values of /swarm/metrics, the
+    # scenario's metrics.headline whatever the experiment, arranged before the other plots.
+    first = [path['value'] for path in panels['Plot!headline']['paths']]
+    assert first == [f'/{METRICS}.status[0].values[{k}].value' for k in (0, 1)]
+    order = re.findall(r'"(Plot![\w-]+)"', json.dumps(layout['layout']))
+    assert order[0] == 'Plot!headline'
     # Every panel in the arrangement exists.
     referenced = re.findall(r'"(\w+![\w-]+)"', json.dumps(layout['layout']))
     assert set(referenced) == set(panels)

@@ -12,16 +12,23 @@ from hypothesis import strategies as st
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 
 from flock_swarm.nodes.wire import (AccelBatch, AccelEncoder, MalformedMessage, OdometryBatch,
-                                    OdometryBatchEncoder, OdometryEncoder, decode_accel,
-                                    decode_clock, decode_odometry, encode_clock)
+                                    OdometryBatchEncoder, OdometryEncoder, StateEncoder,
+                                    decode_accel, decode_clock, decode_odometry, decode_state,
+                                    encode_clock)
 
 floats = st.floats(allow_nan=False, width=64)
 vec3 = st.tuples(floats, floats, floats)
 #: Stamps a message can carry: int32 seconds, uint32 nanoseconds (rclpy checks the ranges).
 stamps = st.tuples(st.integers(-2**31, 2**31 - 1), st.integers(0, 2**32 - 1))
 frames = st.text(max_size=40).filter(lambda s: '\0' not in s)
+#: An adaptive state's labels and values (JointState's name and position), of equal length.
+labelled = st.integers(0, 6).flatmap(lambda n: st.tuples(
+    st.lists(st.text(min_size=1, max_size=12).filter(lambda s: '\0' not in s), min_size=n,
+             max_size=n),
+    st.lists(st.floats(width=64), min_size=n, max_size=n)))
 
 
 def odometry(sec, nanosec, frame, child, pos, vel, orientation=(0.0, 0.0, 0.0, 1.0)):
@@ -57,6 +64,45 @@ def test_decode_odometry_reads_what_rclpy_writes(stamp, frame, child, pos, vel):
 def test_decode_accel_reads_what_rclpy_writes(stamp, frame, lin):
     data = serialize_message(accel(*stamp, frame, lin))
     assert decode_accel(data) == (stamp[0] * 10**9 + stamp[1], frame, lin)
+
+
+def joint_state(sec, nanosec, frame, names, positions):
+    """Return an rclpy JointState with these fields (velocity and effort empty)."""
+    msg = JointState()
+    msg.header.stamp = Time(sec=sec, nanosec=nanosec)
+    msg.header.frame_id = frame
+    msg.name, msg.position = list(names), list(positions)
+    return msg
+
+
+def same_floats(a, b) -> bool:
+    """Whether two float sequences are equal, NaN equal to NaN."""
+    return np.array_equal(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                          equal_nan=True)
+
+
+@settings(max_examples=100, deadline=None)
+@given(stamps, frames, labelled)
+def test_decode_state_reads_what_rclpy_writes(stamp, frame, state):
+    names, positions = state
+    data = serialize_message(joint_state(*stamp, frame, names, positions))
+    ns, got_frame, got_names, got = decode_state(data)
+    assert (ns, got_frame, got_names) == (stamp[0] * 10**9 + stamp[1], frame, tuple(names))
+    assert same_floats(got, positions)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, (2**31 - 1) * 10**9), labelled)
+def test_encoded_state_is_what_rclpy_reads(ns, state):
+    names, positions = state
+    encoder = StateEncoder(names)
+    msg = deserialize_message(encoder.encode(ns, positions), JointState)
+    assert (msg.header.stamp, msg.header.frame_id, list(msg.name)) == \
+        (Time(sec=ns // 10**9, nanosec=ns % 10**9), 'world', list(names))
+    assert same_floats(msg.position, positions)
+    assert len(msg.velocity) == len(msg.effort) == 0
+    # Reusable: the bytes depend on this call's stamp and values only.
+    assert encoder.encode(ns, positions) == StateEncoder(names).encode(ns, positions)
 
 
 @settings(max_examples=100, deadline=None)
@@ -108,10 +154,13 @@ def test_big_endian_cdr_is_read():
 GOOD_ODOM = serialize_message(odometry(1, 2, 'world', 'agent_0', (1.0, 2.0, 3.0),
                                        (4.0, 5.0, 6.0)))
 GOOD_ACCEL = serialize_message(accel(1, 2, 'world', (1.0, 2.0, 3.0)))
+# rclpy's JointState bytes end in unused capacity; the encoder's end with the message.
+GOOD_STATE = StateEncoder(('h', 'e[0]', 'e[1]')).encode(1_000_000_002, (1.0, 2.0, 3.0))
 
 
 @pytest.mark.parametrize('decode, good', [(decode_odometry, GOOD_ODOM),
-                                          (decode_accel, GOOD_ACCEL)])
+                                          (decode_accel, GOOD_ACCEL),
+                                          (decode_state, GOOD_STATE)])
 def test_every_truncation_is_malformed(decode, good):
     for size in range(len(good)):
         with pytest.raises(MalformedMessage):
@@ -131,6 +180,16 @@ def test_every_truncation_is_malformed(decode, good):
 def test_malformed_bytes_raise_with_a_reason(data, reason):
     with pytest.raises(MalformedMessage, match=reason):
         decode_accel(data)
+
+
+def test_a_state_claiming_more_names_or_values_than_its_bytes_is_malformed():
+    names_at = 4 + 8 + 4 + len('world\0')        # the name count, 4-aligned after frame_id
+    names_at += -names_at % 4
+    with pytest.raises(MalformedMessage, match='names'):
+        decode_state(GOOD_STATE[:names_at] + struct.pack('<I', 10**6) + GOOD_STATE[names_at + 4:])
+    values_at = len(GOOD_STATE) - 8 - 3 * 8 - 4 - 4  # the position count, before its padding
+    with pytest.raises(MalformedMessage, match='truncated JointState'):
+        decode_state(GOOD_STATE[:values_at] + struct.pack('<I', 4) + GOOD_STATE[values_at + 4:])
 
 
 @pytest.mark.parametrize('dim, n', [(2, 100), (3, 7), (2, 1)])

@@ -1,11 +1,11 @@
 """A run rebuilt from its bag: :func:`load_run` reads a rosbag2 MCAP bag into :class:`RunData`.
 
-Every step of a run is rebuilt from the agents' odometry and commands and the leader's state
-(grouped by header stamp, ``t_k = k dt``). The scenario stored in the bag (MCAP metadata
-record ``flock_swarm``) gives ``dt``, the radius and the tolerances; bags without that record
-(any rosbag2 bag with ``/agent_<i>/odom`` topics) are read with a radius and tolerances given
-by the caller (``analyze --radius``...). The topic names and types are the contract's
-(:mod:`flock_swarm.contract`).
+Every step of a run is rebuilt from the agents' odometry and commands, the leader's state and
+a law's adaptive state (grouped by header stamp, ``t_k = k dt``). The scenario stored in the
+bag (MCAP metadata record ``flock_swarm``) gives ``dt``, the radius and the tolerances; bags
+without that record (any rosbag2 bag with ``/agent_<i>/odom`` topics) are read with a radius
+and tolerances given by the caller (``analyze --radius``...). The topic names and types are
+the contract's (:mod:`flock_swarm.contract`).
 """
 
 from collections.abc import Callable, Iterable
@@ -15,11 +15,13 @@ from pathlib import Path
 import time
 
 import numpy as np
+import yaml
 
 from flock_swarm import contract
-from flock_swarm.bag import BagReader
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.bag import BagError, BagReader
+from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
+from flock_swarm.scenario_yaml import parse_yaml
 
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
 METADATA_RECORD = 'flock_swarm'
@@ -35,11 +37,15 @@ METRICS_STATUS = contract.METRICS_STATUS
 ODOMETRY = contract.ODOMETRY_TYPE
 ACCEL = contract.ACCEL_TYPE
 DIAGNOSTICS = contract.METRICS_TYPE
+STATE = contract.STATE_TYPE
+#: The type of each kind of agent topic.
+_AGENT_TYPES = {'odom': ODOMETRY, 'cmd_accel': ACCEL, 'state': STATE}
 _AGENT_TOPIC = contract.AGENT_TOPIC
 #: What ``analyze`` needs from a bag, in one sentence (said with every missing-topic error).
 NEEDS = ('analyze needs /agent_<i>/odom (nav_msgs/msg/Odometry) of every agent; it also '
          'uses, when present, /agent_<i>/cmd_accel and /leader/accel '
-         '(geometry_msgs/msg/AccelStamped), /leader/odom (nav_msgs/msg/Odometry) and '
+         '(geometry_msgs/msg/AccelStamped), /leader/odom (nav_msgs/msg/Odometry), '
+         '/agent_<i>/state (sensor_msgs/msg/JointState) and '
          '/swarm/metrics (diagnostic_msgs/msg/DiagnosticArray)')
 
 Progress = Callable[[str], None]
@@ -62,6 +68,8 @@ class SwarmTopics:
     leader_odom: str | None
     leader_accel: str | None
     metrics: str | None
+    #: ``/agent_<i>/state`` of the agents that have one (a law with adaptive state).
+    state: dict[int, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -111,10 +119,17 @@ class RunData:
     has_leader: bool = True
     #: The reader's warning for a truncated or unfinished bag.
     warning: str | None = None
+    #: Whether a file of the bag was cut or not closed (its warning says how).
+    recovered: bool = False
     #: Facts about how the bag was read (fallbacks, skipped steps), one line each.
     notes: list[str] = field(default_factory=list)
+    #: Whether the bag says which agents are informed (no scenario anywhere: ``False``).
+    informed_known: bool = True
     #: Odometry stamps for which some agent's message is missing.
     incomplete_steps: int = 0
+    #: The law's adaptive state per step, ``{key: (K, N, ...)}`` as ``sim`` records it (empty
+    #: for a law without, or a bag without ``/agent_<i>/state``).
+    state: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n_agents(self) -> int:
@@ -161,9 +176,8 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
     found: dict[str, dict[str, dict[int, str]]] = {}
     for name, type_name in topics.items():
         match = _AGENT_TOPIC.match(name)
-        wanted = ODOMETRY if match and match['kind'] == 'odom' else ACCEL
-        if match and type_name == wanted:
-            kinds = found.setdefault(match['ns'], {'odom': {}, 'cmd_accel': {}})
+        if match and type_name == _AGENT_TYPES[match['kind']]:
+            kinds = found.setdefault(match['ns'], {kind: {} for kind in _AGENT_TYPES})
             kinds[match['kind']][int(match['id'])] = name
     found = {ns: kinds for ns, kinds in found.items() if kinds['odom']}
     if not found:
@@ -194,7 +208,8 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
     return SwarmTopics(ns, tuple(odom[i] for i in range(n)),
                        {i: name for i, name in kinds['cmd_accel'].items() if i < n},
                        topic(contract.LEADER_ODOM, ODOMETRY),
-                       topic(contract.LEADER_ACCEL, ACCEL), topic(contract.METRICS, DIAGNOSTICS))
+                       topic(contract.LEADER_ACCEL, ACCEL), topic(contract.METRICS, DIAGNOSTICS),
+                       {i: name for i, name in kinds['state'].items() if i < n})
 
 
 def optional_topics_missing(topics: SwarmTopics) -> list[str]:
@@ -226,23 +241,74 @@ def _id_list(ids: list[int]) -> str:
     return shown + (f' and {len(ids) - 8} more' if len(ids) > 8 else '')
 
 
+#: The scenario keys that name a plugin (a law or a leader model): a bag whose scenario fails
+#: on one of them was recorded with a plugin this installation does not have (or cannot load).
+PLUGIN_KEYS = ('protocol.name', 'leader.model', 'intrinsic.model')
+
+
 def _stored_scenario(reader: BagReader, notes: list[str]
-                     ) -> tuple[Scenario | None, dict[str, str] | None]:
-    """Return the scenario of the bag's ``flock_swarm`` record and the record itself."""
+                     ) -> tuple[Scenario | None, dict[str, str] | None, str | None]:
+    """Return the scenario of the bag's ``flock_swarm`` record, the record itself, and why a
+    plugin the scenario names cannot be used here (``None``: no such problem)."""
     meta = reader.metadata(METADATA_RECORD)
     if meta is None:
-        return None, None
+        meta = _scenario_topic(reader, notes)
+    if meta is None:
+        return None, None, None
+    plugin = None
     try:
-        return parse_scenario(json.loads(meta['scenario'])), meta
+        data = json.loads(meta['scenario'])
+        return parse_scenario(data), meta, None
     except KeyError:
         reason = 'no scenario key'
     except json.JSONDecodeError as exc:
         reason = f'not JSON: {exc}'
     except ScenarioError as exc:
         reason = str(exc)
+        if exc.key in PLUGIN_KEYS:
+            plugin = _missing_plugin(data, exc)
     notes.append(f'the bag\'s {METADATA_RECORD} metadata has no usable scenario ({reason}); '
                  'analysed like a bag without one')
-    return None, meta
+    return None, meta, plugin
+
+
+def _missing_plugin(data, exc: ScenarioError) -> str:
+    """Return the one line naming the plugin a bag's scenario needs and why it is unusable."""
+    section, _, field = exc.key.partition('.')
+    name = data.get(section, {}).get(field) if isinstance(data.get(section), dict) else None
+    what = 'law' if section == 'protocol' else 'leader model'
+    return (f'the bag was recorded with the {what} {name!r} ({exc.key}), which cannot be '
+            f'loaded here ({exc.reason}): install the package that provides it')
+
+
+def _scenario_topic(reader: BagReader, notes: list[str]) -> dict[str, str] | None:
+    """Return the provenance record of the bag's ``/swarm/scenario`` message (the world
+    records it at t = 0), as the metadata record holds it; ``None`` when there is none.
+
+    Tools that rewrite a bag (``rosbags-convert``) drop MCAP metadata but keep messages.
+    """
+    names = [name for name, type_name in reader.topics().items()
+             if name.endswith('/' + contract.SCENARIO) and type_name == contract.SCENARIO_TYPE]
+    if len(names) != 1:
+        return None
+    try:
+        for _, msg in reader.decoded(names[0]):
+            data = parse_yaml(msg.data)
+            break
+        else:
+            return None
+        record = {key: str(value) for key, value in data.items()
+                  if key not in ('scenario', 'informed')}
+        record['scenario'] = json.dumps(data['scenario'])
+        if 'informed' in data:
+            record['informed'] = json.dumps([int(i) for i in data['informed']])
+    except (BagError, yaml.YAMLError, AttributeError, KeyError, TypeError, ValueError) as exc:
+        notes.append(f'{names[0]} holds no usable scenario ({one_line(str(exc))}); analysed '
+                     'like a bag without one')
+        return None
+    notes.append(f'scenario, seed and informed set from {names[0]} (the bag has no '
+                 f'{METADATA_RECORD} metadata record)')
+    return record
 
 
 def _stamp_ns(stamp) -> int:
@@ -274,13 +340,16 @@ def load_run(bag: Path | str, *, radius: float | None = None,
     """
     reader = BagReader(Path(bag))
     notes: list[str] = []
-    sc, meta = _stored_scenario(reader, notes)
+    sc, meta, plugin = _stored_scenario(reader, notes)
     topics = swarm_topics(reader.topics(), sc.n_agents if sc is not None else None)
     absent = optional_topics_missing(topics)
     if absent:
         notes.append(f'optional topic(s) not in the bag: {"; ".join(absent)} (the odometry '
                      'of every agent is all analyze requires)')
     if sc is None:
+        if radius is None and plugin is not None:
+            raise AnalyzeError(f'{plugin}, or give --radius (and --eta-tolerance, '
+                               '--collision-distance) to analyse it without its scenario')
         if radius is None:
             raise AnalyzeError('the bag has no flock_swarm scenario metadata: give --radius '
                                '(and --eta-tolerance, --collision-distance)')
@@ -320,6 +389,9 @@ class _Messages:
     leader_accel: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     # (stamp, the world's metric values)
     metrics: list[tuple[int, dict[str, str]]] = field(default_factory=list)
+    # (stamp, agent, labels, values), in bag order
+    state: list[tuple[int, int, tuple[str, ...], tuple[float, ...]]] = \
+        field(default_factory=list)
     #: Messages whose bytes do not decode (skipped): ``topic at t ns (reason)``.
     undecodable: list[str] = field(default_factory=list)
 
@@ -329,6 +401,7 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
     """Decode the swarm's topics of the bag."""
     kinds: dict[str, tuple[str, int]] = {name: ('odom', i) for i, name in enumerate(topics.odom)}
     kinds.update({name: ('cmd', i) for i, name in topics.cmd.items()})
+    kinds.update({name: ('state', i) for i, name in topics.state.items()})
     for kind, name in (('leader_odom', topics.leader_odom),
                        ('leader_accel', topics.leader_accel), ('metrics', topics.metrics)):
         if name is not None:
@@ -364,6 +437,8 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
                 out.cmd.append((stamp, i, (lin.x, lin.y, lin.z)))
             else:
                 out.leader_accel[stamp] = (lin.x, lin.y, lin.z)
+        elif kind == 'state':
+            out.state.append((stamp, i, tuple(msg.name), tuple(msg.position)))
         else:
             for status in msg.status:
                 if status.name == METRICS_STATUS:
@@ -446,15 +521,18 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
     if last_metrics and 'leader_missed' in last_metrics[-1]:
         leader_missed = int(last_metrics[-1]['leader_missed'])
 
+    informed_known = True
     if meta is not None and 'informed' in meta:
         ids = json.loads(meta['informed'])
     elif sc is not None:
         ids = realize(sc).informed_ids
     else:
         ids = []
+        informed_known = False
         notes.append('informed agents unknown (no scenario in the bag): none marked')
     informed = np.zeros(n, dtype=bool)
     informed[[int(i) for i in ids]] = True
+    state = _states(raw.state, sc, steps, index, n, step_of, mode == 'realtime', notes)
     return RunData(
         bag=reader.path, steps=steps, t=t, q=q, p=p, u=u, leader_q=leader[0],
         leader_p=leader[1], leader_a=leader[2], informed=informed, dt=dt, radius=float(radius),
@@ -464,7 +542,8 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         missed_commands_per_agent=[int(x) for x in per_agent], leader_missed=leader_missed,
         non_finite_at=non_finite,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
-        incomplete_steps=incomplete)
+        incomplete_steps=incomplete, state=state, recovered=reader.recovered,
+        informed_known=informed_known)
 
 
 def _agents_by_step(metrics: list, key: str, index: dict[int, int], n: int,
@@ -508,6 +587,71 @@ def _commands(cmds: list, steps: np.ndarray, index: dict[int, int],
         # The world applied zero: the command came after the step's timeout.
         u[index[k], ids] = 0.0
     return u
+
+
+def _state_shapes(labels: tuple[str, ...]) -> dict[str, tuple[int, ...]]:
+    """Return the state shapes of an agent's state labels, for a bag without a scenario: a
+    key alone is a scalar, ``key[0]``, ``key[1]``... a vector (:func:`contract.state_labels`)."""
+    sizes: dict[str, int | None] = {}
+    for label in labels:
+        key, bracket, _ = label.partition('[')
+        sizes[key] = (sizes.get(key) or 0) + 1 if bracket else None
+    return {key: () if size is None else (size,) for key, size in sizes.items()}
+
+
+def _states(messages: list, sc: Scenario | None, steps: np.ndarray, index: dict[int, int],
+            n: int, step_of: Callable[[int], int], realtime: bool,
+            notes: list[str]) -> dict[str, np.ndarray]:
+    """Return the law's adaptive state at each step, ``{key: (K, N, ...)}``, as the world
+    recorded it: an agent's state of step ``k`` (realtime: its latest of an earlier step),
+    else its last one (its initial value before the first; NaN without a scenario)."""
+    initial = realize(sc).agents.state if sc is not None else {}
+    if not messages:
+        if initial:
+            notes.append('no /agent_<i>/state in the bag: the law\'s adaptive state is not in '
+                         'the series or the summary')
+        return {}
+    if sc is not None:
+        shapes = {key: value.shape[1:] for key, value in initial.items()}
+    else:
+        shapes = _state_shapes(messages[0][2])
+    labels = contract.state_labels(shapes)
+    start = np.full((n, len(labels)), np.nan)
+    if initial:
+        start = np.concatenate([value.reshape(n, -1) for value in initial.values()], axis=1)
+    flat = np.full((len(steps), n, len(labels)), np.nan)
+    given = np.zeros((len(steps), n), dtype=bool)
+    foreign = 0
+    if realtime:
+        held = start.copy()
+        ordered = sorted(((step_of(stamp), i, names, values)
+                          for stamp, i, names, values in messages), key=lambda m: m[0])
+        position = 0
+        for row, k in enumerate(steps):
+            while position < len(ordered) and ordered[position][0] < k:
+                _, i, names, values = ordered[position]
+                if names == labels:
+                    held[i] = values
+                else:
+                    foreign += 1
+                position += 1
+            flat[row] = held
+    else:
+        for stamp, i, names, values in messages:
+            row = index.get(step_of(stamp))
+            if names != labels:
+                foreign += 1
+            elif row is not None:
+                flat[row, i] = values
+                given[row, i] = True
+        for row in range(len(steps)):
+            before = flat[row - 1] if row else start
+            flat[row, ~given[row]] = before[~given[row]]
+    if foreign:
+        notes.append(f'{foreign} /agent_<i>/state message(s) with labels other than '
+                     f'{list(labels)} skipped')
+    return {key: flat[:, :, part].reshape(len(steps), n, *shape)
+            for key, shape, part in contract.state_slices(shapes)}
 
 
 def _leader(raw: _Messages, topics: SwarmTopics, sc: Scenario | None, steps: np.ndarray,

@@ -8,23 +8,25 @@
 
 import numpy as np
 
-from flock_swarm import __version__
 from flock_swarm.analysis.bagrun import Progress, RunData, Ticker
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.leaders.base import LeaderState
-from flock_swarm.core.metrics import STEP_METRICS, RunMetrics
-from flock_swarm.core.run import RunLog, build_summary
+from flock_swarm.core.metrics import RunMetrics
+from flock_swarm.core.run import RunLog, observed_pairs, run_facts, static_graph
 from flock_swarm.core.scenario import realize
+from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
 
 
 def recompute(run: RunData, record_every: int | None = None,
               progress: Progress | None = None) -> tuple[dict[str, np.ndarray], RunMetrics]:
     """Recompute the metrics of every step as the world node does, and the time series.
 
-    Every complete step updates the whole-run metrics from its r-disk edges
-    (:meth:`RunMetrics.update_from_edges`: minimum distance, collision pairs); every
-    ``record_every``-th step and the last are recorded with :func:`step_metrics`, exactly as
-    in ``WorldStepper.observe`` (and ``sim`` for r-disk scenarios).
+    Every complete step updates the whole-run metrics from the pairs ``sim`` and the world
+    take them from (:func:`~flock_swarm.core.run.observed_pairs`; the r-disk edges for a bag
+    without a scenario) (:meth:`RunMetrics.update_from_edges`: minimum distance, collision
+    pairs); every ``record_every``-th step and the last are recorded with
+    :func:`step_metrics`, with the law's adaptive state, exactly as in
+    ``WorldStepper.observe`` (and ``sim``).
 
     :param run: the run.
     :param record_every: subsampling of the series (default: the scenario's).
@@ -35,23 +37,32 @@ def recompute(run: RunData, record_every: int | None = None,
                  record_every or run.record_every)
     last = len(run.steps) - 1
     tick = Ticker(progress)
+    sc = run.scenario
+    real = realize(sc) if sc is not None else None
+    static = static_graph(sc, real) if sc is not None else None
     # The non-finite commands counted so far, per agent, recorded as the world records them.
     non_finite = None if run.non_finite_at is None else np.zeros(run.n_agents, dtype=int)
     for row, k in enumerate(run.steps):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
-        extra = {}
+        covered, radius = disk_graph(q, run.radius, run.strict_radius), run.radius
+        if sc is not None:
+            covered, radius = observed_pairs(sc, real, q, static, covered)
+        extra = {key: values[row] for key, values in run.state.items()}
         if non_finite is not None:
             non_finite[run.non_finite_at.get(int(k), [])] += 1
             extra['non_finite_commands'] = non_finite.copy()
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
-                    disk_graph(q, run.radius, run.strict_radius), run.radius, row == last,
-                    **extra)
+                    covered, radius, row == last, **extra)
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
     return log.rec.arrays(), log.metrics
 
 
 def _status(run: RunData) -> str:
+    # A cut file is `truncated` even when every step survived (cut after its data section:
+    # only the index is lost), as docs/analysis.md says: the bag is not as the world wrote it.
+    if run.recovered:
+        return 'truncated'
     if run.scenario is not None and run.steps[-1] >= run.scenario.steps:
         return 'completed'
     if run.warning is not None:
@@ -69,38 +80,16 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
         missed-command counts, and where the data came from (``bag``, ``complete_steps``,
         ``bag_warning``).
     """
-    status = _status(run)
-    last_step = int(run.steps[-1])
-    if run.scenario is not None:
-        summary = build_summary(run.scenario, realize(run.scenario), series, metrics,
-                                last_step, status)
-    else:
-        final = {name: float(series[f'metric_{name}'][-1]) for name in STEP_METRICS}
-        summary = {
-            'n_agents': run.n_agents, 't_final': float(series['t'][-1]), 'steps': last_step,
-            'eta': final['eta'], 'eta_tolerance': run.eta_tolerance,
-            'velocity_mismatch_max': final['velocity_mismatch_max'],
-            'com_position_error': final['com_position_error'],
-            'com_velocity_error': final['com_velocity_error'],
-            'min_pair_distance': metrics.min_pair_distance,
-            'collisions': len(metrics.collision_pairs),
-            'collision_distance': run.collision_distance,
-            'components_final': int(final['components']),
-            'informed': [int(i) for i in np.flatnonzero(run.informed)],
-            'scenario': None, 'seed': None, 'protocol': None, 'dt': run.dt, 'status': status,
-            'flock_swarm_version': __version__,
-        }
-    summary.update({
-        'mode': run.mode,
-        'missed_commands': int(sum(run.missed_commands_per_agent)),
-        'missed_commands_per_agent': run.missed_commands_per_agent,
-        **({} if run.non_finite_at is None else {
-            'non_finite_commands_per_agent': [int(x) for x in np.bincount(
-                [i for ids in run.non_finite_at.values() for i in ids],
-                minlength=run.n_agents)]}),
-        'leader_missed': run.leader_missed,
-        'bag': str(run.bag),
-        'complete_steps': int(len(run.steps)),
-        'bag_warning': run.warning,
-    })
-    return summary
+    facts = (run_facts(run.scenario, realize(run.scenario)) if run.scenario is not None
+             else RunFacts(run.n_agents, run.dt, run.eta_tolerance, run.collision_distance,
+                           informed_known=run.informed_known))
+    counted = {} if run.non_finite_at is None else {
+        'non_finite_commands_per_agent': [int(x) for x in np.bincount(
+            [i for ids in run.non_finite_at.values() for i in ids],
+            minlength=run.n_agents)]}
+    return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), _status(run)),
+                      mode=run.mode,
+                      missed_commands=int(sum(run.missed_commands_per_agent)),
+                      missed_commands_per_agent=run.missed_commands_per_agent,
+                      leader_missed=run.leader_missed, bag=str(run.bag),
+                      complete_steps=int(len(run.steps)), bag_warning=run.warning, **counted)

@@ -366,10 +366,13 @@ class BagWriter:
 
         As rosbag2's ``SequentialWriter::should_split_bagfile``: the size of the file on
         disk above ``max_bagfile_size``, or ``t_ns`` more than ``max_bagfile_duration``
-        after the file's first message. An empty file is never left behind.
+        after the file's first message. An empty file is never left behind, and messages of
+        the time of the file's latest stay with it: the world writes a step (its states, then
+        the commands, all at ``t_k``) in several calls, and a chunk filling between them made
+        the size rule cut the step in two files.
         """
         file = self._files[-1]
-        if file.count == 0:
+        if file.count == 0 or t_ns <= file.end_ns:
             return
         if ((self._max_size and file.stream.tell() > self._max_size)
                 or (self._max_duration_ns and t_ns - file.start_ns > self._max_duration_ns)):

@@ -22,7 +22,8 @@ from flock_swarm.analysis.bagrun import (AnalyzeError, FALLBACK_COLLISION_DISTAN
 from flock_swarm.analysis.compare import check_verifiable, VERIFY_TOLERANCE
 from flock_swarm.analysis.pipeline import analyze, default_out
 from flock_swarm.bag import BagError
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
+                                 out_dir)
 from flock_swarm.outputs import ensure_writable
 
 #: Exit status when ``--verify`` finds the recording off the simulation.
@@ -61,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog='analyze',
         description='Metrics, time series and figures of a recorded flock_swarm run.')
     parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
-    parser.add_argument('--out', type=Path,
+    parser.add_argument('--out', type=out_dir,
                         help='output directory (default: BAG_analysis next to the bag)')
     parser.add_argument('--snapshots', type=_times, metavar='T,T,...',
                         help='snapshot times in seconds (default: first, middle, last)')
@@ -104,21 +105,23 @@ def main(argv: list[str] | None = None) -> int:
         print(line, file=sys.stderr, flush=True)
 
     say = None if args.quiet else warn
-    try:
-        return _run(args, say, warn)
-    except KeyboardInterrupt:
-        warn('analyze: interrupted')
-        return EXIT_INTERRUPTED
-    except (AnalyzeError, BagError) as exc:
-        warn(f'analyze: error: {exc}')
-        return EXIT_USAGE
-    except OSError as exc:
-        warn(f'analyze: error: {exc.filename or ""}: {exc.strerror or exc}')
-        return EXIT_USAGE
-    except Exception as exc:
-        # One line, as promised for every failure; the type says where to look.
-        warn(f'analyze: error: {type(exc).__name__}: {" ".join(str(exc).split())}')
-        return EXIT_USAGE
+    # SIGTERM and SIGHUP stop it as Ctrl-C does, with the status of the signal.
+    with StopSignals(interrupt=True) as stop:
+        try:
+            return _run(args, say, warn)
+        except KeyboardInterrupt:
+            warn('analyze: interrupted')
+            return stop.status(EXIT_INTERRUPTED)
+        except (AnalyzeError, BagError) as exc:
+            warn(f'analyze: error: {exc}')
+            return EXIT_USAGE
+        except OSError as exc:
+            warn(f'analyze: error: {exc.filename or ""}: {exc.strerror or exc}')
+            return EXIT_USAGE
+        except Exception as exc:
+            # One line, as promised for every failure; the type says where to look.
+            warn(f'analyze: error: {type(exc).__name__}: {" ".join(str(exc).split())}')
+            return EXIT_USAGE
 
 
 def _run(args: argparse.Namespace, say: Progress | None, warn: Progress) -> int:

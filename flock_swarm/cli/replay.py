@@ -14,7 +14,8 @@ WebSocket protocol (:mod:`flock_swarm.foxglove_ws`).
 
 Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
 expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
-with status 2. Ctrl-C stops the playback and exits with status 0. See ``docs/replay.md``.
+with status 2. Ctrl-C (or SIGTERM, SIGHUP) stops the playback and exits with the signal's
+status (130, 143, 129: :data:`~flock_swarm.console.EXIT_SIGNAL`). See ``docs/replay.md``.
 """
 
 import argparse
@@ -22,12 +23,9 @@ from pathlib import Path
 import sys
 
 from flock_swarm.bag import BagError
-from flock_swarm.console import EXIT_USAGE, OneLineParser
+from flock_swarm.console import EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.player import Player, ReplayError
-
-#: Exit status when the bag turns out unreadable during playback.
-EXIT_FAILURE = 1
 
 
 def _count(number: int, noun: str, plural: str | None = None) -> str:
@@ -82,7 +80,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``replay`` from the command line; return the exit status."""
-    import rclpy
     from rclpy.utilities import remove_ros_args
 
     if argv is None:
@@ -95,12 +92,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"replay: error: --ros-args: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_USAGE
     args = build_parser().parse_args(own_args)
+    # The stop signals raise KeyboardInterrupt, as Ctrl-C does: the playback ends cleanly
+    # (rclpy's own handlers, which shut the context down under a publish, are not installed).
+    with StopSignals(interrupt=True) as stop:
+        return stop.status(_play(args, argv))
+
+
+def _play(args: argparse.Namespace, argv: list[str]) -> int:
+    """Play the bag as ``args`` say (``argv``: the ROS arguments); return the exit status."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
     player = None
     live = None
     try:
         if args.foxglove is not None:
             live = start_live(args.foxglove_host, args.foxglove, '--foxglove')
-        rclpy.init(args=['replay', *argv])
+        rclpy.init(args=['replay', *argv], signal_handler_options=SignalHandlerOptions.NO)
         player = Player(
             args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,
             exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
@@ -119,12 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'replay: error: {exc}', file=sys.stderr)
         return status
     except KeyboardInterrupt:
-        return 0
-    except Exception:
-        # Ctrl-C while the bag is opened shuts the context down under rclpy's signal handler:
-        # creating the publishers then fails. That is the user stopping, not a fault.
-        if rclpy.ok():
-            raise
+        # A stop signal before the playback began (the player catches it while it plays).
         return 0
     finally:
         if player is not None:

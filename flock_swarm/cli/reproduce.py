@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE
+from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, StopSignals, out_dir
 from flock_swarm.reproduce import pipeline
 from flock_swarm.reproduce.seeds import SEEDS_CACHE
 
@@ -18,7 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='python -m flock_swarm.reproduce',
         description='Run every experiment of the papers and write the reproduction report.')
-    parser.add_argument('--out', type=Path, default=Path('out/reproduce'),
+    parser.add_argument('--out', type=out_dir, default=Path('out/reproduce'),
                         help='runs, caches and JSON results (default: out/reproduce)')
     parser.add_argument('--report', type=Path, default=Path('docs/reproduction.md'),
                         help='the Markdown report (default: docs/reproduction.md)')
@@ -52,7 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the reproduction from the command line; return the exit status (130 when
-    interrupted: every finished run is in its cache, and the same command resumes)."""
+    interrupted, 143 after SIGTERM, 129 after SIGHUP: every finished run is in its cache,
+    and the same command resumes)."""
     args = build_parser().parse_args(argv)
     if args.realisations is not None and args.realisations < 1:
         print('reproduce: error: --realisations must be >= 1', file=sys.stderr)
@@ -60,12 +61,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.jobs < 1:
         print('reproduce: error: --jobs must be >= 1', file=sys.stderr)
         return EXIT_USAGE
-    try:
-        return pipeline.run(args, sys.argv[1:] if argv is None else list(argv))
-    except KeyboardInterrupt:
-        print('reproduce: interrupted; every finished run is kept in its cache (--out and '
-              'the studies\' caches); run the same command again to resume', file=sys.stderr)
-        return EXIT_INTERRUPTED
+    # SIGTERM and SIGHUP stop it as Ctrl-C does, with the status of the signal.
+    with StopSignals(interrupt=True) as stop:
+        try:
+            return pipeline.run(args, sys.argv[1:] if argv is None else list(argv))
+        except KeyboardInterrupt:
+            print('reproduce: interrupted; every finished run is kept in its cache (--out and '
+                  'the studies\' caches); run the same command again to resume',
+                  file=sys.stderr)
+            return stop.status(EXIT_INTERRUPTED)
 
 
 if __name__ == '__main__':

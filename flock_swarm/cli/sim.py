@@ -7,13 +7,16 @@ A thin command over :mod:`flock_swarm.core.run` (the run) and :mod:`flock_swarm.
 """
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
+                                 out_dir, signal_name)
+from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.faults import RunFault
+from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
 from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
@@ -32,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='KEY=VALUE',
                         help='override one value, e.g. --set protocol.c1=0.8 (repeatable)')
     parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO)')
     parser.add_argument('--plots', action='store_true', help='also write PNG figures')
     parser.add_argument('--quiet', action='store_true', help='no progress output')
     parser.add_argument('--allow-unstable', action='store_true',
@@ -43,24 +46,43 @@ def build_parser() -> argparse.ArgumentParser:
 def listing() -> str:
     """Return the ``sim --list`` text: presets, laws and leader models with their sources.
 
-    :raises ScenarioError: when a registered plugin cannot be loaded (named).
+    A plugin that cannot be used (an import error, a name registered twice...) is listed as
+    ``BROKEN`` with the reason; it fails only the runs that use it.
     """
     from flock_swarm.presets import preset_names
     lines = ['presets (sim NAME):']
     lines += [f'  {name}' for name in preset_names()]
     for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
                          ('leader models (leader.model):', registry.LEADER_GROUP)):
-        found = registry.entries(group)
+        found = registry.status(group)
         width = max((len(name) for name in found), default=0)
         lines += ['', title]
-        for name, entry in found.items():
-            cls = registry.load(group, name)
-            lines.append(f'  {name:<{width}}  [{entry.package}]  {registry.describe(cls)}')
+        for name, (entry, cls, problem) in found.items():
+            what = registry.describe(cls) if problem is None else f'BROKEN: {problem}'
+            lines.append(f'  {name:<{width}}  [{entry.package}]  {what}')
     return '\n'.join(lines) + '\n'
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``sim`` from the command line; return the exit status."""
+    """Run ``sim`` from the command line; return the exit status.
+
+    0 when the run completed, 1 when it diverged, 2 for invalid input, and after a stop
+    signal (SIGINT, SIGTERM, SIGHUP) that signal's status
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`), with everything recorded until then written.
+    """
+    with StopSignals(interrupt=True) as stop:
+        try:
+            return _main(argv, stop)
+        except KeyboardInterrupt:
+            # A stop signal before the run began (the run itself catches it and ends
+            # 'interrupted'; its outputs are written with the signals held).
+            print(f'sim: stopped by {signal_name(stop.first or signal.SIGINT)} before the run '
+                  'began; nothing written', file=sys.stderr)
+            return stop.status(EXIT_INTERRUPTED)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals turned into ``KeyboardInterrupt`` (``stop``)."""
     parser = build_parser()
     if argv is None:
         argv = sys.argv[1:]
@@ -99,9 +121,20 @@ def main(argv: list[str] | None = None) -> int:
         # The fault came before the first recorded instant: nothing to write.
         print(f'sim: error: {fault}', file=sys.stderr)
         return EXIT_FAILED
+    except PluginError as exc:
+        # A law's output of the wrong shape at some step: the run cannot go on (status 1,
+        # a failed run, not a usage error).
+        print(f'sim: error: {exc}', file=sys.stderr)
+        return EXIT_DIVERGED
+    with stop.held():
+        return _finish(result, sc, out, args, say, stop)
+
+
+def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSignals) -> int:
+    """Write the outputs of ``result`` and say how the run ended; return the exit status."""
     try:
         written = write_outputs(result, out, sc)
-        if args.plots:
+        if args.plots and result.series:
             from flock_swarm.plots import plot_timeseries
             for path in plot_timeseries(result.series, out, sc.name):
                 if say:
@@ -111,11 +144,13 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     s = result.summary
     if say:
-        say(f'[sim] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
-            f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
-            f'collisions = {s["collisions"]}, components = {s["components_final"]} '
-            f'({s["wall_time_s"]:.1f} s wall)')
-        say(f'[sim] wrote {written[-1]} and {written[0]}')
+        if stop.stopped:
+            say(f'[sim] stopped by {signal_name(stop.first)}')
+        say('[sim] ' + result_line(s, sc.headline, ('collisions', 'components_final')))
+        if result.series:
+            say(f'[sim] wrote {written[-1]} and {written[0]}')
+        else:
+            say(f'[sim] wrote {out / "summary.json"} (nothing was recorded: no time series)')
     if s['status'] == 'failed':
         print(f'sim: error: {s["failure"]}', file=sys.stderr)
         return EXIT_FAILED
@@ -123,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)
         return EXIT_DIVERGED
-    return EXIT_INTERRUPTED if s['status'] == 'interrupted' else 0
+    return stop.status(EXIT_INTERRUPTED) if s['status'] == 'interrupted' else 0
 
 
 if __name__ == '__main__':

@@ -15,8 +15,10 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_USAGE, OneLineParser, accept_sigint
+from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
+                                 StopSignals, out_dir, signal_name)
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.headline import result_line
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
                                        run_processes)
@@ -31,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--set', dest='overrides', action='append', default=[],
                         metavar='KEY=VALUE', help='override one scenario value (repeatable)')
     parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/SCENARIO_ros)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO_ros)')
     parser.add_argument('--processes', action='store_true',
                         help='run every node as its own OS process (default: one process)')
     parser.add_argument('--container', action='store_true',
@@ -59,6 +61,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
                         help='serve the run live to Foxglove / Lichtblick over the Foxglove '
                         f'WebSocket protocol (default port {DEFAULT_PORT}; 0: any free port)')
+    parser.add_argument('--pace', type=float, default=0.0, metavar='FACTOR',
+                        help='lockstep: at most FACTOR simulated seconds per wall second '
+                        '(1: real time, to watch a run; default 0: as fast as it goes)')
+    parser.add_argument('--wait-for-viewer', action='store_true',
+                        help='with --foxglove: start the run once a viewer has subscribed')
     parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
                         help=f'address the --foxglove server binds (default {DEFAULT_HOST}: '
                         'this machine only)')
@@ -66,10 +73,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``swarm`` from the command line; return the exit status."""
-    accept_sigint()
+    """Run ``swarm`` from the command line; return the exit status.
+
+    0 when the run completed, 1 when it did not (diverged, failed, recording failed),
+    2 for invalid input, and after a stop signal that signal's status
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`): the world finalises its bag and summary
+    first, whatever the layout.
+    """
+    with StopSignals() as stop:
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals caught (``stop``)."""
     args = build_parser().parse_args(argv)
-    say = (lambda line: print(line, file=sys.stderr, flush=True))
+    say = _say
     try:
         if not 0 <= args.domain_id <= 232:
             raise ScenarioError('--domain-id', f'must be in [0, 232], got {args.domain_id}')
@@ -82,6 +100,13 @@ def main(argv: list[str] | None = None) -> int:
         if not args.start_timeout >= 0 or math.isinf(args.start_timeout):
             raise ScenarioError('--start-timeout',
                                 f'must be finite and >= 0, got {args.start_timeout}')
+        if not args.pace >= 0 or math.isinf(args.pace):
+            raise ScenarioError('--pace', f'must be finite and >= 0, got {args.pace}')
+        if args.pace and args.mode != 'lockstep':
+            raise ScenarioError('--pace', 'paces lockstep runs; realtime runs take '
+                                '--realtime-factor')
+        if args.wait_for_viewer and args.foxglove is None:
+            raise ScenarioError('--wait-for-viewer', 'goes with --foxglove')
         if args.container and not args.processes:
             raise ScenarioError('--container', 'goes with --processes (a one-process run '
                                 'always hosts the agents in one container node)')
@@ -102,14 +127,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f'swarm: error: --out: {exc}', file=sys.stderr)
         return EXIT_USAGE
     try:
-        return _run(args, scenario, out, live, say)
+        return _run(args, scenario, out, live, say, stop)
     finally:
         if live is not None:
             live.close()
 
 
-def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
-    """Run the resolved scenario as ``args`` say (serving it on ``live``); return the status."""
+def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
+         stop: StopSignals) -> int:
+    """Run the resolved scenario as ``args`` say (serving it on ``live``); return the status
+    (a stop signal's, when one ended the run)."""
     sc = read_scenario(scenario)
     if not args.processes:
         layout = 'one process (agents in one container node)'
@@ -120,6 +147,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
     say(f'[swarm] {sc.name}: world + leader + {sc.n_agents} agents in {layout}, {args.mode}, '
         f'{sc.steps} steps of {sc.dt:g} s, ROS_DOMAIN_ID={args.domain_id}')
     world_params = {'start_timeout': args.start_timeout}
+    if args.pace:
+        world_params['pace'] = args.pace
     if args.no_record:
         world_params['record'] = False
     if live is not None:
@@ -127,54 +156,74 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say) -> int:
         # on the announcement gets them all at once, not while the nodes are being built
         # (a subscription sent the moment the last channel appeared could be lost with it).
         from flock_swarm.contract import contract_topics
-        live.add_topics(contract_topics(sc.n_agents, '/'))
+        live.add_topics(contract_topics(sc.n_agents, '/', bool(sc.law.initial_state(1))))
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
+        if args.wait_for_viewer:
+            say('[swarm] waiting for a viewer to subscribe (--wait-for-viewer; Ctrl-C stops)')
+            try:
+                # Polled, so a stop signal that only notes itself (StopSignals) ends the wait.
+                while not live.wait_for_viewer(timeout=0.2):
+                    if stop.stopped:
+                        raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                say('[swarm] interrupted before the run started')
+                return stop.status(EXIT_INTERRUPTED)
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
                                 container=args.container, world_params=world_params,
-                                live=live, allow_unstable=args.allow_unstable)
+                                live=live, allow_unstable=args.allow_unstable,
+                                stop=lambda: stop.first, say=say)
     else:
-        summary = run_in_process(scenario, out, args.mode, args.domain_id, args.step_timeout,
-                                 args.executor, progress=say,
-                                 realtime_factor=args.realtime_factor,
-                                 world_params=world_params, live=live,
-                                 allow_unstable=args.allow_unstable)
-    return _report(args, sc.name, out, summary, say)
-
-
-def _report(args: argparse.Namespace, name: str, out: Path, summary: dict, say) -> int:
-    """Plot, print the summary line and the files written (those that exist, and only
-    those: a full disk may have stopped one); return the exit status."""
-    from flock_swarm.outputs import write_error
+        try:
+            summary = run_in_process(scenario, out, args.mode, args.domain_id,
+                                     args.step_timeout, args.executor, progress=say,
+                                     realtime_factor=args.realtime_factor,
+                                     world_params=world_params, live=live,
+                                     allow_unstable=args.allow_unstable,
+                                     stop=lambda: stop.stopped)
+        except ScenarioError as exc:
+            # The world refused to start (another world on the domain: docs/ros.md).
+            print(f'swarm: error: {exc}', file=sys.stderr)
+            return EXIT_USAGE
+    if stop.stopped:
+        say(f'[swarm] stopped by {signal_name(stop.first)}')
     if not summary or not (out / 'summary.json').is_file():
+        # A full disk may have stopped it: the summary in memory says why.
         why = summary.get('failure') if summary else None
         print(f'swarm: error: the world wrote no {out / "summary.json"}'
               + (f' ({why})' if why else ''), file=sys.stderr)
-        return 1
-    status = 0 if summary['status'] == 'completed' else 1
-    written = [path for path in (out / 'summary.json', out / 'timeseries.npz')
-               if path.is_file()]
-    if not args.no_record and (out / 'bag').is_dir():
-        written.insert(0, out / 'bag')
-    if not args.no_plots and (out / 'timeseries.npz').is_file():
-        import numpy as np
-        from flock_swarm.plots import plot_timeseries
-        try:
-            with np.load(out / 'timeseries.npz') as data:
-                written += plot_timeseries(dict(data), out, name)
-        except OSError as exc:
-            print(f'swarm: error: {write_error(exc)}', file=sys.stderr)
-            status = 1
-    say(f'[swarm] {summary["status"]} at t = {summary["t_final"]:g} s: eta = '
-        f'{summary["eta"]:.3f}, velocity mismatch = {summary["velocity_mismatch_max"]:.3g}, '
-        f'collisions = {summary["collisions"]}, missed commands = '
-        f'{summary.get("missed_commands", 0)} ({summary.get("wall_time_s", 0):.1f} s wall)')
+        return stop.status(EXIT_FAILURE)
+    status = 0 if summary['status'] == 'completed' else EXIT_FAILURE
+    written = [out / 'timeseries.npz']
+    with stop.held():
+        if not args.no_plots and written[0].is_file():
+            import numpy as np
+            from flock_swarm.outputs import write_error
+            from flock_swarm.plots import plot_timeseries
+            try:
+                with np.load(written[0]) as data:
+                    written += plot_timeseries(dict(data), out, sc.name)
+            except OSError as exc:
+                print(f'swarm: error: {write_error(exc)}', file=sys.stderr)
+                status = EXIT_FAILURE
+    say('[swarm] ' + result_line(summary, sc.headline, ('collisions', 'missed_commands')))
+    # Only what is there: a run stopped before its first step has no bag and no time series.
+    written = [path for path in [out / 'bag', out / 'summary.json', *written] if path.exists()]
     say('[swarm] wrote ' + ', '.join(str(path) for path in written))
     if summary.get('failure'):
         print(f'swarm: error: {summary["failure"]}', file=sys.stderr)
-    return status
+    return stop.status(status)
+
+
+def _say(line: str) -> None:
+    """Print a progress or result line on stderr."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except OSError:
+        # The terminal went away (SIGHUP): the run still finalises and exits as it should.
+        pass
 
 
 if __name__ == '__main__':

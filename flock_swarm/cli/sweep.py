@@ -13,8 +13,9 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, accept_sigint
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_RUNTIME, EXIT_USAGE, OneLineParser,
+                                 StopSignals, out_dir)
+from flock_swarm.core.errors import ScenarioError, one_line
 
 
 def spec_path(name_or_path: str) -> Path:
@@ -31,14 +32,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog='sweep', description='Run a parameter study over a scenario.')
     parser.add_argument('spec', help='sweep spec: a YAML file or a shipped name '
                         '(config/sweeps/NAME.yaml)')
-    parser.add_argument('--out', type=Path, help='output directory (default: out/sweeps/NAME)')
+    parser.add_argument('--out', type=out_dir, help='output directory (default: out/sweeps/NAME)')
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1,
                         help='local worker processes (default: all cores; 1: this process)')
     parser.add_argument('--scheduler', metavar='ADDRESS',
                         help='run on the Dask scheduler at ADDRESS (tcp://host:8786), or '
                         '"local" for a LocalCluster of --jobs workers')
     parser.add_argument('--connect-timeout', type=float, default=10.0, metavar='S',
-                        help='seconds to wait for the scheduler (default: 10)')
+                        help='seconds to wait for the scheduler, and for a worker when it has '
+                        'none (default: 10)')
     parser.add_argument('--seeds', type=int, metavar='R',
                         help='seeds 0 .. R-1 per point (replaces the spec\'s seeds)')
     parser.add_argument('--set', dest='overrides', action='append', default=[],
@@ -53,8 +55,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``sweep`` from the command line; return the exit status."""
-    accept_sigint()
+    """Run ``sweep`` from the command line; return the exit status (after a stop signal,
+    that signal's: :data:`~flock_swarm.console.EXIT_SIGNAL`)."""
+    # SIGTERM and SIGHUP stop the sweep as Ctrl-C does: every finished run stays cached.
+    with StopSignals(interrupt=True) as stop:
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopSignals) -> int:
+    """:func:`main` with the stop signals turned into ``KeyboardInterrupt`` (``stop``)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -62,10 +71,10 @@ def main(argv: list[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     from flock_swarm.study import execute as ex
     from flock_swarm.study import tables
-    from flock_swarm.study.spec import plan_runs, read_spec
+    from flock_swarm.study.spec import plan_runs, read_spec, times_within
 
     def fail(message: str) -> int:
-        print(f'sweep: error: {message}', file=sys.stderr)
+        print(f'sweep: error: {one_line(message)}', file=sys.stderr)
         return EXIT_USAGE
 
     say = (lambda line: None) if args.quiet else \
@@ -74,10 +83,17 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f'--jobs: must be >= 1, got {args.jobs}')
     if args.seeds is not None and args.seeds < 1:
         return fail(f'--seeds: must be >= 1, got {args.seeds}')
+    if not 0 < args.connect_timeout < float('inf'):
+        return fail(f'--connect-timeout: must be a number of seconds > 0, got '
+                    f'{args.connect_timeout}')
     try:
         path = spec_path(args.spec)
         spec = read_spec(path, tuple(args.overrides), args.seeds)
-        runs = plan_runs(spec, args.allow_unstable)
+        spec, dropped = times_within(spec)
+        if dropped:
+            say(f'[sweep] times: {", ".join(f"{t:g}" for t in dropped)} s dropped: after the '
+                'end of the runs set by --set duration')
+        runs = plan_runs(spec, args.allow_unstable, say)
     except ScenarioError as exc:
         return fail(str(exc))
     out = args.out if args.out is not None else Path('out') / 'sweeps' / spec.name
@@ -105,7 +121,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f'sweep: interrupted; every finished run is kept in {out / "runs.jsonl"} '
               '(run the same command again to go on)', file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return stop.status(EXIT_INTERRUPTED)
+    except ex.ClusterError as exc:
+        print(f'sweep: error: {one_line(str(exc))}', file=sys.stderr)
+        return EXIT_RUNTIME
     except ex.SweepError as exc:
         return fail(str(exc))
     finally:

@@ -18,8 +18,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from flock_swarm.core.errors import one_line
-from flock_swarm.core.laws.base import Law, output_problem
+from flock_swarm.core.errors import PluginError, one_line
+from flock_swarm.core.laws.base import Law, shape_problem
 from flock_swarm.core.leaders.base import LeaderModel, LeaderState, VirtualLeader
 from flock_swarm.core.registry import LAW_GROUP, LEADER_GROUP, entries
 
@@ -91,15 +91,26 @@ def evaluate_law(law: Law, step: int, ids: Sequence[int], dim: int,
     """
     try:
         u = evaluate()
+    except PluginError as exc:
+        # The law's evaluation checks each output's shape at every step (core/laws/base.py).
+        raise RunFault(f'{law_label(law)}: {unnamed(law, exc.reason)} (step {step})', SHAPE,
+                       step, ids) from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         agents = _first_raising(ids, locate) or list(ids)
         raise RunFault(f'{law_label(law)} raised {type(exc).__name__} at step {step} '
                        f'({agents_text(agents)}): {one_line(str(exc))}', RAISED, step,
                        agents) from None
     if not isinstance(u, np.ndarray) or u.shape != (len(ids), dim):
-        problem = output_problem(u, len(ids), dim)
-        raise RunFault(f'{law_label(law)}: {problem} at step {step}', SHAPE, step, ids)
+        problem = shape_problem(law, 'combine()', u, (len(ids), dim))
+        raise RunFault(f'{law_label(law)}: {unnamed(law, problem)} at step {step}', SHAPE, step,
+                       ids)
     return u
+
+
+def unnamed(law: Law, reason: str) -> str:
+    """Return a law's error without the law's name in front (the entry point names it)."""
+    prefix = f'{law.name}: '
+    return reason[len(prefix):] if reason.startswith(prefix) else reason
 
 
 def _first_raising(ids: Sequence[int], locate: Callable[[int], np.ndarray] | None) -> list[int]:
@@ -121,6 +132,9 @@ def evaluate_state(law: Law, step: int, ids: Sequence[int], advance: Callable[[]
     """
     try:
         advance()
+    except PluginError as exc:
+        raise RunFault(f'{law_label(law)}: {unnamed(law, exc.reason)} (step {step})', SHAPE,
+                       step, ids) from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         raise RunFault(f'{law_label(law)}: state_rate() raised {type(exc).__name__} at step '
                        f'{step} ({agents_text(ids)}): {one_line(str(exc))}', RAISED, step,

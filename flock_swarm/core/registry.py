@@ -5,10 +5,12 @@ Laws are registered in the entry-point group ``flock_swarm.laws``, leader models
 the same way: ``name = module:Class``. One registry, one code path: the built-in laws are
 looked up exactly as a user's. docs/extending.md walks through writing and registering one.
 
-A plugin that cannot be imported, is not a subclass of the base class, lacks a method, or
-names itself differently from its entry point raises :class:`PluginError` (a
-:class:`~flock_swarm.core.errors.ScenarioError`, so every command reports it as one line and
-exits with status 2), naming the entry point and the reason.
+A plugin that cannot be imported, is not a subclass of the base class, lacks a method,
+names itself differently from its entry point, or whose name another package registers too,
+raises :class:`PluginError` (a :class:`~flock_swarm.core.errors.ScenarioError`, so every
+command reports it as one line and exits with status 2), naming the entry point and the
+reason -- when a run uses it, and only then: the other plugins and the built-in ones work
+as ever, and :func:`status` (``sim --list``) shows it as broken with the reason.
 """
 
 import dataclasses
@@ -17,8 +19,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import metadata
 
-from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.laws.base import Law
+from flock_swarm.core.errors import PluginError, ScenarioError
+from flock_swarm.core.laws.base import Law, accepted
 from flock_swarm.core.leaders.base import LeaderModel
 
 #: Entry-point group of the laws (``protocol.name``).
@@ -37,10 +39,6 @@ _SETUP_HOOKS = {'agent_data': ('agent_data(self, sc, informed)',
                                 'setup.dt, setup.adjacency, setup.informed, setup.dim')}
 
 
-class PluginError(ScenarioError):
-    """A registered law or leader model that cannot be used; names its entry point."""
-
-
 @dataclass(frozen=True)
 class Entry:
     """One registered plugin: its name, where it points and which package registered it."""
@@ -50,6 +48,8 @@ class Entry:
     value: str
     package: str
     point: metadata.EntryPoint = field(repr=False, compare=False)
+    #: Why the name cannot be used whichever package's entry runs (registered twice), or ``''``.
+    conflict: str = field(default='', compare=False)
 
     @property
     def label(self) -> str:
@@ -63,11 +63,11 @@ def entries(group: str) -> dict[str, Entry]:
 
     The same distribution found twice (an editable install and a colcon install side by
     side) counts once, the first on ``sys.path`` winning; two distributions registering one
-    name is an error, since which one runs would depend on the path order.
+    name make that name unusable (:attr:`Entry.conflict`), since which one runs would depend
+    on the path order; the other names are not affected.
 
     :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
     :return: ``{name: Entry}`` in name order.
-    :raises PluginError: when two packages register the same name.
     """
     found: dict[str, Entry] = {}
     for ep in metadata.entry_points(group=group):
@@ -75,9 +75,10 @@ def entries(group: str) -> dict[str, Entry]:
         package = dist.metadata['Name'] if dist is not None else '?'
         entry = Entry(group, ep.name, ep.value, package, ep)
         old = found.get(ep.name)
-        if old is not None and old.package != package:
-            raise PluginError(_key(group), f'{entry.label}: the name {ep.name!r} is also '
-                              f'registered by package {old.package} ({old.value})')
+        if old is not None and old.package != package and package not in old.conflict:
+            found[ep.name] = dataclasses.replace(
+                old, conflict=f'{entry.label}: the name {ep.name!r} is also registered by '
+                f'package {old.package} ({old.value})')
         found.setdefault(ep.name, entry)
     return dict(sorted(found.items()))
 
@@ -95,18 +96,48 @@ def load(group: str, name: str) -> type:
     :return: the class.
     :raises PluginError: when it is missing, cannot be imported or is not a valid plugin.
     """
+    cls, problem = _loaded(group, name)
+    if problem is not None:
+        raise PluginError(_key(group), problem)
+    return cls
+
+
+@lru_cache(maxsize=None)
+def _loaded(group: str, name: str) -> tuple[type | None, str | None]:
+    """Return ``(class, None)``, or ``(None, why it cannot be used)``: imported once."""
     entry = entries(group).get(name)
     if entry is None:
-        raise PluginError(_key(group), f'no entry point {group}:{name}')
+        return None, f'no entry point {group}:{name}'
+    if entry.conflict:
+        return None, entry.conflict
     try:
         cls = entry.point.load()
     except Exception as exc:  # noqa: BLE001 - any failure of a plugin's import is reported
-        raise PluginError(_key(group), f'{entry.label}: cannot be imported: '
-                          f'{type(exc).__name__}: {exc}') from None
+        return None, f'{entry.label}: cannot be imported: {type(exc).__name__}: {exc}'
     problem = _problem(group, name, cls)
     if problem:
-        raise PluginError(_key(group), f'{entry.label}: {problem}')
-    return cls
+        return None, f'{entry.label}: {problem}'
+    if group == LAW_GROUP:
+        # Which parameters combine and state_rate take is read here, once (not per step).
+        for hook in ('combine', 'state_rate'):
+            accepted(cls, hook)
+    return cls, None
+
+
+def status(group: str) -> dict[str, tuple[Entry, type | None, str | None]]:
+    """Return every registered plugin of a group with its class or why it is broken.
+
+    What ``sim --list`` shows: a broken plugin is listed with the reason, not raised.
+
+    :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
+    :return: ``{name: (entry, class or None, problem or None)}`` in name order.
+    """
+    return {name: (entry, *_loaded(group, name)) for name, entry in entries(group).items()}
+
+
+def usable(group: str) -> dict[str, type]:
+    """Return the registered plugins of a group that load, by name (broken ones left out)."""
+    return {name: cls for name, (_, cls, problem) in status(group).items() if problem is None}
 
 
 def _problem(group: str, name: str, cls) -> str | None:

@@ -18,15 +18,19 @@ import numpy as np
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.faults import (RunFault, advance_leader, evaluate_law, evaluate_state,
                                      leader_state, non_finite_fault, non_finite_rows,
-                                     state_blew_up)
+                                     state_blew_up, unnamed)
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
+from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
 from flock_swarm.core.laws.base import (AgentData, Law, StepViolation, advance_state,
-                                        group_control, output_problem, swarm_control)
+                                        group_control, output_problem, pair_sums,
+                                        swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
+from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
-from flock_swarm.core.registry import LAW_GROUP, PluginError, entries
+from flock_swarm.core.errors import PluginError
+from flock_swarm.core.registry import LAW_GROUP, entries
 from flock_swarm.core.scenario import Realization, Scenario, all_pairs_weights, realize
 from flock_swarm.core.stability import model_bounds
 from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
@@ -149,6 +153,46 @@ def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
     return disk_graph(q, sc.law.radius, sc.law.strict_radius)
 
 
+def whole_run_pairs(sc: Scenario, q: np.ndarray, static: EdgeList | None,
+                    edges: EdgeList) -> tuple[EdgeList, float]:
+    """Return the pairs a step's whole-run metrics are folded from, and the radius they cover
+    completely (:meth:`~flock_swarm.core.metrics.RunMetrics.update_from_edges`).
+
+    ``sim``'s rule, which the world node and ``analyze`` follow so that their
+    ``min_pair_distance`` and ``collisions`` are ``sim``'s: on a fixed graph, the pairs
+    closer than ``collision_distance`` (its edges say nothing of distances); otherwise the
+    step's interaction graph, which covers every pair within ``r`` (r-disk edges) or every
+    pair (a law acting on all pairs).
+
+    :param sc: the scenario.
+    :param q: positions.
+    :param static: the fixed graph (:func:`static_graph`), or ``None``.
+    :param edges: the step's interaction graph (:func:`interaction_graph`); unused on a
+        fixed graph.
+    :return: ``(pairs, radius)``.
+    """
+    if static is not None:
+        return disk_graph(q, sc.collision_distance), sc.collision_distance
+    return edges, np.inf if sc.law.all_pairs else sc.law.radius
+
+
+def observed_pairs(sc: Scenario, real: Realization, q: np.ndarray, static: EdgeList | None,
+                   disk: EdgeList) -> tuple[EdgeList, float]:
+    """Return :func:`whole_run_pairs` for an observer of a run that has the step's r-disk
+    graph rather than its interaction graph (the world node, ``analyze``).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :param q: positions.
+    :param static: the fixed graph (:func:`static_graph`), or ``None``.
+    :param disk: the r-disk graph at ``q`` (``r``, ``strict_radius`` of the law).
+    :return: ``(pairs, radius)``.
+    """
+    graph = interaction_graph(sc, real, q, None) if sc.law.all_pairs and static is None \
+        else disk
+    return whole_run_pairs(sc, q, static, graph)
+
+
 def static_graph(sc: Scenario, real: Realization) -> EdgeList | None:
     """Return the time-invariant edge list of a fixed-graph scenario, or ``None``."""
     if real.adjacency is None:
@@ -183,12 +227,15 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
         with np.errstate(all='ignore'):
             edges = interaction_graph(sc, real, real.q0, static_graph(sc, real))
             u = swarm_control(sc.law, real.q0, real.p0, edges, leader, real.agents, sc.dt)
+    except PluginError as exc:
+        raise PluginError('protocol.name', f'{label}: {unnamed(sc.law, exc.reason)}') from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         raise PluginError('protocol.name', f'{label}: raised {type(exc).__name__} at the '
                           f'initial state: {exc}') from None
-    problem = output_problem(u, sc.n_agents, sc.dim)
+    problem = output_problem(sc.law, 'combine()', u, (sc.n_agents, sc.dim))
     if problem is not None:
-        raise PluginError('protocol.name', f'{label}: {problem}')
+        raise PluginError('protocol.name', f'{label}: {unnamed(sc.law, problem)} at the '
+                          'initial state')
 
 
 def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
@@ -308,6 +355,9 @@ def stack_mismatch(scenarios: list[Scenario]) -> str | None:
         return None
     first = scenarios[0]
     for sc in scenarios:
+        if sc.network.active:
+            # Each run's messages are keyed by its own seed and kept per link: one at a time.
+            return f'{sc.name}: a run with a network model runs alone'
         if sc.graph_type != 'disk' or sc.law.all_pairs or sc.informed.reselect:
             return f'{sc.name}: only r-disk graphs without re-selection stack'
         same = {'dim': sc.dim == first.dim, 'n_agents': sc.n_agents == first.n_agents,
@@ -351,6 +401,10 @@ class _Stack:
             else None
         self._disk = static is None and not sc.law.all_pairs
         self.graph = self._new_graph()
+        #: The messages between the agents (``network:``), ``None`` without the section.
+        self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight) if sc.network.active else None
 
     def _new_graph(self) -> VerletDiskGraph | None:
         """Return the r-disk graph tracker of the active realisations (``None``: not r-disk)."""
@@ -410,11 +464,14 @@ class _Stack:
         """
         q, p, agents = self.q, self.p, self.agents
 
+        t = step * dt
+
         def alone(row: int) -> np.ndarray:
             one = np.array([row])
-            return group_control(law, one, q, p, edges, leader, agents.subset(one), dt)
+            return group_control(law, one, q, p, edges, leader, agents.subset(one), dt, t)
         return evaluate_law(law, step, np.arange(q.shape[0]) % self.size, q.shape[1],
-                            lambda: swarm_control(law, q, p, edges, leader, agents, dt), alone)
+                            lambda: swarm_control(law, q, p, edges, leader, agents, dt, t),
+                            alone)
 
     def end_non_finite(self, u: np.ndarray, leader: LeaderState, law: Law,
                        step: int) -> np.ndarray | None:
@@ -471,32 +528,39 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             if stack.reselector is not None:
                 stack.reselector.update(stack.agents, edges)
             n_rows = stack.q.shape[0]
-            u = stack.end_non_finite(stack.control(law, edges, state, dt, step), state, law,
-                                     step)
+            if stack.net is None:
+                u = stack.control(law, edges, state, dt, step)
+            else:
+                stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
+                u = evaluate_law(law, step, np.arange(n_rows) % stack.size, sc.dim,
+                                 lambda: stack.net.control(None, stack.q, stack.p, stack.agents,
+                                                           dt, step * dt)[0])
+            u = stack.end_non_finite(u, state, law, step)
             if u is None:
                 return
             if u.shape[0] != n_rows:
                 edges = stack.edges()
             q, p, m = stack.q, stack.p, stack.size
-            if stack.static is None:
-                # r-disk edges cover every pair within the radius; all-pairs edges every pair.
-                covered, radius = edges, np.inf if law.all_pairs else law.radius
-            else:
-                covered = disk_graph(q, sc.collision_distance)
-                radius = sc.collision_distance
+            covered, radius = whole_run_pairs(sc, q, stack.static, edges)
             logs = [stack.logs[g] for g in stack.active]
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)
             if step % every == 0 or step == steps:
+                net_stats = {} if stack.net is None else stack.net.recorded(dt)
                 for b, log in enumerate(logs):
                     rows = slice(b * m, (b + 1) * m)
                     log.record(step, step * dt, q[rows], p[rows], u[rows], state,
                                stack.agents.informed[rows], step == steps,
-                               **stack.extra(rows))
+                               **stack.extra(rows), **net_stats)
             if step == steps:
                 break
-            evaluate_state(law, step, range(m),
-                           lambda: advance_state(law, q, p, state, stack.agents, dt))
+            if stack.net is None:
+                evaluate_state(law, step, range(m), lambda: advance_state(
+                    law, q, p, state, stack.agents, dt, lambda: pair_sums(law, q, p, edges),
+                    step * dt))
+            else:
+                evaluate_state(law, step, range(m), lambda: stack.net.advance_state(
+                    None, q, p, stack.agents, dt, step * dt))
             stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
             advance_leader(leader, dt, step, sc.dim)
             now = time.monotonic()
@@ -506,8 +570,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                 latest = logs[0].latest
                 stacked = f'  {len(logs)} stacked' if len(stack.scenarios) > 1 else ''
                 progress(f'[sim] t = {(step + 1) * dt:.2f}/{sc.duration:g} s  '
-                         f'step {step + 1}/{steps}  eta = {latest.get("eta", 0):.2f}  '
-                         f'mismatch = {latest.get("velocity_mismatch_max", 0):.3g}  '
+                         f'step {step + 1}/{steps}  {progress_text(latest, sc.headline)}  '
                          f'({rate:.0f} steps/s){stacked}')
     except KeyboardInterrupt:
         stack.finish('interrupted', step)

@@ -10,25 +10,26 @@ Agent ids are 0-based everywhere (``agent_0`` is the papers' agent 1).
 """
 
 import dataclasses
-import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import yaml
 
 from flock_swarm.core import registry
 from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, only, positive,
                                      text, vector)
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
-from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
+from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
+from flock_swarm.core.laws.base import (AgentData, Law, LawContext, LawSetup, ObserverGroup,
+                                        antisymmetry_problem)
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
+from flock_swarm.core.network import NetworkSpec, parse_network
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
 
 TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
             'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
-            'intrinsic', 'metrics')
+            'intrinsic', 'metrics', 'network')
 #: ``intrinsic.model`` values besides the registered autonomous leader models.
 INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
@@ -41,6 +42,15 @@ MAX_AGENTS = 1_000_000
 MIN_DT = 1e-9
 #: The longest run [s]: the seconds of a ROS stamp (builtin_interfaces/Time.sec) are int32.
 MAX_DURATION = 2 ** 31 - 1
+#: The largest seed: the nodes take the seed as a ROS integer parameter, an int64 (NumPy's
+#: generator takes any integer >= 0); one range for ``sim``, ``swarm``, the nodes and
+#: ``sweep``, so that a seed ``sim`` accepts runs in ROS too.
+MAX_SEED = 2 ** 63 - 1
+#: What each ``informed.select`` reads besides itself (and ``reselect``): any other of
+#: ``count``, ``fraction``, ``ids`` given with it would be ignored, so it is refused.
+INFORMED_USES = {'all': (), 'random': ('count', 'fraction'), 'first': ('count', 'fraction'),
+                 'highest_degree': ('count', 'fraction'), 'ids': ('ids',),
+                 'pseudo_leaders': ()}
 
 
 def _box(value: Any, key: str, dim: int) -> np.ndarray:
@@ -104,6 +114,9 @@ class Scenario:
     eta_tolerance: float
     collision_distance: float
     raw: dict
+    headline: Headline = Headline()
+    #: The ``network:`` section (``docs/network.md``); inactive when absent or all zero.
+    network: NetworkSpec = NetworkSpec()
 
     @property
     def steps(self) -> int:
@@ -120,6 +133,11 @@ def parse_scenario(data: Any) -> Scenario:
     """
     data = mapping(data, '<scenario>')
     only(data, TOP_KEYS, '')
+    for section in ('informed', 'initial'):
+        if isinstance(data.get(section), dict) and None in data[section].values():
+            # null removes a key (--set informed.count=null, after --set informed.select=all);
+            # the scenario as run (``raw``) holds only the keys that count.
+            data = {**data, section: {k: v for k, v in data[section].items() if v is not None}}
     for key in ('dim', 'n_agents', 'dt', 'duration', 'protocol', 'leader'):
         if key not in data:
             raise ScenarioError(key, 'missing required key')
@@ -150,6 +168,8 @@ def parse_scenario(data: Any) -> Scenario:
     seed = integer(data.get('seed', 0), 'seed')
     if seed < 0:
         raise ScenarioError('seed', f'must be >= 0, got {seed}')
+    if seed > MAX_SEED:
+        raise ScenarioError('seed', f'must be <= 2**63 - 1 (a ROS int64 parameter), got {seed}')
     record_every = integer(data.get('record_every', 1), 'record_every')
     if record_every < 1:
         raise ScenarioError('record_every', f'must be >= 1, got {record_every}')
@@ -174,6 +194,10 @@ def parse_scenario(data: Any) -> Scenario:
         if 'position_box' in init else None
     velocity_box = _box(init['velocity_box'], 'initial.velocity_box', dim) \
         if 'velocity_box' in init else None
+    for given, box in (('positions', 'position_box'), ('velocities', 'velocity_box')):
+        if given in init and box in init:
+            raise ScenarioError(f'initial.{box}', f'given with initial.{given}, which replace '
+                                'it: give one of them')
     if positions is None and position_box is None:
         raise ScenarioError('initial.position_box', 'missing (or give initial.positions)')
     if velocities is None and velocity_box is None:
@@ -181,14 +205,15 @@ def parse_scenario(data: Any) -> Scenario:
     leader = _parse_leader(mapping(data['leader'], 'leader'), dim)
     intrinsic = _parse_intrinsic(mapping(data.get('intrinsic'), 'intrinsic'), dim, leader)
     metrics = mapping(data.get('metrics'), 'metrics')
-    only(metrics, ('eta_tolerance', 'collision_distance'), 'metrics.')
+    only(metrics, ('eta_tolerance', 'collision_distance', *HEADLINE_KEYS), 'metrics.')
     eta_tol = positive(metrics.get('eta_tolerance', law.eta_tolerance), 'metrics.eta_tolerance')
     coll = positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
+    network = parse_network(data.get('network'), dt)
     return Scenario(name, text(data.get('description'), 'description', ''),
                     text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
-                    intrinsic, eta_tol, coll, data)
+                    intrinsic, eta_tol, coll, data, parse_headline(metrics), network)
 
 
 def _parse_law(section: dict, ctx: LawContext) -> Law:
@@ -198,19 +223,61 @@ def _parse_law(section: dict, ctx: LawContext) -> Law:
     cls = registry.law_class(section['name'])
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     only(section, ('name', *fields), 'protocol.')
+    for name, f in fields.items():
+        if name not in section and f.default is dataclasses.MISSING \
+                and f.default_factory is dataclasses.MISSING:
+            raise ScenarioError(f'protocol.{name}', f'missing (protocol {cls.name} has no '
+                                'default for it)')
     values = {}
     for key, value in section.items():
         if key == 'name':
             continue
-        if fields[key].type in (int, 'int'):
+        kind = _field_kind(fields[key].type)
+        if kind == 'int':
             values[key] = integer(value, f'protocol.{key}')
-        elif fields[key].type in (str, 'str'):
+        elif kind == 'str':
             values[key] = text(value, f'protocol.{key}', '')
+        elif kind == 'tuple':
+            values[key] = _numbers(value, f'protocol.{key}')
         else:
             values[key] = number(value, f'protocol.{key}')
-    law = cls(**values)
+    try:
+        law = cls(**values)
+    except Exception as exc:  # noqa: BLE001 - whatever a plugin's constructor raises
+        raise PluginError('protocol.name', f'{cls.name}: cannot be built from the protocol '
+                          f'section: {type(exc).__name__}: {exc}') from None
     law.validate(ctx)
+    problem = antisymmetry_problem(law, ctx.dim)
+    if problem is not None:
+        raise PluginError('protocol.name', problem)
     return law
+
+
+def _field_kind(annotation: Any) -> str:
+    """Return ``int``, ``str``, ``tuple`` or ``float``: how a law field is read from YAML.
+
+    :param annotation: the field's annotation (a type, or its text under
+        ``from __future__ import annotations``).
+    """
+    name = annotation if isinstance(annotation, str) else getattr(annotation, '__name__', '')
+    name = name.split('[', 1)[0].strip().lower()
+    return name if name in ('int', 'str', 'tuple') else 'float'
+
+
+def _numbers(value: Any, key: str) -> tuple:
+    """Return a law's vector field (a YAML list of numbers, or of such lists) as tuples.
+
+    Tuples keep the law a hashable frozen dataclass (sweeps and stacks compare laws).
+    """
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ScenarioError(key, f'expected a non-empty list of numbers, got {value!r}')
+    if isinstance(value[0], (list, tuple)):
+        rows = tuple(_numbers(row, f'{key}[{k}]') for k, row in enumerate(value))
+        if len({len(row) for row in rows}) > 1:
+            raise ScenarioError(key, 'expected rows of one length, got lengths '
+                                f'{[len(row) for row in rows]}')
+        return rows
+    return tuple(number(v, f'{key}[{k}]') for k, v in enumerate(value))
 
 
 def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
@@ -242,6 +309,11 @@ def _parse_graph(section: dict, n: int) -> tuple[str, dict]:
 def _parse_informed(section: dict, n: int, law: Law) -> InformedSpec:
     only(section, ('select', 'count', 'fraction', 'ids', 'reselect'), 'informed.')
     select = choice(section.get('select', 'all'), 'informed.select', INFORMED_SELECT)
+    for key in ('count', 'fraction', 'ids'):
+        # A value the selection would ignore: the run would not be what the file says.
+        if key in section and key not in INFORMED_USES[select]:
+            raise ScenarioError(f'informed.{key}', f'not used by informed.select: {select} '
+                                '(remove one of them; --set informed.KEY=null removes a key)')
     # Every value given is validated, also those the selection does not use: the scenario is
     # recorded as run (scenario.json, the bag's metadata), so it must hold only sound values.
     count = fraction = None
@@ -328,6 +400,14 @@ def _parse_leader(section: dict, dim: int) -> LeaderSpec:
     cls = registry.leader_class(section.get('model'))
     state = ('model', 'position', 'velocity') if cls.moving else ('model', 'position')
     model = parse_model(cls, section, dim, 'leader.', state)
+    own = model.initial_state(dim)
+    if own is not None:
+        given = [key for key in state[1:] if key in section]
+        if given:
+            raise ScenarioError(f'leader.{given[0]}', f'set by the {model.name} model from its '
+                                'parameters (its initial_state): remove it')
+        position, velocity = _own_state(model, own, dim)
+        return LeaderSpec(model, position, velocity if cls.moving else np.zeros(dim))
     if 'position' not in section:
         raise ScenarioError('leader.position', 'missing')
     position = vector(section['position'], 'leader.position', dim)
@@ -338,10 +418,25 @@ def _parse_leader(section: dict, dim: int) -> LeaderSpec:
     return LeaderSpec(model, position, vector(section['velocity'], 'leader.velocity', dim))
 
 
+def _own_state(model: LeaderModel, own: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return a leader model's own initial state, checked like the scenario's keys."""
+    try:
+        position, velocity = (np.asarray(v, dtype=float).ravel().tolist() for v in own)
+    except (TypeError, ValueError):
+        raise PluginError('leader.model', f'{model.name}: initial_state() must return '
+                          f'(position, velocity), got {own!r}') from None
+    return (vector(position, 'leader.position (initial_state)', dim),
+            vector(velocity, 'leader.velocity (initial_state)', dim))
+
+
 def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> LeaderModel | None:
     """Return the agents' intrinsic dynamics ``f(p)``: ``None`` for the plain double integrator."""
-    autonomous = [name for name, cls in registry.leader_models().items()
-                  if cls.autonomous and not cls.still]
+    raw = section.get('model', 'none')
+    loaded = registry.usable(registry.LEADER_GROUP)
+    if isinstance(raw, str) and raw in registry.names(registry.LEADER_GROUP) \
+            and raw not in loaded:
+        registry.leader_class(raw, 'intrinsic.model')  # a broken plugin: its own error
+    autonomous = [name for name, cls in loaded.items() if cls.autonomous and not cls.still]
     name = choice(section.get('model', 'none'), 'intrinsic.model',
                   (*INTRINSIC_SPECIAL, *autonomous))
     if name == 'none':
@@ -355,81 +450,6 @@ def _parse_intrinsic(section: dict, dim: int, leader: LeaderSpec) -> LeaderModel
         return None if leader.model.still else leader.model
     return parse_model(registry.leader_class(name, 'intrinsic.model'), section, dim,
                        'intrinsic.', ('model',))
-
-
-# --------------------------------------------------------------------------------------------
-# Overrides
-
-
-class ScenarioLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, also reading YAML 1.2 floats such as ``1e-3`` as numbers.
-
-    PyYAML follows YAML 1.1, where an exponent needs a dot (``1.0e-3``); ``1e-3`` would
-    otherwise arrive as the string ``'1e-3'``.
-    """
-
-
-ScenarioLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
-
-
-def parse_yaml(text: str) -> Any:
-    """Parse YAML text with :class:`ScenarioLoader`.
-
-    :param text: YAML text.
-    :return: the parsed value.
-    :raises yaml.YAMLError: on any malformed document.
-    """
-    try:
-        return yaml.load(text, Loader=ScenarioLoader)
-    except (ValueError, TypeError, AttributeError, OverflowError, RecursionError) as exc:
-        # PyYAML's constructors raise these instead of a YAMLError for malformed tagged
-        # scalars (``!!int abc``, ``!!timestamp 2001-13-45``), integers past Python's
-        # 4300-digit conversion limit and nesting deeper than the interpreter's stack.
-        raise yaml.YAMLError(f'{type(exc).__name__}: {exc}') from None
-
-
-def parse_value(text: str) -> Any:
-    """Parse the value of a ``--set key=value`` override as YAML (``0.5``, ``[1, 2]``, ``true``).
-
-    :param text: the value text.
-    :return: the parsed value.
-    """
-    try:
-        return parse_yaml(text)
-    except yaml.YAMLError as exc:
-        why = getattr(exc, 'problem', None) or exc
-        raise ScenarioError('--set', f'cannot parse value {text!r}: {why}') from None
-
-
-def apply_override(data: dict, assignment: str) -> dict:
-    """Return a copy of ``data`` with one ``dotted.key=value`` assignment applied.
-
-    :param data: the scenario mapping.
-    :param assignment: ``key=value``, e.g. ``protocol.c1=0.8`` or ``n_agents=20``.
-    :return: the new mapping (the input is not modified).
-    """
-    import copy
-    if '=' not in assignment:
-        raise ScenarioError('--set', f'expected key=value, got {assignment!r}')
-    key, text = assignment.split('=', 1)
-    key = key.strip()
-    parts = key.split('.')
-    if not all(parts):
-        raise ScenarioError('--set', f'malformed key {key!r}')
-    out = copy.deepcopy(data)
-    node = out
-    for depth, part in enumerate(parts[:-1]):
-        child = node.get(part)
-        if child is None:
-            child = node[part] = {}
-        if not isinstance(child, dict):
-            raise ScenarioError('.'.join(parts[:depth + 1]), 'is not a section')
-        node = child
-    node[parts[-1]] = parse_value(text)
-    return out
 
 
 # --------------------------------------------------------------------------------------------

@@ -66,6 +66,8 @@ class RunFacts:
     :ivar protocol: the law's name (``None``: unknown).
     :ivar selection: the pseudo-leader certificate, when the informed set was chosen by it.
     :ivar law_state: ``{state key: summary key}`` of the law (``Law.state_summary``).
+    :ivar informed_known: whether the informed set is known (``False``: a bag without its
+        scenario; the summary says ``unknown``, not an empty list).
     """
 
     n_agents: int
@@ -77,6 +79,7 @@ class RunFacts:
     protocol: str | None = None
     selection: PseudoLeaderSelection | None = None
     law_state: Mapping[str, str] = field(default_factory=dict)
+    informed_known: bool = True
 
 
 @dataclass(frozen=True)
@@ -127,12 +130,17 @@ class SummaryKey:
 
 
 def _final(series: str, cast: type = float) -> Callable[[SummaryInputs], Any]:
-    """Return the value function of a metric at the last recorded instant."""
-    return lambda x: cast(x.series[series][-1])
+    """Return the value function of a metric at the last recorded instant (null when the
+    run recorded none: a world stopped before its first step)."""
+    return lambda x: cast(x.series[series][-1]) if x.series else None
 
 
-def _informed(x: SummaryInputs) -> list[int]:
+def _informed(x: SummaryInputs) -> list[int] | str | None:
     import numpy as np
+    if not x.facts.informed_known:
+        return 'unknown'
+    if not x.series:
+        return None
     return [int(i) for i in np.flatnonzero(x.series['informed'][0])]
 
 
@@ -142,6 +150,24 @@ def _certificate(x: SummaryInputs) -> Any:
         return ABSENT
     return {'lambda_max': sel.lambda_max, 'alpha': sel.alpha, 'satisfied': sel.satisfied,
             'components': sel.components}
+
+
+def _network(series: str, reduce: str) -> Callable[[SummaryInputs], Any]:
+    """Return the value function of a network statistic from its recorded series.
+
+    Absent without a ``network:`` section; ``None`` when no recorded instant had a value
+    (no link used, no message sent).
+    """
+    def value(x: SummaryInputs) -> Any:
+        import numpy as np
+        if series not in x.series:
+            return ABSENT
+        values = np.asarray(x.series[series], dtype=float)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            return None
+        return float(values.max() if reduce == 'max' else values.mean())
+    return value
 
 
 _K = SummaryKey
@@ -163,8 +189,9 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('com_velocity_error', FINAL, '`||mean p - p_gamma||` at `t_final`',
        _final('metric_com_velocity_error'), sweep=True, series='metric_com_velocity_error'),
     _K('min_pair_distance', WHOLE_RUN, 'smallest distance between two agents over the whole '
-       'run (exact whenever it is below the interaction radius; above it, over the recorded '
-       'steps)', lambda x: x.run.min_pair_distance, sweep=True,
+       'run (exact whenever it is below the interaction radius, on a fixed graph below '
+       '`collision_distance`, for a law acting on all pairs of an r-disk graph always; '
+       'above it, over the recorded steps)', lambda x: x.run.min_pair_distance, sweep=True,
        series='metric_min_pair_distance'),
     _K('collisions', WHOLE_RUN, 'distinct pairs ever closer than `collision_distance`',
        lambda x: len(x.run.collision_pairs), sweep=True, default=True),
@@ -178,11 +205,13 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('seed', PROVENANCE, 'the seed', lambda x: x.facts.seed),
     _K('protocol', PROVENANCE, 'the law (`protocol.name`)', lambda x: x.facts.protocol),
     _K('dt', RUN_SETTING, 'the step [s]', lambda x: x.facts.dt),
-    _K('status', PROVENANCE, '`completed`, `interrupted` (Ctrl-C: everything up to then is '
-       'written), `diverged` (the state stopped being finite; the last finite recorded '
-       'state is written, exit status 1) or `failed` (a fault of the law, the leader model '
-       'or a node: everything up to the fault is written, exit status 1); a ROS run also '
-       '`recording_failed`, its analysis `truncated`', lambda x: x.status),
+    _K('status', PROVENANCE, '`completed`, `interrupted` (a stop signal: everything up to '
+       'then is written; stopped before the first step, the measures are null), `diverged` '
+       '(the state stopped being finite; the last finite recorded state is written, exit '
+       'status 1) or `failed` (a fault of the law or the leader model, or in a ROS run of a '
+       'node, or another process of the run died: everything up to the fault is written, '
+       'exit status 1); a ROS run also `recording_failed`, its analysis `truncated`',
+       lambda x: x.status),
     _K('failure', PROVENANCE, 'status `failed` or `recording_failed`: the one line telling '
        'the fault (the law or leader model by its entry point, or the node, with the agent '
        'and the step; or the file that could not be written); absent otherwise',
@@ -193,10 +222,20 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
        '`lambda_max(W_{N-m})`, `alpha`, `satisfied`, `components` (when chosen by '
        '`select: pseudo_leaders`)', _certificate),
     _K('adaptive_gain_final', LAW_STATE, 'Zhou\'s adaptive gains `h_i` at `t_final` '
-       '(`zhou_pseudo_leader`; `sim` only: the world does not see the agents\' state)',
-       writers=(SIM,)),
+       '(`zhou_pseudo_leader`; a ROS run records them from the agents\' `/agent_<i>/state`)'),
     _K('pseudo_leader_reselections', WHOLE_RUN, 'how often `sim` re-selected the '
        'pseudo-leaders (`reselect: true`)', sweep=True, sim_only=True, writers=(SIM,)),
+    _K('network_delivered', WHOLE_RUN, 'with a `network:` section: the fraction of the '
+       'agents\' messages not lost (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_delivered', 'mean'), sweep=True,
+       series='network_delivered', writers=(SIM,)),
+    _K('network_age_mean', WHOLE_RUN, 'with a `network:` section: the mean age [s] of the '
+       'neighbour states the law used (each recorded instant\'s, of the steps since the one '
+       'before, averaged)', _network('network_age_mean', 'mean'), sweep=True,
+       series='network_age_mean', writers=(SIM,)),
+    _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
+       'neighbour state the law used over the whole run', _network('network_age_max', 'max'),
+       sweep=True, series='network_age_max', writers=(SIM,)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),
@@ -263,7 +302,8 @@ def summary_of(inputs: SummaryInputs, **given: Any) -> dict:
             if not state_done:
                 state_done = True
                 for state, name in inputs.facts.law_state.items():
-                    # The world node does not see the agents' adaptive state: only sim records it.
+                    # A bag recorded without the agents' state (/agent_<i>/state) gives its
+                    # analysis no series of it.
                     if state in inputs.series:
                         out[name] = [float(x) for x in inputs.series[state][-1]]
             continue

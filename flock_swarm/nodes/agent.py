@@ -10,7 +10,10 @@ plumbing. A law that raises, returns the wrong shape or a non-finite command fai
 the node reports it to the world on ``swarm/faults``
 (:class:`~flock_swarm.nodes.fault_report.FaultReporter`), logs one line and exits with
 status 1. With ``non_finite:=zero`` a non-finite command is published as zero instead
-(counted, logged, reported to the world, which counts it per agent).
+(counted, logged, reported to the world, which counts it per agent). For a
+law with adaptive state, each agent publishes the state its command was computed with on
+``agent_<i>/state`` (``sensor_msgs/JointState``, stamped like the command and sent before it),
+so the world records what ``sim`` records.
 
 One node hosts one agent (``ros2 run flock_swarm agent --ros-args -p agent_id:=3``, the
 robot's own process) or many (``ros2 run flock_swarm agents``, a container): the hosted
@@ -28,9 +31,10 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 
 from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
-                                  odom_topic, qos_profile)
+                                  odom_topic, qos_profile, state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, AgentController,
@@ -40,8 +44,9 @@ from flock_swarm.nodes.graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
-from flock_swarm.nodes.spin import run_node
-from flock_swarm.nodes.wire import AccelEncoder, MalformedMessage, decode_accel, decode_odometry
+from flock_swarm.nodes.spin import run_node, wall_timer
+from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, StateEncoder, decode_accel,
+                                    decode_odometry)
 
 
 def _timeout(name: str, default: float, description: str) -> Param:
@@ -102,6 +107,12 @@ class AgentNode(Node):
         qos = qos_profile(LOCKSTEP_QOS)
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), qos)
                          for i in self.controller.ids]
+        # A law's adaptive state, one topic per hosted agent (none for a law without).
+        self.state_pubs = [self.create_publisher(JointState, state_topic(int(i)), qos)
+                           for i in self.controller.ids] if self.controller.state else []
+        self.state_encoder = StateEncoder(self.controller.state_labels)
+        # What publish_commands sends on: the commands (row i: hosted agent i), then states.
+        self.pubs = self.cmd_pubs + self.state_pubs
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
         self.children = [f'agent_{j}' for j in range(sc.n_agents)]
@@ -115,15 +126,15 @@ class AgentNode(Node):
                                  raw=True)
         self.encoder = AccelEncoder()
         self.outbox: list[tuple[int, bytes]] = []
-        self.matched = [False] * len(self.cmd_pubs)
+        self.matched = [False] * len(self.pubs)
         self.sent: list[tuple[int, bytes]] = []
         self.duplicates: set[int] = set()
-        self.create_timer(1.0, self.check_claims)
+        wall_timer(self, 1.0, self.check_claims)
         self.world_finished = follow_world(self, params['keep_running'])
         if self.lockstep:
-            self.create_timer(0.01, self.on_lockstep_timer)
+            wall_timer(self, 0.01, self.on_lockstep_timer)
         else:
-            self.create_timer(params.timer_period(sc.dt), self.on_timer)
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     leader_lost = property(lambda self: self.controller.leader.lost,
                            doc='Whether the agents apply the uninformed law (leader lost).')
@@ -258,10 +269,17 @@ class AgentNode(Node):
         self.flush()
 
     def publish_commands(self, u: np.ndarray, stamp_ns: int) -> None:
-        """Queue one command per hosted agent (serialised) and send what the world can
-        receive."""
+        """Queue one command per hosted agent (serialised), after its adaptive state for a
+        law with one, and send what the world can receive."""
         encode = self.encoder.encode
-        self.sent = [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
+        sent = []
+        if self.state_pubs:
+            # Before the commands: the world's step is complete with both; sent first, the
+            # state is not what keeps it waiting.
+            m, encode_state = len(self.cmd_pubs), self.state_encoder.encode
+            sent = [(m + row, encode_state(stamp_ns, values))
+                    for row, values in enumerate(self.controller.state_values().tolist())]
+        self.sent = sent + [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
         self.outbox.extend(self.sent)
         self.flush()
 
@@ -277,7 +295,7 @@ class AgentNode(Node):
             return
         waiting, matched = [], self.matched
         for row, msg in self.outbox:
-            pub = self.cmd_pubs[row]
+            pub = self.pubs[row]
             if matched[row] or pub.get_subscription_count() > 0:
                 matched[row] = True
                 pub.publish(msg)

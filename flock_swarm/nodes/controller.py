@@ -3,8 +3,10 @@
 :class:`AgentController` is what an agent node (one agent, or a container of many) decides:
 which inputs belong to which step, when a step can be answered (the leader's state or its
 timeout), the commands (the same law functions as ``sim``,
-:func:`flock_swarm.core.laws.base.group_control`) and the adaptive state. The node turns
-messages into its calls and its commands into messages. In lockstep, a step's odometry is
+:func:`flock_swarm.core.laws.base.group_control`) and the adaptive state, advanced as ``sim``
+advances it and told with each step's commands (:meth:`AgentController.state_values`, the
+state they were computed with: what ``sim`` records at that step). The node turns messages
+into its calls and its commands into messages. In lockstep, a step's odometry is
 queued as bytes and stored at once (:class:`OdometryInbox`).
 """
 
@@ -17,11 +19,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from flock_swarm.contract import state_labels
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fault,
                                      non_finite_rows, state_blew_up)
-from flock_swarm.core.laws.base import advance_state, group_control
+from flock_swarm.core.laws.base import advance_state, group_control, group_sums
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -144,6 +147,8 @@ class AgentController:
 
     :ivar answered: the last step answered (``-1`` before the first).
     :ivar zeroed: the hosted agents whose command of the last answer was replaced by zero.
+    :ivar state: the hosted agents' adaptive state the last commands were computed with
+        (before it advanced), ``{key: (m, ...)}``; empty for a law without.
     """
 
     def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
@@ -180,6 +185,10 @@ class AgentController:
         self.non_finite: Counter = Counter()
         self.non_finite_policy = non_finite
         self.zeroed: list[int] = []
+        self.state = self.swarm.subset(self.ids).state
+        shapes = {key: value.shape[1:] for key, value in self.state.items()}
+        #: The labels of one agent's state (:func:`flock_swarm.contract.state_labels`).
+        self.state_labels = state_labels(shapes)
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered).
@@ -258,7 +267,7 @@ class AgentController:
         for old in [s for s in self.pending if s < k]:
             del self.pending[old]
         self.answered = k
-        return self.command(*box.swarm(self.sc.n_agents), k)
+        return self.command(*box.swarm(self.sc.n_agents), k=k)
 
     def realtime_answer(self, now: float) -> np.ndarray | None:
         """Realtime: return the commands for the latest known states (``None`` before every
@@ -269,13 +278,14 @@ class AgentController:
         q, p, leader = latest.swarm(self.sc.n_agents)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
-        return self.command(q, p, None if self.leader.lost else leader, self.latest_step)
+        return self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
 
     def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
-                k: int) -> np.ndarray:
-        """Return ``u`` of the hosted agents for the swarm state ``(q, p)`` of step ``k``;
-        advance gains.
+                k: int = 0) -> np.ndarray:
+        """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains.
 
+        :param k: the step the state is of (the law's time ``t = k dt``, and the step a
+            fault names).
         :raises RunFault: when the law raised, returned the wrong shape, or (unless
             ``non_finite`` is ``'zero'``) a non-finite command (see the class).
         """
@@ -284,15 +294,19 @@ class AgentController:
         if self.reselector is not None:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
+        t = k * dt
 
         def alone(row: int) -> np.ndarray:
             one = ids[row:row + 1]
-            return group_control(law, one, q, p, edges, leader, self.swarm.subset(one), dt)
+            return group_control(law, one, q, p, edges, leader, self.swarm.subset(one), dt, t)
         u = evaluate_law(law, k, ids, self.sc.dim,
-                         lambda: group_control(law, ids, q, p, edges, leader, group, dt), alone)
+                         lambda: group_control(law, ids, q, p, edges, leader, group, dt, t),
+                         alone)
         if group.state:
-            evaluate_state(law, k, ids,
-                           lambda: advance_state(law, q[ids], p[ids], leader, group, dt))
+            self.state = {key: value.copy() for key, value in group.state.items()}
+            evaluate_state(law, k, ids, lambda: advance_state(
+                law, q[ids], p[ids], leader, group, dt,
+                lambda: group_sums(law, ids, q, p, edges), t))
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
         self.zeroed = []
@@ -310,6 +324,14 @@ class AgentController:
             self.non_finite[i] += 1
         self.zeroed = [] if blew_up else ids[bad].tolist()
         return np.where(bad[:, None], 0.0, u)
+
+    def state_values(self) -> np.ndarray:
+        """Return :attr:`state` one row per hosted agent, the values of :attr:`state_labels`.
+
+        :return: shape ``(m, len(state_labels))``.
+        """
+        m = len(self.ids)
+        return np.concatenate([value.reshape(m, -1) for value in self.state.values()], axis=1)
 
 
 class OdometryInbox(StepInbox):

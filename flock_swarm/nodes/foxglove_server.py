@@ -69,7 +69,8 @@ class LiveBridge(Node):
         self.counts: dict[str, int] = {}
         self.time_ns = 0
         self.subscriptions_by_topic = {}
-        for topic, type_name in contract_topics(sc.n_agents, self.get_namespace()):
+        for topic, type_name in contract_topics(sc.n_agents, self.get_namespace(),
+                                                bool(sc.law.initial_state(1))):
             sub = self.create_subscription(
                 message_class(type_name), topic, self._forward(topic, type_name), BRIDGE_QOS,
                 raw=True)

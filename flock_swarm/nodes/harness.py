@@ -9,8 +9,8 @@ reproduction runs through the nodes (:mod:`flock_swarm.reproduce.execution`):
 - :class:`InProcessSwarm` and :func:`run_in_process`: every node in this process on one
   executor (the agents in one container node);
 - :func:`run_processes`: every node as its own process (the ``ros2 run`` executables,
-  :func:`executable`), in the environment of :func:`process_environment`, ended by
-  :func:`stop`;
+  :func:`executable`), in the environment of :func:`process_environment`, supervised by
+  :class:`~flock_swarm.nodes.supervisor.Supervisor` (logs, watching, stopping in order);
 - :class:`SwarmRun`: what a finished run left in its output directory.
 
 The run ends when the world has recorded its last step: ``DIR/bag/`` (rosbag2 MCAP),
@@ -27,14 +27,13 @@ import json
 import os
 from pathlib import Path
 import shutil
-import signal
-import subprocess
 import sys
 import time
 from typing import Any, Callable, Iterable, TYPE_CHECKING
 
 from flock_swarm import contract
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.nodes.supervisor import LOG_DIR, Supervisor, report_death
 
 if TYPE_CHECKING:
     import numpy as np
@@ -45,20 +44,60 @@ if TYPE_CHECKING:
 
 #: Wall-clock bound [s] of one whole test run when the caller gives none (a hung run fails).
 RUN_TIMEOUT = 240.0
-#: Domain ids handed out by :func:`unique_domain`: [1, DOMAIN_SPAN]. Domain 0 is everybody's
-#: default, and ids above are left to the demo and to people's own runs.
-DOMAIN_SPAN = 200
+#: Domain ids handed out by :func:`unique_domain`: the ranges the ROS 2 docs ("The
+#: ROS_DOMAIN_ID") recommend on Linux, 1-101 and 215-232, less 0 (everybody's default, left to
+#: people's own runs) and 215-222 (222 is scripts/demo's, the rest left to people's own runs).
+#: Ids 102-214 can clash with the ephemeral ports the OS hands out, and ids above 232 overflow
+#: the DDS port range.
+DOMAIN_RANGES = ((1, 101), (223, 232))
+#: How many ids :func:`unique_domain` hands out before one repeats.
+DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 
 _domains = itertools.count()
+#: The domain ids this process holds, with the open lock file of each (see unique_domain).
+_held: dict[int, Any] = {}
 
 
 def unique_domain() -> int:
-    """Return a ROS domain id not handed out before in this process, in [1, 200].
+    """Return a ROS domain id not handed out before in this process, in 1-101 or 223-232
+    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges), and held by no other process
+    of this machine.
 
-    Ids are spread over the range by process id, so two test processes on one machine are
-    unlikely to collide (200 ids a process before one repeats).
+    Ids are spread over the ranges by process id, and each is held with a lock file (under
+    the temporary directory, ``flock_swarm_domains/``) until the process exits: a world
+    refuses to start beside another on its domain (docs/ros.md), so two test processes on
+    one machine (discovery is limited to it) must not meet. When every id is held, the next
+    one is shared (111 ids a process before one repeats).
     """
-    return 1 + (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+    domain = 0
+    for _ in range(DOMAIN_SPAN):
+        n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
+        (lo, hi), (second, _) = DOMAIN_RANGES
+        domain = lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+        if _hold(domain):
+            return domain
+    return domain
+
+
+def _hold(domain: int) -> bool:
+    """Hold ``domain`` for this process (a lock on its file); return whether it is ours."""
+    import fcntl
+    import tempfile
+    if domain in _held:
+        return True
+    folder = Path(tempfile.gettempdir()) / 'flock_swarm_domains'
+    try:
+        folder.mkdir(exist_ok=True)
+        lock = open(folder / f'{domain}.lock', 'a')
+    except OSError:
+        return True  # no lock files here: spread by process id only, as before
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return False
+    _held[domain] = lock
+    return True
 
 
 def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
@@ -80,11 +119,13 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
     """
     import yaml
 
+    from flock_swarm.core.network import refuse_in_ros
     from flock_swarm.presets import prepare
 
     if seed is not None and seed < 0:
         raise ScenarioError('--seed', f'must be >= 0, got {seed}')
     sc, _ = prepare(name, overrides, seed, allow_unstable=allow_unstable)
+    refuse_in_ros(sc.network)
     out.mkdir(parents=True, exist_ok=True)
     path = out / 'scenario.yaml'
     path.write_text(yaml.safe_dump(sc.raw, sort_keys=False))
@@ -93,7 +134,8 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
 
 def read_scenario(path: Path) -> Scenario:
     """Return the validated scenario of a resolved scenario file."""
-    from flock_swarm.core.scenario import parse_scenario, parse_yaml
+    from flock_swarm.core.scenario import parse_scenario
+    from flock_swarm.scenario_yaml import parse_yaml
     return parse_scenario(parse_yaml(Path(path).read_text()))
 
 
@@ -236,7 +278,8 @@ class InProcessSwarm:
         """
         from flock_swarm.contract import contract_topics
         from flock_swarm.foxglove_ws import LiveSink
-        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace()))
+        live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace(),
+                                        bool(self.world.stepper.state)))
         self.world.sinks.append(LiveSink(live))
 
     def parameters(self, **values) -> list:
@@ -282,6 +325,8 @@ class InProcessSwarm:
         world = self.world
         deadline = time.monotonic() + timeout
         while not condition():
+            if world.refusal is not None:
+                raise world.refusal
             if world.done:
                 raise AssertionError(f'the run ended ({world.status} at step {world.k}) '
                                      f'before {what}')
@@ -290,15 +335,20 @@ class InProcessSwarm:
                                      f'(the world is at step {world.k})')
             self.executor.spin_once(timeout_sec=0.1)
 
-    def spin_to_end(self, timeout: float | None = None) -> None:
+    def spin_to_end(self, timeout: float | None = None,
+                    stop: Callable[[], Any] | None = None) -> None:
         """Spin until the world is done (or the context is shut down, by Ctrl-C).
 
         :param timeout: wall-clock bound [s] (``None``: no limit).
+        :param stop: ends the spin early when it returns a true value (a stop signal came:
+            :class:`~flock_swarm.console.StopSignals`), checked every 0.1 s at most.
         :raises TimeoutError: after ``timeout`` seconds.
         """
         started = time.monotonic()
-        while self.context.ok() and not self.world.done:
+        while self.context.ok() and not self.world.done and not (stop and stop()):
             self.executor.spin_once(timeout_sec=0.1)
+            if self.world.refusal is not None:
+                raise self.world.refusal
             if timeout is not None and time.monotonic() - started > timeout:
                 raise TimeoutError(f'the run did not finish within {timeout:g} s')
 
@@ -350,14 +400,18 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                    progress: Callable[[str], None] | None = None,
                    timeout: float | None = None, agents: Iterable[int] | None = None,
                    world_params: dict | None = None, realtime_factor: float = 1.0,
-                   live: LiveServer | None = None, allow_unstable: bool = False) -> dict:
+                   live: LiveServer | None = None, allow_unstable: bool = False,
+                   stop: Callable[[], Any] | None = None) -> dict:
     """Run world, leader and the agents in this process to the end (:class:`InProcessSwarm`).
 
-    Ctrl-C ends the run early; the world still writes what it recorded.
+    Ctrl-C, or ``stop`` returning a true value, ends the run early; the world still writes
+    what it recorded (status ``interrupted``).
 
     :param scenario: the resolved scenario file (or a preset name or a file: it is resolved
         into ``out/scenario.yaml``).
     :param timeout: wall-clock limit [s] of the whole run (``None``: none).
+    :param stop: polled while the run goes on: a stop signal came
+        (:class:`~flock_swarm.console.StopSignals`).
     :return: the summary.
     :raises TimeoutError: after ``timeout`` seconds.
 
@@ -369,7 +423,7 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
                         realtime_factor=realtime_factor, live=live,
                         allow_unstable=allow_unstable) as swarm:
         try:
-            swarm.spin_to_end(timeout)
+            swarm.spin_to_end(timeout, stop)
         except KeyboardInterrupt:
             pass
         swarm.world.close()
@@ -390,24 +444,6 @@ def executable(name: str) -> list[str]:
     if found:
         return [found]
     return [sys.executable, '-m', MODULES.get(name, f'flock_swarm.nodes.{name}')]
-
-
-def stop(procs: list, timeout: float = 10.0) -> None:
-    """End processes as Ctrl-C would (SIGINT), killing those still there after ``timeout``.
-
-    One deadline for all: a hundred agent processes that ignore SIGINT are killed after
-    ``timeout``, not after ``timeout`` each.
-    """
-    for proc in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + timeout
-    for proc in procs:
-        try:
-            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 #: Fast DDS profile of swarms of several hundred agents across processes (docs/ros.md).
@@ -436,13 +472,18 @@ def process_environment(n_agents: int, domain_id: int, base: dict | None = None)
 
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
-                  log=None, realtime_factor: float = 1.0, container: bool = False,
+                  realtime_factor: float = 1.0, container: bool = False,
                   world_params: dict | None = None, live: LiveServer | None = None,
-                  allow_unstable: bool = False) -> dict:
+                  allow_unstable: bool = False, stop: Callable[[], int | None] | None = None,
+                  say: Callable[[str], None] | None = None) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
-    all agents share one (``agents``).
+    all agents share one (``agents``). The processes are supervised as ``ros2 launch`` does
+    (:mod:`flock_swarm.nodes.supervisor`): their output goes to ``out/logs/<name>.log``; a
+    process that dies ends the run (the world finalises with status ``failed``, and the dead
+    process and the tail of its log are printed); a stop signal is forwarded to the world
+    first, then the others are stopped. No child outlives the call.
 
     :param scenario: the resolved scenario file.
     :param out: the output directory.
@@ -450,7 +491,6 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param domain_id: ``ROS_DOMAIN_ID`` of every process.
     :param step_timeout: the world's per-step timeout [s].
     :param timeout: wall-clock limit [s] of the whole run.
-    :param log: file object receiving the agents' and leader's output (default: discarded).
     :param realtime_factor: realtime mode: simulated seconds per wall second.
     :param container: host every agent in one ``agents`` process.
     :param world_params: further parameters of the world node.
@@ -458,10 +498,13 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         bridge node spun by a thread of this process
         (:class:`~flock_swarm.nodes.foxglove_server.BackgroundBridge`), or None.
     :param allow_unstable: tell every node to accept a ``dt`` beyond a stability bound.
-    :return: the summary.
+    :param stop: returns the stop signal this process received (``None``: none yet), polled
+        while the run goes on (:class:`~flock_swarm.console.StopSignals`).
+    :param say: where the report of a dead process goes (default: stderr).
+    :return: the summary the world wrote (empty when it wrote none).
+    :raises TimeoutError: after ``timeout`` seconds (the world is stopped first).
     """
     sc = read_scenario(scenario)
-    env = process_environment(sc.n_agents, domain_id)
 
     def ros_args(values: dict) -> list[str]:
         out_args = ['--ros-args']
@@ -470,41 +513,47 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
         return out_args
 
     base = node_parameters(scenario, mode, realtime_factor, allow_unstable)
-    sink = log if log is not None else subprocess.DEVNULL
-    others = [subprocess.Popen(executable('leader') + ros_args(base), env=env, stdout=sink,
-                               stderr=sink)]
-    hosts = [executable('agents') + ros_args(base)] if container else [
-        executable('agent') + ros_args(dict(base, agent_id=i)) for i in range(sc.n_agents)]
-    for command in hosts:
-        others.append(subprocess.Popen(command, env=env, stdout=sink, stderr=sink))
+    children = Supervisor(out / LOG_DIR, process_environment(sc.n_agents, domain_id))
     bridge = None
-    if live is not None:
-        from flock_swarm.nodes.foxglove_server import BackgroundBridge
-        bridge = BackgroundBridge(live, domain_id, base)
-        # The bridge's subscriptions are best effort: it must have matched the leader's and
-        # the agents' publishers before the first step, and the world waits for it as one
-        # more subscriber of every odometry topic and for its markers' and metrics' one.
-        bridge.wait_matched([contract.absolute(name) for name in (
-            contract.LEADER_ODOM, contract.LEADER_ACCEL,
-            *(contract.cmd_topic(i) for i in range(sc.n_agents)))], 30.0)
-        world_params = dict(world_params or {}, expect_subscribers=len(hosts) + 1,
-                            expect_telemetry_subscribers=1)
-    world = subprocess.Popen(executable('world') + ros_args(
-        dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
-        env=env)
     try:
-        world.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        world.send_signal(signal.SIGINT)
-        world.wait(timeout=30)
-        raise TimeoutError(f'the run did not finish within {timeout:g} s') from None
+        children.start('leader', executable('leader') + ros_args(base))
+        if container:
+            children.start('agents', executable('agents') + ros_args(base))
+        else:
+            for i in range(sc.n_agents):
+                children.start(f'agent_{i}',
+                               executable('agent') + ros_args(dict(base, agent_id=i)))
+        if live is not None:
+            from flock_swarm.nodes.foxglove_server import BackgroundBridge
+            bridge = BackgroundBridge(live, domain_id, base)
+            # The bridge's subscriptions are best effort: it must have matched the leader's
+            # and the agents' publishers (their adaptive state's too, for a law with one)
+            # before the first step, and the world waits for it as one more subscriber of
+            # every odometry topic and for its markers' and metrics' one.
+            adaptive = range(sc.n_agents) if sc.law.initial_state(1) else ()
+            bridge.wait_matched([contract.absolute(name) for name in (
+                contract.LEADER_ODOM, contract.LEADER_ACCEL,
+                *(contract.cmd_topic(i) for i in range(sc.n_agents)),
+                *(contract.state_topic(i) for i in adaptive))], 30.0)
+            # One subscriber per agent host (every child so far but the leader), and the bridge.
+            world_params = dict(world_params or {}, expect_subscribers=len(children.children),
+                                expect_telemetry_subscribers=1)
+        world = children.start('world', executable('world') + ros_args(
+            dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
+            echo=sys.stderr)
+        outcome = children.watch(world, stop or (lambda: None), timeout)
     finally:
-        stop(others)
+        children.stop_all()
         if bridge is not None:
             silent = bridge.node.silent()
             if silent:
                 print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
                       file=sys.stderr, flush=True)
             bridge.close()
-    summary = out / 'summary.json'
-    return json.loads(summary.read_text()) if summary.is_file() else {}
+    path = out / 'summary.json'
+    summary = json.loads(path.read_text()) if path.is_file() else {}
+    if outcome.dead is not None:
+        report_death(outcome.dead, summary.get('steps'), say)
+    if outcome.timed_out:
+        raise TimeoutError(f'the run did not finish within {timeout:g} s')
+    return summary

@@ -28,13 +28,14 @@ from flock_swarm.nodes.fault_report import FaultReporter
 from flock_swarm.nodes.graph import agent_hosts, follow_world
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.wire import AccelEncoder, OdometryEncoder
 
 #: The leader's parameters, in the order they are read and checked.
 LEADER_PARAMS = COMMON_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each leader topic must have before the first '
-          'tick is answered (-1: the world plus one per node hosting agents)'),
+          'tick is answered (given as -1: the world plus one per node hosting agents; reads '
+          'back as that number once the leader has found them)'),
     Param('start_timeout', 30.0, 'seconds to wait for expect_subscribers'),
     KEEP_RUNNING,
 )
@@ -48,6 +49,8 @@ class LeaderNode(Node):
         init_node(super().__init__, 'leader', kwargs)
         params = self.params = NodeParameters(self, LEADER_PARAMS)
         self.scenario = sc = params.load_scenario()
+        # expect_subscribers: -1 reads back the number waited for, once it is known.
+        params.will_settle('expect_subscribers')
         params.declare()
         self.clock = StepClock(sc.dt)
         self.model = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
@@ -69,9 +72,9 @@ class LeaderNode(Node):
         self.failure: str | None = None
         if params['mode'] == 'lockstep':
             self.create_subscription(Clock, CLOCK, self.on_clock, qos_profile(CLOCK_QOS))
-            self.retry = self.create_timer(0.01, self.flush)
+            self.retry = wall_timer(self, 0.01, self.flush)
         else:
-            self.create_timer(params.timer_period(sc.dt), self.on_timer)
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     def on_clock(self, msg: Clock) -> None:
         """Advance to the tick's step and publish (a repeated tick republishes)."""
@@ -96,6 +99,8 @@ class LeaderNode(Node):
             waited = time.monotonic() - self.t0
             if (need is None or min(counts) < need) and waited < self.start_timeout:
                 return
+            if need is not None and self.expect < 0:
+                self.params.settle('expect_subscribers', need)
             self.matched = True
             self.retry.cancel()
         target, self.target = self.target, -1

@@ -15,6 +15,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from flock_swarm.core.graphs import EdgeList
+from flock_swarm.core.headline import Headline, lead_with
 from flock_swarm.contract import FRAME, MARKERS, METRICS, TELEMETRY_QOS, qos_profile
 from flock_swarm.nodes.wire import CdrWriter
 
@@ -160,14 +161,18 @@ class Telemetry:
     """The markers and ``/swarm/metrics`` of the steps the world observes, published and
     recorded (the world is a :class:`~flock_swarm.nodes.recording.RecordedNode`)."""
 
-    def __init__(self, node, radius: float, informed: np.ndarray) -> None:
+    def __init__(self, node, radius: float, informed: np.ndarray,
+                 headline: Headline = Headline()) -> None:
         """Create the two publishers on ``node``.
 
         :param node: the world node (its ``clock`` stamps the messages).
         :param radius: the interaction radius (the markers' scale).
         :param informed: which agents are informed (their colour).
+        :param headline: the scenario's headline: the metrics' first values (a viewer's
+            diagnostics panel lists them first).
         """
         self.node, self.radius, self.informed = node, radius, informed
+        self.headline = headline
         qos = qos_profile(TELEMETRY_QOS)
         self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, qos)
         self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, qos)
@@ -185,7 +190,8 @@ class Telemetry:
                 obs.q, obs.p, obs.leader.q, self.informed, obs.edges, t_ns, FRAME,
                 0.1 * self.radius), t_ns)
         if obs.metrics is not None:
-            values = dict(obs.metrics, rejected_messages=json.dumps(rejected))
+            values = lead_with(dict(obs.metrics, rejected_messages=json.dumps(rejected)),
+                               self.headline)
             node.publish_recorded(self.metrics_pub, metrics_message(
                 values, clock.stamp(obs.k), WARN if obs.problems else OK,
                 ', '.join(obs.problems) or 'ok'), t_ns)

@@ -30,11 +30,20 @@ import numpy as np
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.scenario import Scenario, parse_yaml
+from flock_swarm.core.network import refuse_in_ros
+from flock_swarm.core.scenario import Scenario
+from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.presets import load_mapping, prepare
 
+#: rclpy's parameter of every node: the node's ROS clock follows ``/clock`` when true.
+USE_SIM_TIME = 'use_sim_time'
 #: Parameters every rclpy node has; they are not scenario overrides.
-ROS_PARAMS = {'use_sim_time', 'start_type_description_service'}
+ROS_PARAMS = {USE_SIM_TIME, 'start_type_description_service'}
+#: How ``use_sim_time`` reads back on the leader and the agents (they accept either value).
+SIM_TIME_DESCRIPTION = (
+    'the node\'s ROS clock follows /clock (read at start). The node runs at the same speed '
+    'either way: its steps come from the world\'s /clock and odometry stamps, and its timers '
+    'run on the steady clock')
 #: The largest integer a ROS parameter holds (int64).
 INT64_MAX = 2 ** 63 - 1
 
@@ -266,11 +275,15 @@ class NodeParameters:
     :ivar scenario: the scenario (after :meth:`load_scenario`).
     """
 
-    def __init__(self, node, table: Sequence[Param]) -> None:
+    def __init__(self, node, table: Sequence[Param], sim_time_refused: str | None = None,
+                 sim_time_description: str = SIM_TIME_DESCRIPTION) -> None:
         """Read the parameters of ``table`` given to ``node`` (created by :func:`init_node`).
 
         :param node: the node, before it declared any parameter of its own.
         :param table: its parameters (:data:`COMMON_PARAMS` and its own).
+        :param sim_time_refused: the reason ``use_sim_time:=true`` is refused (the world's:
+            it publishes ``/clock`` itself); ``None``: accepted.
+        :param sim_time_description: how ``use_sim_time`` reads back (``ros2 param describe``).
         :raises ScenarioError: naming the first invalid parameter.
         """
         self.node = node
@@ -279,8 +292,16 @@ class NodeParameters:
         self.given = {param.name: plain(param.value)
                       for param in node.get_parameters(list(names))
                       if param.name not in ROS_PARAMS}
+        # rclpy declared it before us (and only logs a value of the wrong type).
+        self.sim_time = typed_value(USE_SIM_TIME, node.get_parameter(USE_SIM_TIME).value, False)
+        if self.sim_time and sim_time_refused is not None:
+            raise ScenarioError(USE_SIM_TIME, sim_time_refused)
+        self.sim_time_description = sim_time_description
         self.values = read_table(table, self.given)
         self.scenario: Scenario | None = None
+        #: Parameters the node settles once it knows their value (:meth:`settle`).
+        self._settled: set[str] = set()
+        self._settling = False
 
     def __getitem__(self, name: str) -> Any:
         """Return the value of parameter ``name``."""
@@ -307,6 +328,7 @@ class NodeParameters:
         sc, _ = prepare(base, seed=None if seed == -1 else seed,
                         extra=scenario_overrides(self.given, self.table, base),
                         allow_unstable=self.values['allow_unstable'])
+        refuse_in_ros(sc.network)
         self.values['seed'] = sc.seed
         self.scenario = sc
         return sc
@@ -324,7 +346,7 @@ class NodeParameters:
         declared = set()
         for param in self.table.values():
             self._declare(param.name, self.values[param.name], param.description,
-                          param.free_typed, param.read_only)
+                          param.free_typed, param.read_only and param.name not in self._settled)
             declared.add(param.name)
         for key, value in scenario_parameters(self.scenario).items():
             if key not in declared:
@@ -333,6 +355,56 @@ class NodeParameters:
         for name in self.given:
             if name not in declared:
                 self.node.undeclare_parameter(name)
+        # Read-only too: `ros2 param set NODE use_sim_time true` is refused with the reason
+        # instead of answering "successful" for a clock no timer of the node follows.
+        self._declare(USE_SIM_TIME, self.sim_time, self.sim_time_description)
+
+    @property
+    def settled(self) -> frozenset[str]:
+        """Return the parameters the node settles itself (:meth:`will_settle`)."""
+        return frozenset(self._settled)
+
+    def will_settle(self, name: str) -> None:
+        """Declare ``name`` (by :meth:`declare`) so that the node can :meth:`settle` it later.
+
+        rclpy offers no public way to change a read-only parameter, so such a parameter is
+        declared writable and a set-parameters callback refuses every change the node does not
+        make itself: ``ros2 param set`` is refused as for a read-only one.
+
+        :param name: a parameter of the table, before :meth:`declare`.
+        """
+        if not self._settled:
+            self.node.add_on_set_parameters_callback(self._refuse_outside_changes)
+        self._settled.add(name)
+
+    def settle(self, name: str, value: Any) -> None:
+        """Make parameter ``name`` (see :meth:`will_settle`) read back ``value``: a default the
+        node resolves once it knows it (``expect_subscribers`` -1 becomes the number of
+        subscribers waited for, known at the start). ``ros2 param set`` stays refused.
+
+        :param name: a parameter of the table.
+        :param value: the value in use, of the parameter's type.
+        """
+        from rclpy.parameter import Parameter
+        self.values[name] = value
+        self._settling = True
+        try:
+            result = self.node.set_parameters([Parameter(name, value=value)])[0]
+        finally:
+            self._settling = False
+        if not result.successful:
+            self.node.get_logger().warning(f'{name} reads back its given value, not {value!r}: '
+                                           f'{result.reason}')
+
+    def _refuse_outside_changes(self, params):
+        """Refuse a change of a settled parameter unless the node itself settles it."""
+        from rcl_interfaces.msg import SetParametersResult
+        for param in params:
+            if param.name in self._settled and not self._settling:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'parameter {param.name!r} cannot be set because it is read-only')
+        return SetParametersResult(successful=True)
 
     def _declare(self, name: str, value: Any, description: str, free_typed: bool = False,
                  read_only: bool = True) -> None:
@@ -342,6 +414,11 @@ class NodeParameters:
         node = self.node
         if node.has_parameter(name):
             node.undeclare_parameter(name)
-        node.declare_parameter(name, value, ParameterDescriptor(
-            description=description, read_only=read_only, dynamic_typing=free_typed),
-            ignore_override=True)
+        # The node's own declaration: the guard of settled parameters lets it through.
+        self._settling = True
+        try:
+            node.declare_parameter(name, value, ParameterDescriptor(
+                description=description, read_only=read_only, dynamic_typing=free_typed),
+                ignore_override=True)
+        finally:
+            self._settling = False

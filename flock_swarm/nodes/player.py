@@ -18,6 +18,7 @@ naming the option. See ``docs/replay.md``.
 """
 
 from dataclasses import dataclass, field
+import difflib
 import math
 from numbers import Integral
 from pathlib import Path
@@ -172,8 +173,12 @@ def select_topics(available: Iterable[str], topics: Sequence[str] | None = None,
     if topics is not None:
         missing = [name for name in topics if name not in available]
         if missing:
-            raise ReplayError('--topics', f"not in the bag: {', '.join(missing)} (the bag has "
-                              f"{', '.join(available) or 'no topics'})")
+            # The closest recorded names first: a typo (/leader/odm, leader/odom) is then
+            # answered with the name meant, not only a list of every topic of the bag.
+            close = difflib.get_close_matches(missing[0], available, n=3, cutoff=0.6)
+            hint = f"did you mean {' or '.join(close)}? " if close else ''
+            raise ReplayError('--topics', f"not in the bag: {', '.join(missing)} ({hint}the "
+                              f"bag has {', '.join(available) or 'no topics'})")
         if clock and CLOCK_TOPIC in topics:
             raise ReplayError('--topics', f'{CLOCK_TOPIC} cannot be replayed with --clock, '
                               f'which publishes {CLOCK_TOPIC} from bag time')
@@ -315,6 +320,10 @@ class Player(Node):
         if self._reader.warning:
             self._say(f'replay: warning: {self._reader.warning}')
         recorded = self._reader.topics()
+        if not recorded:
+            name = bag if not isinstance(bag, BagReader) else 'the bag'
+            raise ReplayError('BAG', f'{name} holds no topics, so nothing to replay (a '
+                              'recording stopped before its first message?)')
         selected = select_topics(recorded, topics, regex, exclude, clock)
         if clock and CLOCK_TOPIC in recorded:
             self._say(f'[replay] --clock: the recorded {CLOCK_TOPIC} is not replayed; '

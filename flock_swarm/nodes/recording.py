@@ -7,10 +7,13 @@ step); :class:`BagSink` queues them and writes them to the MCAP bag once a step.
 
 import json
 import os
+import shutil
 from itertools import groupby
 from operator import itemgetter
 from pathlib import Path
 from typing import Callable, Protocol
+
+import yaml
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
@@ -18,6 +21,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from flock_swarm import __version__
@@ -42,6 +46,35 @@ class MessageSink(Protocol):
 
     def close(self) -> None:
         """Deliver the rest and finish (idempotent)."""
+
+
+def provenance(sc: Scenario, real: Realization, mode: str) -> dict[str, str]:
+    """Return the run's provenance as the bag's ``flock_swarm`` metadata record holds it:
+    the scenario (JSON text), its name, seed, informed set (JSON), mode and version.
+
+    :param sc: the scenario.
+    :param real: its realisation (the informed set).
+    :param mode: ``lockstep`` or ``realtime``.
+    """
+    return {
+        'scenario': json_text(sc.raw, indent=None).strip(),
+        'scenario_name': sc.name,
+        'seed': str(sc.seed),
+        'informed': json.dumps(real.informed_ids),
+        'mode': mode,
+        'flock_swarm_version': __version__,
+    }
+
+
+def provenance_text(record: dict[str, str]) -> str:
+    """Return the text of ``/swarm/scenario``: the provenance record as a YAML mapping, its
+    scenario, seed and informed set as YAML values (the scenario as its YAML text shows it).
+
+    :param record: :func:`provenance`'s record.
+    """
+    data = dict(record, scenario=json.loads(record['scenario']), seed=int(record['seed']),
+                informed=json.loads(record['informed']))
+    return yaml.safe_dump(data, sort_keys=False, width=float('inf'))
 
 
 class BagSink:
@@ -70,7 +103,10 @@ class BagSink:
         if path.exists() and any(path.iterdir()):
             raise ScenarioError('out_dir', f'{path} already holds a bag; choose another out_dir')
         # Every schema is found before the bag file exists: a failure leaves nothing behind.
-        for msg_type in (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray):
+        # The agents' adaptive state is a topic only for a law that has one.
+        types = (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray) \
+            + ((JointState,) if real.agents.state else ())
+        for msg_type in types:
             try:
                 message_definition(type_name_of(msg_type))
             except DefinitionNotFoundError as exc:
@@ -85,14 +121,7 @@ class BagSink:
         except OSError as exc:
             raise ScenarioError('out_dir', f'cannot write to {path.parent}: {exc.strerror}') \
                 from None
-        self.bag.add_metadata('flock_swarm', {
-            'scenario': json_text(sc.raw, indent=None).strip(),
-            'scenario_name': sc.name,
-            'seed': str(sc.seed),
-            'informed': json.dumps(real.informed_ids),
-            'mode': mode,
-            'flock_swarm_version': __version__,
-        })
+        self.bag.add_metadata('flock_swarm', provenance(sc, real, mode))
         self.path = path
         self.failed = failed
         self.error: str | None = None
@@ -139,6 +168,24 @@ class BagSink:
         except OSError:
             pass
         self.failed(self.error)
+
+    @property
+    def empty(self) -> bool:
+        """Whether the bag is open and no message was written or queued to it (the run was
+        stopped before it began)."""
+        return (not self.records and self.bag is not None
+                and not any(self.bag.message_counts.values()))
+
+    def discard(self) -> None:
+        """Remove the bag directory: a run stopped before anything was recorded leaves no
+        empty bag to look like a recording (and ``swarm --out`` can be used again)."""
+        self.records = []
+        bag, self.bag = self.bag, None
+        try:
+            if bag is not None:
+                bag.abandon()
+        finally:
+            shutil.rmtree(self.path, ignore_errors=True)
 
     def close(self) -> None:
         """Write what is queued, finalise the bag (MCAP summary and ``metadata.yaml``).

@@ -11,7 +11,8 @@ from typing import Callable
 
 from rclpy.node import Node
 
-from flock_swarm.console import EXIT_USAGE
+from flock_swarm.console import (EXIT_FAILURE, EXIT_SIGNAL, EXIT_USAGE, FAIL_SIGNAL,
+                                 StopSignals)
 from flock_swarm.core.errors import ScenarioError, one_line
 
 
@@ -25,34 +26,69 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
+def wall_timer(node: Node, period: float, callback: Callable[[], None]):
+    """Return a timer of ``node`` on the steady clock: it fires every ``period`` wall seconds
+    whatever ``use_sim_time`` says.
+
+    The nodes' timers time waits, retries and realtime pacing in wall time; the simulation's
+    time is in the stamps. On the node's ROS clock they would wait for ``/clock`` under
+    ``use_sim_time:=true``: the world (which publishes it) never started, and the leader and
+    the agents slowed from about 500 to 22 steps per second.
+
+    :param node: the node.
+    :param period: seconds of wall time between calls.
+    :param callback: called on every tick.
+    """
+    from rclpy.clock import Clock, ClockType
+    return node.create_timer(period, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None,
-             until: Callable[[Node], bool] | None = None) -> int:
+             until: Callable[[Node], bool] | None = None,
+             on_fail: Callable[[Node], None] | None = None) -> int:
     """Run one node as in ros2/demos: init, spin, clean shutdown; return the exit status.
 
     Invalid configuration is reported as one line on stderr with exit status 2. The node
-    spins on :func:`make_executor`'s executor. SIGINT and SIGTERM only end the spin: the
-    context stays valid until the node is closed and destroyed, so no callback meets an
-    invalid context (rclpy's own handlers shut it down under a running callback).
+    spins on :func:`make_executor`'s executor. A stop signal (SIGINT, SIGTERM, SIGHUP: see
+    :class:`~flock_swarm.console.StopSignals`) only ends the spin, at any moment (while the
+    node is being built too): the context stays valid until the node is closed and
+    destroyed, so no callback meets an invalid context (rclpy's own handlers shut it down
+    under a running callback), and the exit status is the signal's
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`: 130, 143, 129).
 
     :param name: executable name (prefix of error lines).
     :param factory: builds the node (after ``rclpy.init``).
     :param args: command-line arguments (``None``: ``sys.argv``).
     :param until: optional condition ending the spin (the world ends after its last step).
+    :param on_fail: when given, :data:`~flock_swarm.console.FAIL_SIGNAL` (a supervisor saw
+        another process of the run die) ends the spin too: ``on_fail`` gets the node before
+        it is closed, and the exit status is :data:`~flock_swarm.console.EXIT_FAILURE`.
     :return: the exit status.
     """
-    signalled: list[int] = []
-    previous_handlers = {sig: signal.signal(sig, lambda number, frame: signalled.append(number))
-                         for sig in (signal.SIGINT, signal.SIGTERM)}
+    failed: list[int] = []
+    previous = None
+    if on_fail is not None:
+        previous = signal.signal(FAIL_SIGNAL, lambda number, frame: failed.append(number))
     try:
-        return _spin(name, factory, args, until, signalled)
+        with StopSignals() as stop:
+            status, stopped = _spin(name, factory, args, until,
+                                    lambda: bool(stop.received or failed),
+                                    lambda node: on_fail(node) if failed else None)
     finally:
-        for sig, handler in previous_handlers.items():
-            signal.signal(sig, handler)
+        if previous is not None:
+            signal.signal(FAIL_SIGNAL, previous)
+    # A signal that comes while the node closes after its run ended by itself changes nothing.
+    if status != 0 or not stopped:
+        return status
+    return EXIT_SIGNAL[stop.first] if stop.received else EXIT_FAILURE
 
 
 def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
-          until: Callable[[Node], bool] | None, signalled: list[int]) -> int:
-    """:func:`run_node` with its signal handlers installed (``signalled`` lists the signals)."""
+          until: Callable[[Node], bool] | None, signalled: Callable[[], bool],
+          before_close: Callable[[Node], None]) -> tuple[int, bool]:
+    """:func:`run_node` with its signal handlers installed: return the exit status and
+    whether a signal ended the spin (``signalled``: whether one came; ``before_close`` gets
+    the node before it is closed)."""
     import rclpy
     from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.logging import LoggingSeverity, get_logger_level, set_logger_level
@@ -71,24 +107,26 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
         # params file): rcl's message, without the C source locations it appends.
         reason = re.split(r'(?:\. Error: |, at /)', reason, maxsplit=1)[0]
         print(f'{name}: error: --ros-args: {one_line(reason)}', file=sys.stderr)
-        return EXIT_USAGE
+        return EXIT_USAGE, False
     if get_logger_level('rcl') == LoggingSeverity.FATAL:
         # Unless --ros-args --log-level set the rcl logger's level itself.
         set_logger_level('rcl', previous)
     node = None
     executor = None
     status = 0
+    stopped = False
     try:
         node = factory()
         executor = make_executor()
         executor.add_node(node)
-        while not signalled and rclpy.ok() and (until is None or not until(node)):
+        while not (stopped := signalled()) and rclpy.ok() and (until is None or not until(node)):
             executor.spin_once(timeout_sec=0.1)
     except ScenarioError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
         status = EXIT_USAGE
     finally:
         if node is not None:
+            before_close(node)
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
@@ -97,4 +135,4 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return status
+    return status, stopped

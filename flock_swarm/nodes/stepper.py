@@ -3,7 +3,8 @@
 :class:`WorldStepper` owns what the world node decides: the open step and the commands
 received for it, the step timeout and the agents that missed it (zero command), the
 leader's buffered states and its loss (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`),
-the resend policy of a stalled step, the integration (the same
+the resend policy of a stalled step, the agents' adaptive state of each step (a law's
+``h_i``, recorded as ``sim`` records it), the integration (the same
 :func:`~flock_swarm.core.dynamics.step_agents` as ``sim``), the faults that end the run (a
 peer that stopped answering or left the ROS graph, a fault a node reported), the run log
 and the summary. The
@@ -14,17 +15,21 @@ lockstep, a step's commands are queued as bytes and handed over at once (:class:
 
 import bisect
 import json
+import math
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from flock_swarm.contract import state_labels, state_slices
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
+from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
-from flock_swarm.core.run import Recorder, RunLog, SimResult, build_summary
+from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary, observed_pairs,
+                                  static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.summary import with_failure
 from flock_swarm.core.faults import agents_text
@@ -144,10 +149,12 @@ def _setting(name: str, description: str, check: Callable[[Any], bool]) -> Param
 
 #: The world's settings as parameters: description and the check each value must pass.
 SETTING_PARAMS = (
+    # Finite, as swarm's --step-timeout and --start-timeout: with .inf a missing agent would
+    # hold the world forever.
     _setting('step_timeout', 'lockstep: seconds to wait for commands before a missing agent '
-             'gets a zero command', lambda v: v > 0),
+             'gets a zero command', lambda v: 0 < v < math.inf),
     _setting('start_timeout', 'lockstep: seconds to wait for agents and leader to appear and '
-             'answer step 0 before starting anyway', lambda v: v >= 0),
+             'answer step 0 before starting anyway', lambda v: 0 <= v < math.inf),
     _setting('marker_every', 'publish markers every N steps', lambda v: v >= 1),
     _setting('metrics_every', 'publish metrics every N steps', lambda v: v >= 1),
     _setting('staleness', 'realtime: seconds a held command (or the leader state) stays valid; '
@@ -214,6 +221,7 @@ class WorldStepper:
         self.scenario, self.settings, self.log = sc, settings, log
         self.lockstep = settings.lockstep
         self.real = realize(sc)
+        self.static = static_graph(sc, self.real)
         self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
         self.intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
         n = sc.n_agents
@@ -229,6 +237,14 @@ class WorldStepper:
         self.last_leader = LeaderState(sc.leader.position.copy(), sc.leader.velocity.copy(),
                                        np.zeros(sc.dim))
         self.leader = LeaderWatch()
+        # The agents' adaptive state (empty for a law without): the value of every agent at
+        # the open step, an agent's last one held until its next comes (its initial value
+        # before), and the agents whose state of the open lockstep step is in.
+        self.state = {key: value.copy() for key, value in self.real.agents.state.items()}
+        shapes = {key: value.shape[1:] for key, value in self.state.items()}
+        self.state_labels = state_labels(shapes)
+        self.state_layout = state_slices(shapes)
+        self.state_in: set[int] = set()
         self.missed = np.zeros(n, dtype=int)
         # Agents that have sent a command, and the steps each has missed since its last.
         self.heard = np.zeros(n, dtype=bool)
@@ -297,6 +313,22 @@ class WorldStepper:
             self.command_rows = u
             self.heard[:] = True
 
+    def agent_state(self, i: int, k: int, values: Sequence[float]) -> None:
+        """Take agent ``i``'s (checked) adaptive state of step ``k``: the values of
+        :attr:`state_labels`, in order.
+
+        Lockstep: the state of the open step counts (it completes the step with the
+        commands); one of the step just closed is a repeat, or came after the step was
+        closed without it (its last state was recorded). Realtime: it is held until the next.
+        """
+        if self.lockstep:
+            if not self.started or self.done or k != self.k:
+                return
+            self.state_in.add(i)
+        row = np.asarray(values, dtype=float)
+        for key, shape, part in self.state_layout:
+            self.state[key][i] = row[part].reshape(shape)
+
     def leader_state(self, k: int, now: float, q: np.ndarray | None = None,
                      p: np.ndarray | None = None, a: np.ndarray | None = None) -> None:
         """Take the leader's (checked) odometry ``q, p`` or acceleration ``a`` of step ``k``."""
@@ -349,6 +381,7 @@ class WorldStepper:
         """Open the current step: no command yet, its timeout and first resend ahead."""
         self.commands = {}
         self.command_rows = None
+        self.state_in = set()
         self.step_began = now
         self.deadline = now + self.settings.step_timeout
         if self.k == 0:
@@ -378,9 +411,11 @@ class WorldStepper:
         self.resend_at = now + self.resend_wait
 
     def complete(self) -> bool:
-        """Return whether the open lockstep step has every command and the leader's state."""
+        """Return whether the open lockstep step has every command and the leader's state
+        (and, for a law with adaptive state, every agent's)."""
+        n = self.scenario.n_agents
         return (self.lockstep and self.started and not self.done
-                and len(self.commands) == self.scenario.n_agents
+                and len(self.commands) == n and (not self.state or len(self.state_in) == n)
                 and (self.leader.lost
                      or (self.k in self.leader_odom and self.k in self.leader_accel)))
 
@@ -410,6 +445,13 @@ class WorldStepper:
         answered[missing] = False
         self.silent_steps[answered] = 0
         self.silent_steps[missing] += 1
+        # An agent without its command is told above; one whose command came without its
+        # state is told here.
+        silent = [i for i in range(n) if i not in self.state_in and i not in missing] \
+            if self.state else []
+        if silent:
+            self.log.warning(f'step {k}: no adaptive state from agent(s) {silent} within '
+                             f'{self.settings.step_timeout:g} s; their last state is recorded')
         if leader_missing:
             self.leader_missed += 1
             self.lose_leader()
@@ -542,9 +584,10 @@ class WorldStepper:
         leader = self.last_leader
         edges = disk_graph(self.q, law.radius, law.strict_radius)
         last = k >= sc.steps
+        covered, radius = observed_pairs(sc, self.real, self.q, self.static, edges)
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
-                                   self.real.agents.informed, edges, law.radius, last,
-                                   non_finite_commands=self.non_finite.copy())
+                                   self.real.agents.informed, covered, radius, last,
+                                   non_finite_commands=self.non_finite.copy(), **self.state)
         if now is not None:
             self.metrics_now = now
         events = self.leader.events
@@ -584,8 +627,7 @@ class WorldStepper:
         sc, m = self.scenario, self.metrics_now
         return (f'[world] t = {self.k * sc.dt:.2f}/{sc.duration:g} s  step {self.k}/{sc.steps}'
                 f'  {self.k / max(now - self.t_wall0, 1e-9):.1f} steps/s'
-                f'  eta = {m.get("eta", 0.0):.2f}'
-                f'  mismatch = {m.get("velocity_mismatch_max", 0.0):.3g}'
+                f'  {progress_text(m, sc.headline)}'
                 f'  missed = {int(self.missed.sum())}')
 
     # -- the end ------------------------------------------------------------------------------
@@ -601,8 +643,9 @@ class WorldStepper:
         return True
 
     def result(self, now: float, rejected: dict, duplicates: list[int],
-               bag_error: str | None, bag: str | None) -> SimResult | None:
-        """Return the run so far (``None`` before anything was recorded).
+               bag_error: str | None, bag: str | None) -> SimResult:
+        """Return the run so far (no time series, and no measures in the summary, when it
+        ended before anything was recorded: stopped before its first step).
 
         :param now: the time (for the wall time).
         :param rejected: the rejected messages by reason (the node's input guard).
@@ -612,8 +655,6 @@ class WorldStepper:
         :return: the summary (``docs/outputs.md``) and the recorded time series.
         """
         log = self.run_log
-        if not log.rec.count:
-            return None
         series = log.rec.arrays()
         summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
                                 self.status)

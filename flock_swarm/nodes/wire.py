@@ -1,4 +1,5 @@
-"""CDR encoding and decoding of the messages every step carries: Odometry, AccelStamped, Clock.
+"""CDR encoding and decoding of the messages every step carries: Odometry, AccelStamped, Clock,
+and the agents' adaptive state (JointState).
 
 A lockstep step moves ``N`` odometry messages to every agent host and ``N`` commands back.
 Through rclpy's typed API each of them is built as nested Python message objects and
@@ -6,7 +7,8 @@ Through rclpy's typed API each of them is built as nested Python message objects
 23 us one ``geometry_msgs/AccelStamped`` on the project's machines, more than everything
 else a step does (docs/performance.md). The nodes therefore subscribe raw (``raw=True``: the
 serialised bytes) and publish bytes, and this module reads and writes the three fixed
-layouts with :mod:`struct` at a few microseconds per message.
+layouts, and the state's layout fixed by its labels, with :mod:`struct` at a few microseconds
+per message.
 
 The format is the OMG CDR that rmw_fastrtps and rmw_cyclonedds put on the wire (XCDR1, as
 ROS 2 Jazzy uses it): a 4-byte encapsulation header (``00 01``: little-endian, ``00 00``:
@@ -45,6 +47,7 @@ class _Layout:
     """The :class:`struct.Struct` objects of one byte order."""
 
     def __init__(self, order: str) -> None:
+        self.order = order
         self.u32 = struct.Struct(order + 'I')
         self.time = struct.Struct(order + 'iI')
         self.vec3 = struct.Struct(order + '3d')
@@ -121,6 +124,35 @@ def decode_accel(data: bytes) -> tuple[int, str, tuple]:
     return ns, frame, lay.vec3.unpack_from(data, accel)
 
 
+def decode_state(data: bytes) -> tuple[int, str, tuple[str, ...], tuple[float, ...]]:
+    """Return ``(stamp_ns, frame_id, names, positions)`` of a serialised
+    ``sensor_msgs/JointState``: an agent's adaptive state (labels, values), see
+    :data:`flock_swarm.contract.STATE_TYPE`. Its ``velocity`` and ``effort`` are not read.
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay = _layout(data)
+    ns, frame, end = _header(data, lay)
+    count_at = _align(end, 4)
+    _need(data, count_at + 4, 'JointState')
+    (count,) = lay.u32.unpack_from(data, count_at)
+    names, end = [], count_at + 4
+    # Each name takes 5 bytes at least: a count larger than the bytes left is no message.
+    if count > len(data) - end:
+        raise MalformedMessage(f'a JointState of {count} names in {len(data)} bytes')
+    for _ in range(count):
+        name, end = _string(data, _align(end, 4), lay)
+        names.append(name)
+    count_at = _align(end, 4)
+    _need(data, count_at + 4, 'JointState')
+    (count,) = lay.u32.unpack_from(data, count_at)
+    values = _align(count_at + 4, 8) if count else count_at + 4
+    # The values, then at least the counts of velocity and effort.
+    _need(data, values + 8 * count + 8, 'JointState')
+    positions = struct.unpack_from(f'{lay.order}{count}d', data, values)
+    return ns, frame, tuple(names), positions
+
+
 def decode_clock(data: bytes) -> int:
     """Return the time [ns] of a serialised ``rosgraph_msgs/Clock``.
 
@@ -187,6 +219,37 @@ class AccelEncoder(_Encoder):
     def __init__(self, frame: str = FRAME) -> None:
         """Create the encoder."""
         super().__init__((frame,), ACCEL_BYTES, (0,))
+
+
+class StateEncoder:
+    """Serialised ``sensor_msgs/JointState`` of one agent's adaptive state in frame ``world``:
+    ``encode(ns, values)``, the labels fixed (:func:`flock_swarm.contract.state_labels`),
+    the values in ``position``, ``velocity`` and ``effort`` empty."""
+
+    def __init__(self, labels: Sequence[str], frame: str = FRAME) -> None:
+        """Create the encoder of a state labelled ``labels``."""
+        buf = bytearray(CDR_LE + bytes(8))
+        _put_string(buf, frame)
+        buf.extend(bytes(_align(len(buf), 4) - len(buf)))
+        buf.extend(_LE.u32.pack(len(labels)))
+        for label in labels:
+            _put_string(buf, label)
+        buf.extend(bytes(_align(len(buf), 4) - len(buf)))
+        buf.extend(_LE.u32.pack(len(labels)))
+        if labels:
+            buf.extend(bytes(_align(len(buf), 8) - len(buf)))
+        self.values_at = len(buf)
+        # The values, then the empty velocity and effort sequences (a count each).
+        buf.extend(bytes(8 * len(labels)) + _LE.u32.pack(0) + _LE.u32.pack(0))
+        self.buf = buf
+        self.values = struct.Struct(f'<{len(labels)}d')
+
+    def encode(self, ns: int, values: Sequence[float]) -> bytes:
+        """Return the state stamped ``ns`` [ns] with ``values`` (one per label)."""
+        buf = self.buf
+        _LE.time.pack_into(buf, 4, *divmod(ns, NS_PER_S))
+        self.values.pack_into(buf, self.values_at, *values)
+        return bytes(buf)
 
 
 class _MessageBatch:

@@ -2,11 +2,11 @@
 
 Lockstep mode (default, deterministic): for step ``k`` the world publishes ``/clock`` ``t_k``
 and every ``/agent_<i>/odom`` stamped ``t_k``, then waits until every agent's
-``cmd_accel`` and the leader's state for ``t_k`` are in, or the per-step timeout expires (a
-late or missing agent gets a zero command: counted, logged, published on ``/swarm/metrics``
-and recorded). It then integrates exactly (the same :func:`step_agents` as ``sim``) to
-``t_{k+1}``. Realtime mode: a wall-clock timer steps with the latest commands (zero-order
-hold).
+``cmd_accel`` and the leader's state for ``t_k`` are in (and, for a law with adaptive state,
+every ``/agent_<i>/state`` of ``t_k``), or the per-step timeout expires (a late or missing
+agent gets a zero command: counted, logged, published on ``/swarm/metrics`` and recorded).
+It then integrates exactly (the same :func:`step_agents` as ``sim``) to ``t_{k+1}``.
+Realtime mode: a wall-clock timer steps with the latest commands (zero-order hold).
 
 A fault ends the run as ``failed`` within a bounded time, with one line naming the node or
 component, the agent and the step (docs/ros.md, "Faults"): a fault an agent or the leader
@@ -21,6 +21,8 @@ in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; t
 :class:`~flock_swarm.nodes.stepper.WorldStepper` (no ROS); this node is its plumbing.
 """
 
+import math
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -32,28 +34,55 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
-                                  LEADER_ODOM, LOCKSTEP_QOS, RUNNING, STATUS, STATUS_QOS,
-                                  cmd_topic, odom_topic, qos_profile)
+                                  LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
+                                  STATUS, STATUS_QOS, cmd_topic, odom_topic, qos_profile,
+                                  state_topic)
+from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
 from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
-from flock_swarm.nodes.graph import agent_hosts, check_claims, command_claims
+from flock_swarm.nodes.graph import check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
-from flock_swarm.nodes.recording import BagSink, RecordedNode
-from flock_swarm.nodes.spin import run_node
+from flock_swarm.nodes.recording import BagSink, RecordedNode, provenance, provenance_text
+from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
                                        WorldSettings, WorldStepper)
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
-                                    encode_clock)
+                                    decode_state, encode_clock)
 from flock_swarm.outputs import (SpooledRecorder, json_text, write_error, write_outputs,
                                  write_text)
+
+#: A law's adaptive state may take any finite value: only a non-finite one is rejected.
+STATE_LIMIT = sys.float_info.max
+
+
+#: Why the world refuses ``use_sim_time:=true`` (and how the parameter reads back).
+SIM_TIME_REFUSED = ('must be false: the world publishes /clock itself (it is the simulation '
+                    'clock); the leader and the agents accept either value')
+
+
+#: Seconds between the waiting world's lines naming who it waits for.
+WAIT_LOG_EVERY = 5.0
+
+
+def id_list(ids: list[int]) -> str:
+    """Return agent ids as ``agent 3`` or ``agents 0-2, 5``."""
+    runs: list[list[int]] = []
+    for i in ids:
+        if runs and runs[-1][1] == i - 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    text = ', '.join(str(a) if a == b else f'{a}-{b}' for a, b in runs)
+    return f'agent {text}' if len(ids) == 1 else f'agents {text}'
 
 
 def _split_bound(name: str, default: int | float, description: str) -> Param:
@@ -72,7 +101,11 @@ WORLD_PARAMS = COMMON_PARAMS + (
                  'many seconds of simulation time (0: no split)'),
 ) + SETTING_PARAMS + (
     Param('expect_subscribers', -1, 'subscribers each odometry topic must have before the '
-          'start (-1: one per node hosting agents)'),
+          'start (given as -1: one per node hosting agents; reads back as that number once '
+          'the world has found them)'),
+    Param('pace', 0.0, 'lockstep: at most this many simulated seconds per wall second (0: as '
+          'fast as the nodes go; 1: real time, to watch a run live)',
+          lambda v: math.isfinite(v) and v >= 0, 'must be finite and >= 0, got {value!r}'),
     Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
           'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
           'must be 0 or more, not {value}'),
@@ -90,7 +123,8 @@ class WorldNode(RecordedNode):
         :param kwargs: forwarded to :class:`rclpy.node.Node` (context, namespace...).
         """
         init_node(super().__init__, 'world', kwargs)
-        params = self.params = NodeParameters(self, WORLD_PARAMS)
+        params = self.params = NodeParameters(
+            self, WORLD_PARAMS, SIM_TIME_REFUSED, 'always false: the world publishes /clock')
         sc = self.scenario = params.load_scenario()
         self.progress = progress
         self.mode = params['mode']
@@ -99,8 +133,18 @@ class WorldNode(RecordedNode):
         self.record = params['record']
         self.expect_subscribers = params['expect_subscribers']
         self.expect_telemetry = params['expect_telemetry_subscribers']
+        self.pace = params['pace']
+        #: Lockstep with ``pace``: the next step is held until its wall time.
+        self.paced = False
+        self.created = self.wait_logged = time.monotonic()
+        #: Why the world refused to start (another world on the domain), or ``None``.
+        self.refusal: ScenarioError | None = None
+        self.other_world_reported = False
+        self.subscribers_needed = self.expect_subscribers
         out_dir = params['out_dir']
         self.out = Path(out_dir) if out_dir else Path('out') / f'{sc.name}_ros'
+        # expect_subscribers: -1 reads back the number waited for, once it is known.
+        params.will_settle('expect_subscribers')
         params.declare(out_dir=str(self.out))
         # The time series goes to disk as it is recorded: memory stays flat on long runs.
         self.spool = SpooledRecorder(self.out, self.get_logger().warning)
@@ -135,7 +179,8 @@ class WorldNode(RecordedNode):
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
         # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
-        self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed)
+        self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed,
+                                   sc.headline)
         subscribe = self.recorded_subscription
         self.cmd_handlers = [lambda msg, i=i: self.on_command(i, msg)
                              for i in range(sc.n_agents)]
@@ -144,16 +189,28 @@ class WorldNode(RecordedNode):
                                      (lambda data, i=i: self.queue_command(i, data))
                                      if self.lockstep else None)
                            for i in range(sc.n_agents)]
+        # A law's adaptive state (none: no topic), recorded and checked like the commands.
+        self.agent_state_topics = [subscribe(JointState, state_topic(i), decode_state,
+                                             lambda msg, i=i: self.on_agent_state(i, msg))
+                                   for i in range(sc.n_agents)] \
+            if self.stepper.state else []
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
-        self.create_timer(1.0, self.check_claims)
+        wall_timer(self, 1.0, self.check_claims)
         self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
         self.create_subscription(DiagnosticArray, FAULTS, self.on_fault, qos_profile(FAULTS_QOS))
-        self.timer = self.create_timer(0.01, self.on_lockstep_timer) if self.lockstep else \
-            self.create_timer(params.timer_period(sc.dt), self.on_realtime_timer)
+        # Latched, and recorded at t = 0: the bag keeps the scenario where tools that drop
+        # MCAP metadata (rosbags-convert) keep it too (analyze reads it there).
+        self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
+        self.publish_recorded(self.scenario_pub, String(data=provenance_text(
+            provenance(sc, self.stepper.real, self.mode))), 0)
+        for sink in self.sinks:
+            sink.flush()
+        self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \
+            wall_timer(self, params.timer_period(sc.dt), self.on_realtime_timer)
 
     # The stepper's state, as the runner and the tests read it off the node.
     k = property(lambda self: self.stepper.k, doc='The open step.')
@@ -203,6 +260,21 @@ class WorldNode(RecordedNode):
             self.guard.reject(topic, 'late', f'a command for step {k} at step {self.k}')
         self._maybe_finish()
 
+    def on_agent_state(self, i: int, msg: tuple) -> None:
+        """Check agent ``i``'s adaptive state ``(stamp_ns, frame_id, labels, values)`` and
+        hand it on (its labels must be the law's)."""
+        ns, frame, labels, values = msg
+        topic, expected = self.agent_state_topics[i], self.stepper.state_labels
+        if labels != expected:
+            self.guard.reject(topic, 'malformed', f'state labels {list(labels)}, not the '
+                              f'law\'s {list(expected)}')
+            return
+        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
+                             window=self.stepper.window())
+        if k is not None:
+            self.stepper.agent_state(i, k, values)
+            self._maybe_finish()
+
     def on_leader_odom(self, msg: tuple) -> None:
         """Check the leader's position and velocity of its step (``msg``: see
         :func:`~flock_swarm.nodes.wire.decode_odometry`) and hand them on."""
@@ -236,8 +308,8 @@ class WorldNode(RecordedNode):
 
     def check_claims(self) -> None:
         """Once a second: report two nodes publishing commands for the same agent (a
-        duplicate agent_id); fail the run when a peer that answered before has been gone
-        from the ROS graph for ``peer_timeout`` seconds."""
+        duplicate agent_id), and another world on the domain; fail the run when a peer that
+        answered before has been gone from the ROS graph for ``peer_timeout`` seconds."""
         n = self.scenario.n_agents
         claims = command_claims(self, n)
         check_claims(self, n, self.duplicates, claims=claims)
@@ -248,6 +320,13 @@ class WorldNode(RecordedNode):
             leader_gone = self.count_publishers(self.leader_odom_topic) == 0
             self.fail(st.graph_gone([i for i in range(n) if i not in claims], leader_gone,
                                     time.monotonic(), lambda i: self.hosts.get(i, '')))
+        # After the start (a run in one process starts before discovery could show another
+        # world; a realtime world starts at once): said once, the run goes on.
+        if (self.stepper.started or not self.lockstep) and not self.other_world_reported:
+            other = self.other_worlds()
+            if other is not None:
+                self.other_world_reported = True
+                self.get_logger().error(f'{other} (this run\'s messages mix with its)')
 
     def publish_states(self, t_ns: int) -> None:
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
@@ -276,22 +355,68 @@ class WorldNode(RecordedNode):
     # -- lockstep -----------------------------------------------------------------------------
 
     def ready_to_start(self) -> bool:
-        """Return whether every agent and the leader are discovered and subscribed."""
+        """Return whether every agent and the leader are discovered and subscribed; say who
+        is missing every :data:`WAIT_LOG_EVERY` seconds. Another world (or a replay) on the
+        domain sets :attr:`refusal` and stops the timer: ``main`` and the harness end the run
+        with that line, and ``expect_subscribers`` given as -1 reads back the count found.
+        """
+        self.refusal = self.refusal or self.other_worlds()
+        if self.refusal is not None:
+            # Not raised here: an executor logs an exception of a callback with its traceback.
+            self.timer.cancel()
+            return False
+        missing = self.waiting_for()
+        if not missing:
+            if self.expect_subscribers < 0:
+                self.params.settle('expect_subscribers', self.subscribers_needed)
+            return True
+        now = time.monotonic()
+        if now - self.wait_logged >= WAIT_LOG_EVERY:
+            self.wait_logged = now
+            self.get_logger().info(f'waiting {now - self.created:.0f} s for ' + '; '.join(missing))
+        return False
+
+    def waiting_for(self) -> list[str]:
+        """Return what the start still waits for, one phrase each (empty: nothing)."""
+        n, missing = self.scenario.n_agents, []
         if self.expect_subscribers < 0:
-            need = agent_hosts(self, self.scenario.n_agents)
-            if need is None:
-                return False
+            claims = command_claims(self, n)
+            absent = [i for i in range(n) if i not in claims]
+            if absent:
+                missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
+            need = len(set().union(*claims.values())) if claims else 1
         else:
             need = self.expect_subscribers
-            if any(self.count_publishers(t) < 1 for t in self.cmd_topics):
-                return False
-        if any(pub.get_subscription_count() < need for pub in self.odom_pubs):
-            return False
-        if any(pub.get_subscription_count() < self.expect_telemetry
-               for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub)):
-            return False
-        return (self.count_publishers(self.leader_odom_topic) >= 1
-                and self.clock_pub.get_subscription_count() >= 1)
+            absent = [i for i, t in enumerate(self.cmd_topics) if self.count_publishers(t) < 1]
+            if absent:
+                missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
+        self.subscribers_needed = need
+        short = [i for i, pub in enumerate(self.odom_pubs) if pub.get_subscription_count() < need]
+        if short:
+            missing.append(f'{need} subscriber(s) of the odometry of {id_list(short)}')
+        for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub):
+            if pub.get_subscription_count() < self.expect_telemetry:
+                missing.append(f'{self.expect_telemetry} subscriber(s) of {pub.topic_name}')
+        if self.count_publishers(self.leader_odom_topic) < 1:
+            missing.append(f'the leader (nobody publishes {self.leader_odom_topic})')
+        if self.clock_pub.get_subscription_count() < 1:
+            missing.append(f'a subscriber of {self.clock_pub.topic_name} (the leader)')
+        return missing
+
+    def other_worlds(self) -> ScenarioError | None:
+        """Return the refusal to start beside another world on the same ROS domain (two runs
+        would mix their messages): another publisher of ``/clock`` or ``swarm/status``
+        (``None``: nobody else)."""
+        topics = [pub.topic_name for pub in (self.clock_pub, self.status_pub)]
+        if all(self.count_publishers(topic) <= 1 for topic in topics):
+            return None
+        nodes = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                        for topic in topics for i in self.get_publishers_info_by_topic(topic)
+                        if not i.node_name.startswith('_NODE_NAME_UNKNOWN')})
+        return ScenarioError('ROS_DOMAIN_ID', (
+            f'another world or a replay publishes {" or ".join(topics)} on domain '
+            f'{self.context.get_domain_id()} (nodes: {", ".join(nodes)}): give each run a '
+            'domain of its own'))
 
     def on_lockstep_timer(self) -> None:
         """Start when everybody is there; turn an expired step into zero commands.
@@ -299,6 +424,11 @@ class WorldNode(RecordedNode):
         Queued commands are taken one by one once the queue stopped growing for a tick (an
         agent is missing, or a message was doubled), and before a step times out.
         """
+        if self.paced:
+            if time.monotonic() >= self.pace_due():
+                self.paced = False
+                self.begin_step()
+            return
         if self.inbox.stalled():
             self.take_commands()
             return
@@ -334,7 +464,14 @@ class WorldNode(RecordedNode):
         if not self.done:
             self.fail(self.stepper.silent_agents(obs.k, lambda i: self.hosts.get(i, '')))
         if not self.done:
+            if self.pace and time.monotonic() < self.pace_due():
+                self.paced = True  # the lockstep timer begins it when due
+                return
             self.begin_step()
+
+    def pace_due(self) -> float:
+        """Return the monotonic time at which ``pace`` lets the open step begin."""
+        return self.stepper.t_wall0 + self.k * self.scenario.dt / self.pace
 
     # -- realtime -----------------------------------------------------------------------------
 
@@ -383,18 +520,24 @@ class WorldNode(RecordedNode):
         # Commands that came but were still queued are judged, counted and recorded too.
         self.take_commands()
         self.status_pub.publish(String(data=self.stepper.status))
+        recorded = self.bag is not None
+        if recorded and self.bag.empty:
+            # Stopped before the first step (a signal in the start wait): no empty bag.
+            self.bag.discard()
+            self.sinks.remove(self.bag)
+            recorded = False
+            self.get_logger().warning(
+                f'the run ended ({self.stepper.status}) before its first step: nothing was '
+                f'recorded, no bag written; {self.out / "summary.json"} says so')
         result = self.stepper.result(time.monotonic(), self.guard.counts(),
                                      sorted(self.duplicates), self.bag_error,
-                                     str(self.out / 'bag') if self.record else None)
+                                     str(self.out / 'bag') if recorded else None)
         for sink in self.sinks:
             try:
                 sink.close()
             except OSError as exc:
                 self.get_logger().error(f'cannot finalise {sink}: {exc.strerror or exc}; its '
                                         'complete chunks stay readable')
-        if result is None:
-            self.spool.discard()
-            return
         self.result = result
         try:
             self.written = write_outputs(result, self.out, self.scenario)
@@ -427,9 +570,24 @@ class WorldNode(RecordedNode):
         except OSError as again:
             self.get_logger().error(write_error(again))
 
+    def peer_died(self) -> None:
+        """End the run with status ``failed``: a supervisor saw another process of the run
+        die (:data:`~flock_swarm.console.FAIL_SIGNAL`); keep what was recorded."""
+        self.fail(f'another process of the run died (the supervisor said so at step {self.k})')
+
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
         announcement of the end reach the leader and agents before the node goes."""
+        if self.refusal is not None:
+            # Announce nothing on swarm/status: the other world's leader and agents hear it.
+            # Leave no bag behind either (it holds nothing of a run): out_dir can be reused.
+            self.stepper.end('refused')
+            for sink in self.sinks:
+                sink.close()
+            self.spool.discard()
+            if self.bag is not None:
+                shutil.rmtree(self.bag.path, ignore_errors=True)
+            return
         if self.stepper.end('interrupted'):
             self.write_results()
         self.status_pub.wait_for_all_acked(Duration(seconds=2))
@@ -439,12 +597,18 @@ def main(args: list[str] | None = None) -> int:
     """Run the world node (``ros2 run flock_swarm world``); it exits after the last step.
 
     The exit status is 2 for invalid configuration, 1 when the run failed (a fault of a law,
-    a leader model or a node), when recording failed or an output could not be written,
-    else 0.
+    a leader model or a node, or a supervisor reported a dead process:
+    :data:`~flock_swarm.console.FAIL_SIGNAL`), when recording failed or an output could not
+    be written, that of the signal after a stop signal
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`: the run ends ``interrupted``), else 0.
     """
     built: list[WorldNode] = []
     status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
-                      until=lambda node: node.done)
+                      until=lambda node: node.done or node.refusal is not None,
+                      on_fail=WorldNode.peer_died)
+    if built and built[0].refusal is not None:
+        print(f'world: error: {built[0].refusal}', file=sys.stderr)
+        return EXIT_USAGE
     failed = built and (built[0].status in ('recording_failed', 'failed')
                         or built[0].bag_error or built[0].write_error)
     return 1 if status == 0 and failed else status

@@ -16,16 +16,16 @@ the ROS runs in ``OUT/ros/<experiment>/``. An interrupted reproduction therefore
 where it stopped, and a larger ``--realisations`` only runs the missing realisations.
 ``--fresh`` ignores the caches.
 
-The package: one module per paper (:mod:`~flock_swarm.reproduce.su2009`,
-:mod:`~flock_swarm.reproduce.os2003`, :mod:`~flock_swarm.reproduce.zhou2012`,
-:mod:`~flock_swarm.reproduce.yu2010`, :mod:`~flock_swarm.reproduce.jadbabaie2003`: its
-experiments, analysis, table rows, discussion and figures), gathered by
-:mod:`~flock_swarm.reproduce.catalogue`; the runs and caches in
-:mod:`~flock_swarm.reproduce.execution`, the Markdown in :mod:`~flock_swarm.reproduce.report`,
-the whole of it in :mod:`~flock_swarm.reproduce.pipeline`; the command line is
-:mod:`flock_swarm.cli.reproduce`.
+The package: one module per experiment in :mod:`flock_swarm.reproduce.experiments` (an
+:class:`~flock_swarm.reproduce.experiment.Experiment`: set-up, analysis, table rows,
+discussion, figure, headline, criterion, the set-ups it runs over seeds), found by
+:mod:`~flock_swarm.reproduce.catalogue`; the verdicts' statistics in
+:mod:`~flock_swarm.reproduce.stats`; the runs and caches in
+:mod:`~flock_swarm.reproduce.execution` and :mod:`~flock_swarm.reproduce.seeds`; the Markdown
+in :mod:`~flock_swarm.reproduce.report`, which names no experiment; the whole of it in
+:mod:`~flock_swarm.reproduce.pipeline`; the command line is :mod:`flock_swarm.cli.reproduce`.
 """
 
-from flock_swarm.reproduce.catalogue import EXPERIMENTS
+from flock_swarm.reproduce.catalogue import all_experiments
 
-__all__ = ['EXPERIMENTS']
+__all__ = ['all_experiments']

@@ -1,6 +1,6 @@
-"""Running the reproduction: the presets and the Fig. 3 sweep (on the machinery of
-:mod:`flock_swarm.study`, with its caches), the ROS runs against ``sim``, and each experiment's
-JSON result."""
+"""Running the reproduction: every experiment's preset run and the sweeps some experiments
+run beside it (Su Fig. 3; on the machinery of :mod:`flock_swarm.study`, with its caches), and
+the ROS runs against ``sim``."""
 
 import json
 import shutil
@@ -11,14 +11,16 @@ from typing import Any, Callable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.run import check_step, simulate
+from flock_swarm.core.headline import run_mapping
+from flock_swarm.core.summary import compared_metrics
+from flock_swarm.core.run import simulate
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.outputs import write_outputs
 from flock_swarm.presets import load, prepare
-from flock_swarm.reproduce import su2009
-from flock_swarm.reproduce.catalogue import ANALYSES, EXPERIMENTS, FIGURES
-from flock_swarm.reproduce.common import Experiment, fmt, set_args
-from flock_swarm.reproduce.su2009 import Plan, describe_fig3, fig3_tasks
+from flock_swarm.reproduce.catalogue import all_experiments
+from flock_swarm.reproduce.common import fmt, set_args
+from flock_swarm.reproduce.experiment import Experiment
+from flock_swarm.reproduce.plan import Plan
 from flock_swarm.study.execute import LocalPool, Progress, SerialBackend, execute
 from flock_swarm.study.spec import plain
 
@@ -28,11 +30,6 @@ ROS_DOMAIN_BASE = 150
 
 #: Wall-clock limit of one node run [s].
 ROS_TIMEOUT = 300.0
-
-
-def preset_overrides(exp: Experiment, quick: bool) -> list[str]:
-    """Return the ``--set`` overrides of an experiment's preset run."""
-    return list(exp.quick) if quick else []
 
 
 def cached_preset(out: Path, sc: Scenario) -> dict | None:
@@ -49,7 +46,9 @@ def cached_preset(out: Path, sc: Scenario) -> dict | None:
         return None
     if not (out / 'timeseries.npz').is_file():
         return None
-    same = ran == json.loads(json.dumps(plain(sc.raw)))
+    # The headline changes what is printed, not the run: a run from before it was chosen counts.
+    same = isinstance(ran, dict) \
+        and run_mapping(ran) == json.loads(json.dumps(plain(run_mapping(sc.raw))))
     if same and summary.get('flock_swarm_version') == __version__ \
             and summary.get('status') == 'completed':
         return summary
@@ -69,38 +68,42 @@ def run_task(task: dict) -> dict:
 
 def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
                     say: Callable[[str], None], presets: bool = True,
-                    live: Callable[[str], None] | None = None, backend=None) -> dict:
-    """Run the presets, then the Fig. 3 sweep through the sweep machinery (caches reused).
+                    live: Callable[[str], None] | None = None, backend=None,
+                    experiments: tuple[Experiment, ...] | None = None) -> dict:
+    """Run the experiments' presets, then the sweeps they run beside them (caches reused).
 
     :param plan: what to run.
     :param out: the output directory.
     :param jobs: worker processes.
     :param fresh: ignore the caches.
     :param say: progress output.
-    :param presets: also run the presets (``False``: the Fig. 3 sweep only).
+    :param presets: also run the presets (``False``: the sweeps only).
     :param live: rewrites the terminal's progress line (see :class:`Progress`), or ``None``.
     :param backend: where the runs go (default: ``jobs`` local worker processes, or this
         process for one job; a :class:`~flock_swarm.study.execute.DaskBackend` for a
         cluster).
-    :return: ``{'summaries': {key: summary}, 'fig3': [records], 'executed': n, 'cached': n,
-        'core_seconds': s, 'wall_s': s}``.
+    :param experiments: the experiments (default: the catalogue's).
+    :return: ``{'summaries': {key: summary}, 'sweeps': {key: [records]}, 'executed': n,
+        'cached': n, 'core_seconds': s, 'core_seconds_all': s, 'wall_s': s}``.
     """
     started = time.monotonic()
     if backend is None:
         backend = SerialBackend() if jobs <= 1 else LocalPool(jobs, say)
+    if experiments is None:
+        experiments = all_experiments()
     summaries, tasks, cached = {}, [], 0
-    for exp in EXPERIMENTS if presets else ():
-        if exp.key == 'su2009_fig3':
+    for exp in experiments if presets else ():
+        if not exp.runs_preset:
             continue
-        overrides = preset_overrides(exp, plan.quick)
-        sc, _ = prepare(exp.key, overrides)
+        overrides = exp.preset_overrides(plan.quick)
+        sc, _ = prepare(exp.scenario, overrides)
         run_dir = out / 'runs' / exp.key
         summary = None if fresh else cached_preset(run_dir, sc)
         if summary is not None:
             summaries[exp.key] = summary
             cached += 1
         else:
-            tasks.append({'kind': 'preset', 'key': exp.key, 'preset': exp.key,
+            tasks.append({'kind': 'preset', 'key': exp.key, 'preset': exp.scenario,
                           'overrides': overrides, 'out': str(run_dir),
                           'weight': sc.steps * sc.n_agents, 'cost': sc.steps * sc.n_agents ** 2})
     # The long runs first, so that they do not end up alone at the end.
@@ -115,20 +118,28 @@ def run_simulations(plan: Plan, out: Path, jobs: int, fresh: bool,
             summaries[res['key']] = res['summary']
             core += res['summary']['wall_time_s']
             progress.step(1, task['weight'], f'{res["key"]}: {res["summary"]["status"]}')
-    sweep = execute(fig3_tasks(plan), out / 'fig3_runs.jsonl', su2009.fig3_record, backend,
-                    su2009.FIG3_STACK_AGENTS, say, live, fresh, prefix='reproduce',
-                    describe=describe_fig3)
-    fig3 = sweep['records']
+    sweeps, executed = {}, len(tasks)
+    for exp in experiments:
+        sweep = exp.sweep(plan)
+        if sweep is None:
+            continue
+        done = execute(sweep.runs, out / sweep.cache, sweep.recorder, backend,
+                       sweep.stack_agents, say, live, fresh, prefix='reproduce',
+                       describe=sweep.describe)
+        sweeps[exp.key] = done['records']
+        executed += done['executed']
+        cached += done['cached']
+        core += done['core_seconds']
     used = sum(x['wall_time_s'] for x in summaries.values()) \
-        + sum(r['wall_time_s'] for r in fig3)
-    return {'summaries': summaries, 'fig3': fig3, 'executed': len(tasks) + sweep['executed'],
-            'cached': cached + sweep['cached'], 'core_seconds': core + sweep['core_seconds'],
-            'core_seconds_all': used, 'wall_s': time.monotonic() - started}
+        + sum(r['wall_time_s'] for records in sweeps.values() for r in records)
+    return {'summaries': summaries, 'sweeps': sweeps, 'executed': executed, 'cached': cached,
+            'core_seconds': core, 'core_seconds_all': used,
+            'wall_s': time.monotonic() - started}
 
 
 def ros_experiments() -> list[Experiment]:
     """Return the experiments run through the ROS nodes (one per paper)."""
-    return [e for e in EXPERIMENTS if e.ros is not None]
+    return [e for e in all_experiments() if e.ros is not None]
 
 
 def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
@@ -150,7 +161,7 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
     run_dir = out / 'ros' / exp.key
     result_path = run_dir / 'comparison.json'
     domain = ROS_DOMAIN_BASE + index
-    command = f'swarm {exp.key}{set_args(overrides)} --domain-id {domain}'
+    command = f'swarm {exp.scenario}{set_args(overrides)} --domain-id {domain}'
     if not fresh and result_path.is_file():
         old = json.loads(result_path.read_text())
         if old.get('command') == command and old.get('flock_swarm_version') == __version__ \
@@ -159,7 +170,7 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
             return dict(old, reused=True)
     if run_dir.exists():
         shutil.rmtree(run_dir)
-    path = resolve_scenario(exp.key, overrides, None, run_dir)
+    path = resolve_scenario(exp.scenario, overrides, None, run_dir)
     sc = load(str(path))
     say(f'[reproduce] ROS {exp.key}: world + leader + {sc.n_agents} agents, lockstep, '
         f'{sc.steps} steps, domain {domain}')
@@ -204,29 +215,4 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
 
 
 #: The summary metrics compared between the ROS run and sim.
-COMPARED = ('eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
-            'min_pair_distance', 'collisions', 'components_final')
-
-
-def experiment_result(exp: Experiment, plan: Plan, summary: dict, out: Path,
-                      figures: Path) -> dict:
-    """Analyse one preset run, draw its figure, and return its JSON result.
-
-    :param exp: the experiment.
-    :param plan: the plan (quick or not).
-    :param summary: the run's summary.
-    :param out: the output directory (the run's files are in ``out/runs/<key>``).
-    :param figures: where the figure goes.
-    :return: the result mapping.
-    """
-    overrides = preset_overrides(exp, plan.quick)
-    sc, real = prepare(exp.key, overrides, allow_unstable=True)
-    with np.load(out / 'runs' / exp.key / 'timeseries.npz') as data:
-        series = {k: data[k] for k in data.files}
-    metrics = ANALYSES[exp.key](sc, summary, series)
-    fig = FIGURES[exp.key](sc, summary, series, metrics, figures / f'{exp.key}.png')
-    return {'key': exp.key, 'title': exp.title, 'preset': exp.key, 'overrides': overrides,
-            'command': f'sim {exp.key}{set_args(overrides)}', 'seed': sc.seed,
-            'n_agents': sc.n_agents, 'dt': sc.dt, 'duration': sc.duration,
-            'stability_violations': len(check_step(sc, real)),
-            'summary': plain(summary), 'metrics': plain(metrics), 'figure': fig.name}
+COMPARED = compared_metrics()

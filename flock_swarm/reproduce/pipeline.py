@@ -11,13 +11,13 @@ from datetime import datetime, timezone
 from typing import Any, Callable
 
 from flock_swarm.console import EXIT_USAGE
-from flock_swarm.reproduce.catalogue import EXPERIMENTS
+from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import FIG_MAX_BYTES
-from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, experiment_result, ros_experiments,
-                                             run_ros, run_simulations)
+from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, ros_experiments, run_ros,
+                                             run_simulations)
+from flock_swarm.reproduce.plan import Plan
 from flock_swarm.reproduce.report import (git_revision, machine, record_invocation, write_report,
                                           write_seeds_report)
-from flock_swarm.reproduce.su2009 import Plan, fig3_curves, fig3_result
 from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
 from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
                                        terminal_line)
@@ -72,9 +72,8 @@ def run(args: argparse.Namespace, argv_used: list[str]) -> int:
         seeds_dir = args.seeds_cache or (args.out / 'seeds' if plan.quick else SEEDS_CACHE)
         pool = backend or (SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say))
         meta['seeds_cache'] = str(seeds_dir)
-        studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live)
-        curves = fig3_curves(seeds_dir, pool, say, args.fig3_curves and not plan.quick,
-                             args.figures, live)
+        studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live,
+                              args.fig3_curves, args.figures)
     finally:
         if backend is not None:
             backend.close()
@@ -83,13 +82,8 @@ def run(args: argparse.Namespace, argv_used: list[str]) -> int:
     results: dict[str, dict] = {}
     results_dir = args.out / 'results'
     results_dir.mkdir(parents=True, exist_ok=True)
-    for exp in EXPERIMENTS:
-        if exp.key == 'su2009_fig3':
-            res = fig3_result(plan, sims['fig3'], args.figures)
-            res['curves'] = curves
-        else:
-            res = experiment_result(exp, plan, sims['summaries'][exp.key], args.out,
-                                    args.figures)
+    for exp in all_experiments():
+        res = exp.result(plan, sims, args.out, args.figures)
         if exp.key in ros:
             res['ros'] = ros[exp.key]
         if exp.key in studies:
@@ -120,10 +114,9 @@ def seeds_only(args: argparse.Namespace, plan: Plan, meta: dict,
     meta['seeds_cache'] = str(seeds_dir)
     live = terminal_line if sys.stderr.isatty() else None
     pool = SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say)
-    studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live)
-    curves = fig3_curves(seeds_dir, pool, say, args.fig3_curves and not plan.quick,
-                         args.figures, live)
+    studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live,
+                          args.fig3_curves, args.figures)
     meta['wall_min'] = (time.monotonic() - started) / 60.0
-    write_seeds_report(studies, curves, meta, args.report, args.figures)
+    write_seeds_report(studies, meta, args.report, args.figures)
     say(f'[reproduce] wrote {args.report}; {meta["wall_min"]:.1f} min')
     return 0

@@ -1,5 +1,7 @@
-"""The Markdown report: summary, one section per experiment with its table and discussion,
-the ROS comparison, misprints, provenance."""
+"""The Markdown report: provenance, the summary of every experiment's criterion and verdict,
+the papers' misprints, one section per experiment, the ROS comparison. Everything particular
+to an experiment comes from its object (:class:`~flock_swarm.reproduce.experiment.Experiment`):
+this module names none."""
 
 import json
 import os
@@ -8,13 +10,12 @@ import subprocess
 from pathlib import Path
 
 from flock_swarm import __version__
-from flock_swarm.reproduce.catalogue import DISCUSSIONS, EXPERIMENTS, ROWS
-from flock_swarm.reproduce.common import cell, fmt, preset_notes, set_args
+from flock_swarm.reproduce import stats
+from flock_swarm.reproduce.catalogue import all_experiments
+from flock_swarm.reproduce.common import cell, fmt
 from flock_swarm.reproduce.execution import COMPARED
-from flock_swarm.reproduce.seeds import MAJORITY, STUDY_OF
-from flock_swarm.reproduce.seeds import section as seeds_section
-from flock_swarm.reproduce.su2009 import (FIG3_PAPER_DELTA, Plan, fig3_curves_section,
-                                          fig3_section)
+from flock_swarm.reproduce.plan import Plan
+from flock_swarm.reproduce.seeds import SEEDS_CHEAP, SEEDS_COSTLY
 from flock_swarm.study.spec import plain
 
 
@@ -47,46 +48,17 @@ def git_revision() -> str:
                    if dirty else '')
 
 
-#: Su Fig. 3 counts as reproduced when our delta at eta = 0.8 is this close to each anchor.
-FIG3_ANCHOR_SLACK = 0.05
-#: Su Fig. 6 counts as reproduced when the COM error follows (48) to within this many
-#: metres per second of dt: every agent holds f_gamma(t_k) over a step while the leader
-#: integrates the Lorenz equations, which leaves a residual of about dt/2 f_gamma';
-#: test_su2009 allows dt (|e(0)| + |e'(0)| + the range of f_gamma) and checks that it halves
-#: with dt, and the Lorenz acceleration of Fig. 6 ranges over hundreds of m/s^2.
-CLOSED_FORM_SLACK_PER_DT = 100.0
-
-MISPRINTS = (
-    'Su, Wang, Lin 2009, eq. (48) (COM error for c2^2 < 4 c1): the velocity formula lacks a '
-    'factor c2 / 2. As printed, its sine coefficient is -w e0 - (c2/2 e0 + v0) / w with '
-    'w = sqrt(4 c1 - c2^2) / 2, which solves (45) only for c2 = 2; the derivative of (48)\'s '
-    'own position gives -(c1 e0 + c2/2 v0) / w. Found by test/test_su2009.py; the Fig. 6 '
-    'comparison below uses the corrected form.',
-    'Su, Wang, Lin 2009, Theorem 1 (i) prints the bound sqrt(2 Q0) / c1 on the distance of an '
-    'informed agent to the leader; the proof (and Theorem 2 (i)) give sqrt(2 Q0 / c1). Our '
-    'tests check the latter.',
-    'Su, Wang, Lin 2009, eq. (45) writes p̄_γ (an overbar) in the COM velocity equation, '
-    'where ṗ_γ = f_γ is meant (the line above derives ū = f_γ - c1 (q̄ - q_γ) - '
-    'c2 (p̄ - p_γ)).',
-    'Su, Wang, Lin 2009, the sentence closing the proof of Theorem 2 (iii) gives the rate of '
-    'the case c2^2 > 4 c1 as (c2 - sqrt(4 c1 - c2^2)) / 2, the square root of a negative '
-    'number in that case; the theorem\'s statement (tau) and the exponents of (46) have '
-    '(c2 - sqrt(c2^2 - 4 c1)) / 2. (The same sentence calls the rates "time constants"; they '
-    'are in 1/s.)',
-    'Yu, Chen, Cao 2010, Section 4.1 prints d = sqrt(c ln(b/a)) = 0.7740; with c = 5 that '
-    'would be 3.87. The value 0.7740 is sqrt(c_bar ln(b/a)) with c_bar = 0.2 (noticed while '
-    'writing this report; the preset uses the paper\'s a, b, c_bar, which fix d).',
-)
-
-
-def metric_table(key: str, metrics: dict) -> list[str]:
-    """Return the Markdown rows ``| what (`key`) | paper | ours |`` of an experiment."""
-    lines = ['| quantity | paper | ours |', '|---|---|---|']
-    for label, mkey, paper in ROWS[key]:
-        if mkey in metrics:
-            lines.append(f'| {cell(label)} (`{mkey}`) | {cell(paper)} | '
-                         f'{cell(fmt(metrics[mkey]))} |')
-    return lines
+#: How a verdict is reached, for the report's preamble.
+RULE = (
+    'Each experiment states its criterion before any number: the paper\'s claim as a '
+    'statistic over seeds (a mean against the paper\'s value with a margin, or the fraction '
+    'of seeds meeting a per-seed claim), with its 95 % confidence interval (Student\'s t for '
+    'means, Wilson for fractions). The verdict is **reproduced** when the interval lies inside '
+    'the values that support the claim, **not reproduced** when it lies outside them, '
+    '**inconclusive** when it straddles an edge. Every set-up (variant) is judged on its own; '
+    'the summary\'s verdict is that of the paper\'s set-up, the first of each table, and '
+    f'the variants\' follow it. Seeds: {SEEDS_CHEAP} per set-up where a run costs under a '
+    f'minute of computing, {SEEDS_COSTLY} where it costs more (each table says which).')
 
 
 def ros_section(res: dict) -> list[str]:
@@ -131,95 +103,18 @@ def ros_section(res: dict) -> list[str]:
     return lines
 
 
-def headline(key: str, res: dict) -> tuple[str, str]:
-    """Return the paper's and our headline number of an experiment for the summary table."""
-    m = res['metrics']
-    if key in ('su2009_fig2', 'su2009_fig7'):
-        paper = '86' if key == 'su2009_fig2' else '89'
-        return (f'{paper} of 100 with p_gamma',
-                f'{m["agents_with_desired_velocity"]} of {res["n_agents"]}')
-    if key == 'su2009_fig3':
-        return ('eta = 0.8 at delta 0.27 (N = 100), 0.10 (N = 1000)',
-                f'delta {fmt(m.get("delta_for_eta80_N100"))} (N = 100), '
-                f'{fmt(m.get("delta_for_eta80_N1000"))} (N = 1000); '
-                f'{m["realisations_min"]} realisations/point')
-    if key == 'su2009_fig5':
-        return ('COM error fluctuates', f'late max {fmt(m["com_position_error_max_late"])} m, '
-                f'{fmt(m["com_velocity_error_max_late"])} m/s')
-    if key == 'su2009_fig6':
-        return ('COM error -> 0 exponentially, eq. (48)',
-                f'{fmt(m["com_position_error"])} m at 30 s; (48) within '
-                f'{fmt(m["closed_form_position_dev"])} m')
-    if key == 'os2003_sink':
-        return ('one flock, invariant topology',
-                f'{m["components_final"]} component(s), '
-                f'{m["topology_changes_last_quarter"]} late switches')
-    if key == 'zhou2012_sec51':
-        return ('lambda_max(B_7) = -1; v_i -> v_l',
-                f'{fmt(m["lambda_max_B7"])}; max error {fmt(m["velocity_mismatch_max"])} m/s')
-    if key == 'zhou2012_sec52':
-        return ('6 pseudo-leaders, lambda_max = -0.9284',
-                f'{m["pseudo_leaders"]}, {fmt(m["lambda_max_minor_ours"])} (top 6: '
-                f'{fmt(m["lambda_max_minor_top6"])})')
-    if key == 'yu2010_sec41':
-        return ('v_i -> v_o; r_a -> r_o',
-                f'{fmt(m["velocity_mismatch_max"])} m/s; {fmt(m["ra_error_component1"])} m, '
-                f'{fmt(m["ra_error_component2"])} m')
-    return ('theta_i -> theta_0 when linked',
-            f'{m["followers_aligned"]} of {res["n_agents"]} aligned, '
-            f'{m["followers_linked_final"]} linked')
+def verdict_cell(judged: dict) -> str:
+    """Return the summary's verdict: the paper's set-up's, then each variant's."""
+    if judged['verdict'] == stats.NOT_RUN:
+        return stats.NOT_RUN
+    text = f'**{judged["verdict"]}**'
+    others = [f'{label}: {verdict}' for label, verdict in judged['setups'][1:]]
+    return text + (f' (variants: {"; ".join(others)})' if others else '')
 
 
-def overall(key: str, results: dict[str, dict]) -> tuple[str, str]:
-    """Return an experiment's distribution headline (the paper's set-up) and its verdict."""
-    res = results[key]
-    study = res.get('seeds')
-    if key == 'jadbabaie2003_linked' and 'jadbabaie2003_leader' in results:
-        study = results['jadbabaie2003_leader'].get('seeds')
-    if study is not None:
-        first = study['setups'][0]
-        shown = STUDY_OF['jadbabaie2003_leader' if key == 'jadbabaie2003_linked' else key].shown
-        label, metric, _ = shown[0]
-        stat = first['stats'][metric]
-        text = (f'{first["label"]}: {first["met"]} of {first["seeds"]} seeds meet the claim; '
-                f'{metric} {fmt(stat.get("mean"))} [{fmt(stat.get("min"))}, '
-                f'{fmt(stat.get("max"))}]') if first['seeds'] else 'no seeds cached yet'
-        return text, study['verdict']
-    m = res['metrics']
-    if key == 'su2009_fig3':
-        return (f'{m["realisations_min"]} realisations/point',
-                fig3_verdict(m, res.get('curves', {}).get('curves', [])))
-    if key == 'su2009_fig5':
-        moving = m['com_position_error_max_late'] > 0.1 or m['com_velocity_error_max_late'] > 0.1
-        return 'one seed', 'reproduced' if moving else 'not reproduced'
-    if key == 'su2009_fig6':
-        close = m.get('closed_form_position_dev') is not None \
-            and m['closed_form_position_dev'] <= CLOSED_FORM_SLACK_PER_DT * res['dt']
-        return 'one seed', 'reproduced' if close else 'not reproduced'
-    return 'one seed', 'not judged'
-
-
-def fig3_verdict(metrics: dict, curves: list[dict]) -> str:
-    """Return Su Fig. 3's verdict: ``reproduced`` when the preset's sweep needs a delta
-    within :data:`FIG3_ANCHOR_SLACK` of both anchors, ``reproduced under variant: X`` when a
-    complete curve does, else ``not reproduced``, naming the curves that meet one anchor.
-
-    :param metrics: the preset sweep's metrics (``delta_for_eta80_N<n>``).
-    :param curves: the four curves (:func:`~flock_swarm.reproduce.su2009.fig3_curves`).
-    """
-    def near(values: dict) -> dict[int, bool]:
-        return {n: values.get(f'delta_for_eta80_N{n}') is not None
-                and abs(values[f'delta_for_eta80_N{n}'] - d) <= FIG3_ANCHOR_SLACK
-                for n, d in FIG3_PAPER_DELTA.items()}
-    if all(near(metrics).values()):
-        return 'reproduced'
-    complete = [c for c in curves if c['complete']]
-    for c in complete:
-        if all(near(c).values()):
-            return f'reproduced under variant: {c["label"]}'
-    partial = [f'N = {n} under {c["label"]}' for c in complete
-               for n, ok in near(c).items() if ok]
-    return 'not reproduced' + (f' (one anchor only: {", ".join(partial)})' if partial else '')
+def misprints(experiments) -> list[str]:
+    """Return the misprints the experiments found in their papers, in the report's order."""
+    return [text for exp in experiments for text in exp.misprints]
 
 
 def record_invocation(out: Path, meta: dict, plan: Plan) -> list[dict]:
@@ -315,8 +210,9 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
             f'{", ".join(f"{x:.2f}" for x in item["load_average"])} |')
     lines += [
         '',
-        '- Caches: presets in `OUT/runs/`, the Fig. 3 sweep in `OUT/fig3_runs.jsonl` (one JSON '
-        'line per run, keyed by a hash of the scenario and package version), the ROS runs in '
+        '- Caches: presets in `OUT/runs/`, the sweeps some experiments run beside their preset '
+        'in `OUT/*.jsonl` (one JSON line per run, keyed by a hash of the scenario and package '
+        'version), the ROS runs in '
         '`OUT/ros/`. Re-running the command resumes; a larger `--realisations` adds only the '
         'missing runs.',
         f'- ROS runs: {meta["ros_note"]}',
@@ -324,56 +220,38 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
         '- Over seeds: each experiment\'s study (`config/sweeps/reproduce_*.yaml`, seeds from '
         '1; the preset\'s own seed stays the figure) is cached in `'
         f'{meta.get("seeds_cache", "docs/reproduction/runs")}/` (one JSON line per run, '
-        'committed, resumed by every invocation; `--cached-seeds` runs nothing new). A claim '
-        f'counts as reproduced when at least {MAJORITY:.0%} of the seeds of a set-up meet it.',
+        'committed, resumed by every invocation; `--cached-seeds` runs nothing new).',
+        f'- Verdicts: {RULE}',
         '',
         '## Summary',
         '',
-        '| experiment | paper | ours (the preset\'s seed) | over seeds (paper\'s set-up) | '
-        'verdict |',
-        '|---|---|---|---|---|',
+        '| experiment | paper | ours (the preset\'s seed) | criterion | over seeds (the '
+        'paper\'s set-up; 95 % interval) | verdict |',
+        '|---|---|---|---|---|---|',
     ]
-    for exp in EXPERIMENTS:
-        if exp.key in results:
-            paper, ours = headline(exp.key, results[exp.key])
-            over, judged = overall(exp.key, results)
-            lines.append(f'| [{exp.title}](#{anchor(exp.title)}) | {paper} | {ours} | '
-                         f'{cell(over)} | {judged} |')
-        else:
-            lines.append(f'| {exp.title} | | not run | | |')
+    experiments = all_experiments()
+    for exp in experiments:
+        res = results.get(exp.key)
+        if res is None:
+            lines.append(f'| {exp.title} | | not run | | | |')
+            continue
+        paper, ours = exp.headline(res)
+        judged = exp.judge(res)
+        lines.append(f'| [{exp.title}](#{anchor(exp.title)}) | {paper} | {ours} | '
+                     f'{cell(exp.criterion.short())} | {cell(judged["over"])} | '
+                     f'{verdict_cell(judged)} |')
     lines += ['', '## Misprints in the papers', '']
-    lines += [f'- {text}' for text in MISPRINTS]
-    for exp in EXPERIMENTS:
+    lines += [f'- {text}' for text in misprints(experiments)]
+    for exp in experiments:
         lines += ['', f'## {exp.title}', '']
         res = results.get(exp.key)
         if res is None:
             lines.append('Not run in this invocation.')
             continue
-        lines += [f'**Paper** ({exp.paper}). {exp.claim}', '']
-        if exp.key == 'su2009_fig3':
-            lines += [f'**Run.** `sim su2009_fig3` with `--set n_agents=N`, '
-                      '`initial.position_box=[[0, L], [0, L]]` (L = sqrt(N / 0.05)), '
-                      f'`informed.fraction=delta`{set_args(plan.fig3_overrides)} and '
-                      f'`--seed k`, for N in {", ".join(map(str, res["sizes"]))} and delta in '
-                      f'{", ".join(f"{d:g}" for d in res["fractions"])}. Preset notes: '
-                      f'{preset_notes(exp.key)}', '']
-            lines += fig3_section(res, plan)
-            if 'curves' in res:
-                lines += fig3_curves_section(res['curves'], rel)
-        else:
-            lines += [f'**Run.** `{res["command"]}` (seed {res["seed"]}, {res["n_agents"]} '
-                      f'agents, dt = {fmt(res["dt"])} s, {fmt(res["duration"])} s, '
-                      f'{fmt(res["summary"]["wall_time_s"])} s wall). Preset notes: '
-                      f'{preset_notes(exp.key)}', '']
-            if res['stability_violations']:
-                lines += [f'Note: the step-size check reports {res["stability_violations"]} '
-                          'violated bound(s) for this scenario.', '']
-            lines += metric_table(exp.key, res['metrics'])
-            lines += ['', '**Where we differ and why.** '
-                      + DISCUSSIONS[exp.key](dict(res['metrics'], n_agents=res['n_agents']))]
-            if 'seeds' in res:
-                lines += seeds_section(STUDY_OF[exp.key], res['seeds'])
-            lines += ros_section(ros.get(exp.key))
+        lines += [f'**Paper** ({exp.paper}). {exp.claim}', '',
+                  f'**Criterion** (stated before the numbers). {exp.criterion.statement()}', '']
+        lines += exp.body(res, plan, rel)
+        lines += ros_section(ros.get(exp.key))
         lines += ['', f'![{exp.key}]({(rel / res["figure"]).as_posix()})']
     report.parent.mkdir(parents=True, exist_ok=True)
     report.write_text('\n'.join(lines) + '\n')
@@ -386,13 +264,12 @@ def anchor(title: str) -> str:
     return keep.replace(' ', '-')
 
 
-def write_seeds_report(studies: dict[str, dict], curves: dict, meta: dict, report: Path,
+def write_seeds_report(studies: dict[str, dict], meta: dict, report: Path,
                        figures: Path) -> Path:
-    """Write the report of the experiments over seeds and the Fig. 3 curves alone
-    (``--seeds-only``): a summary of the verdicts, then one section per experiment.
+    """Write the report of the studies over seeds alone (``--seeds-only``): a summary of the
+    criteria and verdicts, then one section per experiment.
 
     :param studies: :func:`~flock_swarm.reproduce.seeds.run_studies`' result.
-    :param curves: :func:`~flock_swarm.reproduce.su2009.fig3_curves`' result.
     :param meta: provenance: command, date, commit, machine, cache.
     :param report: the report's path.
     :param figures: the figures' directory.
@@ -400,33 +277,24 @@ def write_seeds_report(studies: dict[str, dict], curves: dict, meta: dict, repor
     """
     rel = Path(os.path.relpath(figures, report.parent))
     mach = meta['machine']
-    titles = {e.key: e.title for e in EXPERIMENTS}
+    experiments = [e for e in all_experiments() if e.key in studies]
     lines = [
         '# Reproduction over seeds', '',
         f'Written by `{meta["command"]}` on {meta["date"]} (UTC), commit {meta["git"]}, '
         f'flock_swarm {__version__}, from the caches in `{meta["seeds_cache"]}/` (one JSON '
         f'line per run; {meta["wall_min"]:.1f} min; load average '
         f'{", ".join(f"{x:.2f}" for x in mach["load_average"])} at the start on '
-        f'{mach["nproc"]} CPUs). Every number is written by the run. A claim counts as '
-        f'reproduced when at least {MAJORITY:.0%} of the seeds of a set-up meet it; the '
-        'first set-up of each table is the paper\'s (or, for Jadbabaie, the one where the '
-        'premise of Theorem 4 holds).', '',
-        '| experiment | claim per seed | paper\'s set-up over seeds | verdict |',
-        '|---|---|---|---|']
-    for key, res in studies.items():
-        first = res['setups'][0]
-        metric = STUDY_OF[key].shown[0][1]
-        stat = first['stats'][metric]
-        over = (f'{first["met"]} of {first["seeds"]} seeds; {metric} {fmt(stat.get("mean"))} '
-                f'[{fmt(stat.get("min"))}, {fmt(stat.get("max"))}]'
-                if first['seeds'] else 'no seeds cached yet')
-        lines.append(f'| {cell(titles[key])} | {cell(res["claim"])} | {cell(over)} | '
-                     f'{res["verdict"]} |')
-    for key, res in studies.items():
-        lines += ['', f'## {titles[key]}']
-        lines += seeds_section(STUDY_OF[key], res)
-    lines += ['', '## Su 2009, Fig. 3 under the variants']
-    lines += fig3_curves_section(curves, rel)
+        f'{mach["nproc"]} CPUs). Every number is written by the run. {RULE}', '',
+        '| experiment | criterion | the paper\'s set-up over seeds (95 % interval) | '
+        'verdict |', '|---|---|---|---|']
+    for exp in experiments:
+        judged = exp.judge({'seeds': studies[exp.key]})
+        lines.append(f'| [{exp.title}](#{anchor(exp.title)}) | {cell(exp.criterion.short())} '
+                     f'| {cell(judged["over"])} | {verdict_cell(judged)} |')
+    for exp in experiments:
+        lines += ['', f'## {exp.title}', '',
+                  f'**Criterion** (stated before the numbers). {exp.criterion.statement()}']
+        lines += exp.seeds_section(studies[exp.key], rel)
     report.parent.mkdir(parents=True, exist_ok=True)
     report.write_text('\n'.join(lines) + '\n')
     return report

@@ -29,6 +29,10 @@ def read_cache(path: Path, required: Iterable[str] = ('digest',),
                report: Callable[[str], None] | None = None) -> dict[str, dict]:
     """Return the valid records of a cache file by digest (the last one of a digest wins).
 
+    Unusable lines are reported once: they are moved out of the cache, to
+    ``PATH.unusable`` (kept for a look), so that the next read (of this run or a later one)
+    does not report them again; their runs are redone.
+
     :param path: the JSON-lines file (absent: no records).
     :param required: keys every record must have.
     :param report: told one line per line that is unusable (and whose run is redone).
@@ -38,6 +42,8 @@ def read_cache(path: Path, required: Iterable[str] = ('digest',),
     if not path.is_file():
         return records
     need = tuple(required)
+    kept: list[bytes] = []
+    unusable: list[bytes] = []
     with open(path, 'rb') as stream:
         for number, raw in enumerate(stream, 1):
             why = None
@@ -53,12 +59,37 @@ def read_cache(path: Path, required: Iterable[str] = ('digest',),
                 elif any(k not in rec for k in need):
                     why = f'no {next(k for k in need if k not in rec)!r}'
             if why is not None:
-                if raw.strip() and report is not None:
-                    report(f'{path}:{number}: unusable cache line ({why}); its run is redone')
+                if raw.strip():
+                    unusable.append(raw if raw.endswith(b'\n') else raw + b'\n')
+                    if report is not None:
+                        report(f'{path}:{number}: unusable cache line ({why}); its run is '
+                               'redone')
                 continue
+            kept.append(raw)
             del rec['check']
             records[rec['digest']] = rec
+    if unusable:
+        _set_aside(path, kept, unusable, report)
     return records
+
+
+def _set_aside(path: Path, kept: list[bytes], unusable: list[bytes],
+               report: Callable[[str], None] | None) -> None:
+    """Rewrite the cache with the ``kept`` lines only; append ``unusable`` to PATH.unusable."""
+    aside = path.with_name(path.name + '.unusable')
+    try:
+        with open(aside, 'ab') as stream:
+            stream.write(b''.join(unusable))
+        partial = path.with_name(path.name + '.partial')
+        with open(partial, 'wb') as stream:
+            stream.write(b''.join(line if line.endswith(b'\n') else line + b'\n'
+                                  for line in kept))
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(partial, path)
+    except OSError as exc:  # a read-only cache: the lines are reported again next time
+        if report is not None:
+            report(f'{path}: cannot set the unusable lines aside to {aside} ({exc.strerror})')
 
 
 class CacheWriter:

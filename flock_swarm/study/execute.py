@@ -27,14 +27,16 @@ from flock_swarm.core import summary
 from flock_swarm.core.run import SimResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.study.cache import CacheWriter, read_cache
-from flock_swarm.study.spec import Run, plain, timed_column
+from flock_swarm.study.spec import Run, metric_value, plain, timed_column
 
 #: Without a terminal, progress lines come at most this often [s] (on one, a live line).
 PROGRESS_EVERY = 30.0
 #: A job whose worker process dies this many times is given up (it kills its worker).
 MAX_WORKER_DEATHS = 3
-#: How long to wait for a Dask scheduler to answer [s].
+#: How long to wait for a Dask scheduler to answer, and for a worker when it has none [s].
 CONNECT_TIMEOUT = 10.0
+#: How often the Dask backend looks at its scheduler and workers while it waits [s].
+DASK_POLL = 1.0
 
 #: A record maker: ``(run, scenario, result) -> record`` (a module-level function or a
 #: picklable object, so that worker processes and Dask workers can receive it).
@@ -43,6 +45,14 @@ Recorder = Callable[[Run, Scenario, SimResult], dict]
 
 class SweepError(RuntimeError):
     """A failure of the sweep's machinery (a backend, a worker), one line."""
+
+
+class ClusterError(SweepError):
+    """The Dask cluster became unusable while the sweep ran: the scheduler lost, no workers.
+
+    Not the user's input: ``sweep`` exits with its runtime-failure status, and running it
+    again (with the cache of the runs finished so far) may succeed.
+    """
 
 
 @dataclass(frozen=True)
@@ -108,7 +118,7 @@ class MetricRecorder:
         s, series = result.summary, result.series
         record: dict[str, Any] = {'point': plain(run.point), 'seed': run.seed}
         for name in self.metrics:
-            record[name] = plain(s[name])
+            record[name] = plain(metric_value(s, name))
         if self.times:
             t, timed = series['t'], summary.timed_series()
             for when in self.times:
@@ -308,9 +318,13 @@ class DaskBackend:
         """
         import logging
         from distributed import Client, LocalCluster
-        # The connection error is reported as one line below, not as Dask's log records.
-        logging.getLogger('distributed').setLevel(logging.CRITICAL)
+        # The connection error (and a lost scheduler) is reported as one line below, not as
+        # Dask's log records (its loggers have levels of their own from Dask's config).
+        for name in ['distributed', *logging.root.manager.loggerDict]:
+            if name.startswith('distributed'):
+                logging.getLogger(name).setLevel(logging.CRITICAL)
         self.cluster = None
+        self.address, self.timeout = address, timeout
         try:
             if address == 'local':
                 self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1,
@@ -327,31 +341,72 @@ class DaskBackend:
         self.name = f'Dask scheduler {self.client.scheduler.address} ({workers} worker(s) now)'
 
     def results(self, func: Callable[..., Any], tasks: list, *args) -> Iterator[tuple]:
-        """Yield ``(task, func(task, *args))`` for every task, in completion order."""
-        from distributed import as_completed
+        """Yield ``(task, func(task, *args))`` for every task, in completion order.
+
+        Waits at most :data:`DASK_POLL` seconds at a time, so that a scheduler lost (its
+        futures cancelled, the client no longer running) or a cluster without a worker for
+        the connection timeout ends the sweep with one :class:`ClusterError` line instead of
+        a traceback or a silent wait.
+
+        :raises ClusterError: the scheduler lost, or no worker for ``timeout`` seconds.
+        :raises SweepError: a task that failed.
+        """
+        from distributed import wait as dask_wait
         futures = []
         for k, task in enumerate(tasks):
             # Earlier tasks first (the plan puts long runs first); pure=False: always run.
             futures.append(self.client.submit(func, task, *args, pure=False,
                                               priority=len(tasks) - k))
         index = {fut.key: k for k, fut in enumerate(futures)}
-        pending = set(index)
+        pending = dict(index)
+        idle_since = None
         try:
-            for fut in as_completed(futures):
+            while pending:
+                waiting = [futures[k] for k in pending.values()]
                 try:
-                    value = fut.result()
-                except Exception as exc:  # any failure of a task: one line, the sweep stops
-                    raise SweepError(f'a Dask task failed: {type(exc).__name__}: {exc}') \
-                        from None
-                pending.discard(fut.key)
-                yield tasks[index[fut.key]], value
+                    done = dask_wait(waiting, timeout=DASK_POLL,
+                                     return_when='FIRST_COMPLETED').done
+                except TimeoutError:
+                    done = set()
+                except Exception:  # futures cancelled: by a lost scheduler, or by Dask
+                    done = set()
+                    self._check_scheduler(len(tasks) - len(pending), len(tasks))
+                for fut in (f for f in waiting if f in done):
+                    try:
+                        value = fut.result()
+                    except Exception as exc:  # a task's failure: one line, the sweep stops
+                        self._check_scheduler(len(tasks) - len(pending), len(tasks))
+                        raise SweepError(f'a Dask task failed: {type(exc).__name__}: {exc}') \
+                            from None
+                    del pending[fut.key]
+                    yield tasks[index[fut.key]], value
+                self._check_scheduler(len(tasks) - len(pending), len(tasks))
+                if self.client.scheduler_info().get('workers'):
+                    idle_since = None
+                elif idle_since is None:
+                    idle_since = time.monotonic()
+                elif time.monotonic() - idle_since >= self.timeout:
+                    raise ClusterError(f'--scheduler: no Dask worker for {self.timeout:g} s at '
+                                       f'{self.address} ({len(tasks) - len(pending)} of '
+                                       f'{len(tasks)} jobs done, kept in the cache); start '
+                                       'workers and run the same command again')
         finally:
-            if pending:
-                self.client.cancel([f for f in futures if f.key in pending])
+            if pending and self.client.status == 'running':
+                self.client.cancel([futures[k] for k in pending.values()])
+
+    def _check_scheduler(self, done: int, total: int) -> None:
+        """Raise :class:`ClusterError` when the client lost its scheduler."""
+        if self.client.status != 'running':
+            raise ClusterError(f'--scheduler: lost the Dask scheduler at {self.address} '
+                               f'({done} of {total} jobs done, kept in the cache); run the same '
+                               'command again to go on')
 
     def close(self) -> None:
-        """Disconnect (and stop the local cluster)."""
-        self.client.close()
+        """Disconnect (and stop the local cluster); a lost scheduler is not waited for."""
+        try:
+            self.client.close(timeout=self.timeout)
+        except Exception:  # already closed by a lost scheduler: nothing to release
+            pass
         if self.cluster is not None:
             self.cluster.close()
 

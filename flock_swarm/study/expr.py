@@ -29,6 +29,21 @@ _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos}
 #: Largest exponent ``**`` accepts: keeps a typo from computing a number of a million digits.
 MAX_EXPONENT = 1000
+#: The budget of an expression, checked before anything is computed: its text (so also the
+#: digits of a literal) and its syntax tree (so the number of operations) ...
+MAX_TEXT = 1000
+MAX_NODES = 200
+#: ... and every operation's result, estimated from its operands before it is computed:
+#: integers of at most this many bits (about 3000 digits: Python prints up to 4300), so that
+#: nested powers (``2 ** 2 ** 2 ** 2 ** 2``) or ``(10 ** 1000) ** 1000`` are refused instead
+#: of computed, ...
+MAX_INT_BITS = 10_000
+#: ... and lists of at most this many numbers in all (nested lists counted in full), so that
+#: ``[1] * 10 ** 9`` is refused instead of filling the memory. A box or a list of positions of
+#: many agents is far below.
+MAX_ITEMS = 100_000
+#: Largest number of digits ``round(x, n)`` accepts (``round(x, -10 ** 9)`` computes 10^n).
+MAX_ROUND_DIGITS = 1000
 
 
 class ExpressionError(ValueError):
@@ -45,10 +60,19 @@ class Expression:
         :raises ExpressionError: on a syntax error or a construct outside the language.
         """
         self.text = text
+        if len(text) > MAX_TEXT:
+            raise ExpressionError(f'{len(text)} characters: an expression has at most '
+                                  f'{MAX_TEXT}')
         try:
             tree = ast.parse(text.strip(), mode='eval')
         except SyntaxError as exc:
             raise ExpressionError(f'invalid syntax in {text!r}: {exc.msg}') from None
+        except ValueError as exc:  # a literal Python refuses to convert (too many digits)
+            raise ExpressionError(f'{text!r}: {exc}') from None
+        nodes = sum(1 for _ in ast.walk(tree.body))
+        if nodes > MAX_NODES:
+            raise ExpressionError(f'{text!r}: {nodes} operations and operands: an expression '
+                                  f'has at most {MAX_NODES}')
         self._tree = tree.body
         self._names: set[str] = set()
         self._check(self._tree)
@@ -112,13 +136,21 @@ class Expression:
                     and abs(right) > MAX_EXPONENT:
                 raise ExpressionError(f'{self.text!r}: exponent {right} is larger than '
                                       f'{MAX_EXPONENT}')
+            self._budget(node.op, left, right)
             return _BINARY[type(node.op)](left, right)
         if isinstance(node, ast.UnaryOp):
             return _UNARY[type(node.op)](self._eval(node.operand, values))
         if isinstance(node, ast.List):
-            return [self._eval(item, values) for item in node.elts]
+            out = [self._eval(item, values) for item in node.elts]
+            self._fits(_items(out))
+            return out
         if isinstance(node, ast.Call):
-            return FUNCTIONS[node.func.id](*(self._eval(a, values) for a in node.args))
+            args = [self._eval(a, values) for a in node.args]
+            if node.func.id == 'round' and len(args) > 1 and isinstance(args[1], int) \
+                    and abs(args[1]) > MAX_ROUND_DIGITS:
+                raise ExpressionError(f'{self.text!r}: round to {args[1]} digits: at most '
+                                      f'{MAX_ROUND_DIGITS}')
+            return FUNCTIONS[node.func.id](*args)
         name = _dotted(node, self.text)
         if name in values:
             return values[name]
@@ -126,6 +158,48 @@ class Expression:
             return CONSTANTS[name]
         raise ExpressionError(f'{self.text!r}: unknown name {name!r} (known: '
                               f'{", ".join(sorted(values)) or "none"})')
+
+    def _budget(self, op: ast.operator, left: Any, right: Any) -> None:
+        """Refuse an operation whose result would exceed the budget, before computing it."""
+        if isinstance(op, ast.Pow) and _integer(left) and _integer(right) and right > 0:
+            # |a ** b| < 2 ** (b * bits(a)); the product is computed from the bit counts.
+            self._bits(left.bit_length() * right)
+        elif isinstance(op, ast.Mult):
+            if _integer(left) and _integer(right):
+                self._bits(left.bit_length() + right.bit_length())
+            elif isinstance(left, list) and _integer(right):
+                self._fits(_items(left) * max(right, 0))
+            elif _integer(left) and isinstance(right, list):
+                self._fits(_items(right) * max(left, 0))
+        elif isinstance(op, ast.Add) and isinstance(left, list) and isinstance(right, list):
+            self._fits(_items(left) + _items(right))
+
+    def _bits(self, bits: int) -> None:
+        """Refuse an integer result of about ``bits`` bits beyond :data:`MAX_INT_BITS`."""
+        if bits > MAX_INT_BITS:
+            raise ExpressionError(f'{self.text!r}: an integer of about {bits} bits: the '
+                                  f'budget of an expression is {MAX_INT_BITS} bits')
+
+    def _fits(self, items: int) -> None:
+        """Refuse a list result of ``items`` numbers beyond :data:`MAX_ITEMS`."""
+        if items > MAX_ITEMS:
+            raise ExpressionError(f'{self.text!r}: a list of {items} numbers: the budget of '
+                                  f'an expression is {MAX_ITEMS}')
+
+
+def _integer(value: Any) -> bool:
+    """Return whether ``value`` is an integer (a bool counts as one, as in Python)."""
+    return isinstance(value, int)
+
+
+def _items(value: Any) -> int:
+    """Return how many numbers a (nested) list holds, each shared sublist counted in full.
+
+    Only lists within the budget exist, so this costs at most :data:`MAX_ITEMS` steps.
+    """
+    if isinstance(value, list):
+        return sum(_items(v) for v in value) if value else 0
+    return 1
 
 
 def _dotted(node: ast.AST, text: str) -> str:

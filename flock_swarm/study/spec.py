@@ -8,20 +8,23 @@ layout. See ``docs/sweeps.md`` for the format; :func:`parse_spec` checks all of 
 """
 
 import copy
+import dataclasses
 import hashlib
 import itertools
 import json
+import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import yaml
+from typing import Any, Callable
 
 from flock_swarm import __version__
 from flock_swarm.core import summary
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.run import stack_mismatch
-from flock_swarm.core.scenario import Scenario, parse_scenario, parse_yaml
+from flock_swarm.core.scenario import MAX_SEED, Scenario, parse_scenario
+from flock_swarm.scenario_yaml import read_yaml_file
 from flock_swarm.study.expr import Expression, ExpressionError
 
 #: The keys of a spec file.
@@ -34,8 +37,19 @@ SUMMARY_METRICS = summary.sweep_metrics()
 TIMED_METRICS = summary.timed_series()
 #: Default metrics when a spec names none.
 DEFAULT_METRICS = summary.default_metrics()
+#: How a law's own summary key (``Law.state_summary``: one value per agent) becomes a sweep
+#: metric: ``KEY.STAT``, e.g. ``adaptive_gain_final.max``.
+LAW_METRIC_STATS = {'min': min, 'mean': lambda xs: sum(xs) / len(xs), 'max': max}
 #: Runs of one stack hold about this many agents in all (see :mod:`flock_swarm.study.execute`).
 STACK_AGENTS = 3000
+#: Most points of a sweep: each point's scenario is built and validated before any run (a few
+#: milliseconds each: 10 000 points plan in about half a minute); a larger grid is refused
+#: before it is expanded (10^7 points would plan for hours).
+MAX_POINTS = 10_000
+#: Most runs (points x seeds) of a sweep: the plan holds every run's scenario in memory.
+MAX_RUNS = 1_000_000
+#: Planning reports its progress every this many points.
+PLAN_EVERY = 1000
 
 
 @dataclass(frozen=True)
@@ -144,8 +158,12 @@ def plain(value: Any) -> Any:
 
 
 def scenario_digest(sc: Scenario) -> str:
-    """Return the cache key of a run: a hash of its scenario as run and the package version."""
-    text = json.dumps(plain(sc.raw), sort_keys=True)
+    """Return the cache key of a run: a hash of its scenario as run and the package version.
+
+    The scenario's headline (``metrics.headline``, ``metrics.claim``) is left out: it changes
+    what is printed, not the run.
+    """
+    text = json.dumps(plain(run_mapping(sc.raw)), sort_keys=True)
     return hashlib.sha1(f'{text}|{__version__}'.encode()).hexdigest()[:16]
 
 
@@ -159,20 +177,33 @@ def read_spec(path: Path, overrides: tuple[str, ...] = (), seeds: int | None = N
     :return: the spec.
     :raises ScenarioError: naming the offending key.
     """
-    try:
-        data = parse_yaml(path.read_text())
-    except OSError as exc:
-        raise ScenarioError('spec', f'{path}: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        raise ScenarioError('spec', f'{path}: invalid YAML{where}') from None
+    data = read_yaml_file(path, 'spec', 'a sweep spec')
     if not isinstance(data, dict):
         raise ScenarioError('spec', f'{path}: expected a mapping at the top level')
     data.setdefault('name', path.stem)
     if seeds is not None:
         data['seeds'] = seeds
+    if isinstance(data.get('scenario'), str):
+        data['scenario'] = near_spec(path, data['scenario'])
     return parse_spec(data, overrides)
+
+
+def near_spec(spec: Path, scenario: str) -> str:
+    """Return a spec's ``scenario:`` with a relative file path taken from the spec's folder.
+
+    A spec and its scenario file travel together (``sweep`` runs from any directory); a
+    preset name (no ``.yaml`` suffix, no ``/``) and an absolute path stay as they are, by the
+    rule :func:`flock_swarm.presets.resolve` tells a path from a preset name with.
+
+    :param spec: the spec file.
+    :param scenario: its ``scenario:`` value.
+    :return: the scenario to load.
+    """
+    candidate = Path(scenario)
+    is_path = candidate.suffix in ('.yaml', '.yml') or os.sep in scenario
+    if not is_path or candidate.is_absolute():
+        return scenario
+    return str(spec.parent / candidate)
 
 
 def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
@@ -225,6 +256,15 @@ def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
                                 f'{", ".join(sorted(known)) or "none"})')
         derived.append((key, expr))
         known.add(key)
+    _check_overrides(overrides, keys, [key for key, _ in derived])
+    seeds = _seeds(data.get('seeds', 1))
+    count = math.prod(len(a.values) for a in grid) * (len(zipped[0].values) if zipped else 1)
+    if count > MAX_POINTS:
+        raise ScenarioError('grid', f'{count} points (the product of the axes\' lengths): at '
+                            f'most {MAX_POINTS} per sweep (split the study into several specs)')
+    if count * len(seeds) > MAX_RUNS:
+        raise ScenarioError('seeds', f'{count} points x {len(seeds)} seeds = '
+                            f'{count * len(seeds)} runs: at most {MAX_RUNS} per sweep')
     metrics = _metrics(data.get('metrics', list(summary.default_metrics())))
     times = _times(data.get('times', []))
     plot = data.get('plot') or {}
@@ -244,8 +284,23 @@ def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
     if not isinstance(description, str):
         raise ScenarioError('description', f'expected text, got {description!r}')
     return SweepSpec(name, scenario, tuple(overrides), fixed, grid, zipped, tuple(derived),
-                     _seeds(data.get('seeds', 1)), metrics, times, plot_x, plot_line, stack,
+                     seeds, metrics, times, plot_x, plot_line, stack,
                      description)
+
+
+def _check_overrides(overrides: tuple[str, ...], axes: list[str], derived: list[str]) -> None:
+    """Refuse a ``sweep --set`` of a key the spec sets per point (an axis or a derived value).
+
+    The point's value would replace it silently; a key inside such a key (or one holding
+    it, such as ``informed`` for the axis ``informed.fraction``) would mix both.
+    """
+    for assignment in overrides:
+        key = assignment.split('=', 1)[0].strip()
+        for kind, names in (('an axis', axes), ('a derived value', derived)):
+            for name in names:
+                if key == name or key.startswith(f'{name}.') or name.startswith(f'{key}.'):
+                    raise ScenarioError('--set', f'{key} is set per point by the spec ({kind}: '
+                                        f'{name}); change the spec instead')
 
 
 def _paths(section: Any, key: str) -> dict[str, Any]:
@@ -276,7 +331,25 @@ def _axes(section: Any, key: str) -> tuple[Axis, ...]:
 
 
 def _seeds(value: Any) -> tuple[int, ...]:
-    """Return the seeds: a count (``0 .. n - 1``), a list, or ``{first, count}``."""
+    """Return the seeds: a count (``0 .. n - 1``), a list, or ``{first, count}``.
+
+    Each seed in ``[0, MAX_SEED]`` (the scenario's range), at most :data:`MAX_RUNS` of them;
+    a count is checked before its range is built.
+    """
+    seeds = _seed_range(value)
+    # A range's length and end without building it (len() fails past sys.maxsize).
+    count, last = (seeds.stop - seeds.start, seeds.stop - 1) if isinstance(seeds, range) \
+        else (len(seeds), max(seeds))
+    if count > MAX_RUNS:
+        raise ScenarioError('seeds', f'{count} seeds: at most {MAX_RUNS} runs in all')
+    if last > MAX_SEED:
+        raise ScenarioError('seeds', f'a seed must be <= 2**63 - 1 (the scenario\'s seed '
+                            f'range), got {last}')
+    return tuple(seeds)
+
+
+def _seed_range(value: Any) -> range | list[int]:
+    """Return the seeds of :func:`_seeds`, unchecked against the bounds (a range of a count)."""
     if isinstance(value, dict):
         extra = sorted(set(map(str, value)) - {'first', 'count'})
         if extra:
@@ -284,17 +357,17 @@ def _seeds(value: Any) -> tuple[int, ...]:
         first, count = value.get('first', 0), value.get('count')
         if not _natural(first) or not _natural(count) or count < 1:
             raise ScenarioError('seeds', f'expected first >= 0 and count >= 1, got {value!r}')
-        return tuple(range(first, first + count))
+        return range(first, first + count)
     if isinstance(value, list):
         if not value or not all(_natural(s) for s in value):
             raise ScenarioError('seeds', f'expected a list of integers >= 0, got {value!r}')
         if len(set(value)) < len(value):
             raise ScenarioError('seeds', 'a seed is listed twice')
-        return tuple(value)
+        return value
     if not _natural(value) or value < 1:
         raise ScenarioError('seeds', f'expected a count >= 1, a list or {{first, count}}, '
                             f'got {value!r}')
-    return tuple(range(value))
+    return range(value)
 
 
 def _natural(value: Any) -> bool:
@@ -302,15 +375,38 @@ def _natural(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
+def law_metric(name: Any) -> tuple[str, str] | None:
+    """Return ``(summary key, statistic)`` of a law-state metric ``KEY.STAT``, else ``None``."""
+    if not isinstance(name, str):
+        return None
+    key, dot, stat = name.rpartition('.')
+    return (key, stat) if dot and key and stat in LAW_METRIC_STATS else None
+
+
+def metric_value(summary_: dict, name: str) -> Any:
+    """Return a run's value of a sweep metric: a summary key, or a law-state statistic."""
+    law = law_metric(name)
+    if law is None:
+        return summary_[name]
+    values = summary_.get(law[0])
+    return LAW_METRIC_STATS[law[1]](values) if values else None
+
+
 def _metrics(value: Any) -> tuple[str, ...]:
-    """Return the metrics, each a scalar summary key."""
+    """Return the metrics, each a scalar summary key or a law-state statistic ``KEY.STAT``.
+
+    Which law-state keys a run writes depends on its law: :func:`plan_runs` checks them
+    against the scenario's.
+    """
     if not isinstance(value, list) or not value:
         raise ScenarioError('metrics', f'expected a non-empty list, got {value!r}')
     known = summary.sweep_metrics()
     for k, name in enumerate(value):
-        if name not in known:
+        if name not in known and law_metric(name) is None:
             raise ScenarioError(f'metrics[{k}]', f'unknown metric {name!r} (known: '
-                                f'{", ".join(known)})')
+                                f'{", ".join(known)}; and a law\'s own summary key as KEY.'
+                                f'{"/".join(LAW_METRIC_STATS)}, e.g. '
+                                'adaptive_gain_final.max)')
     if len(set(value)) < len(value):
         raise ScenarioError('metrics', 'a metric is listed twice')
     return tuple(value)
@@ -328,6 +424,34 @@ def _times(value: Any) -> tuple[float, ...]:
     if len(set(out)) < len(out):
         raise ScenarioError('times', 'a time is listed twice')
     return tuple(out)
+
+
+def times_within(spec: SweepSpec) -> tuple[SweepSpec, tuple[float, ...]]:
+    """Return the spec without the ``times`` after a duration shortened by ``sweep --set``.
+
+    ``sweep su2009_fig3 --set duration=10`` asks for short runs of a study that also
+    collects its metrics at 50 s: those columns cannot exist, and the user chose it on the
+    command line, so they are dropped (the caller says so) instead of refusing the sweep. A
+    spec whose own ``times`` lie after its own runs' end is still refused by
+    :func:`plan_runs`.
+
+    :param spec: the spec.
+    :return: the spec to run and the times dropped (none: ``spec`` itself).
+    """
+    from flock_swarm.scenario_yaml import parse_value
+    duration = None
+    for assignment in spec.overrides:
+        key, _, text = assignment.partition('=')
+        if key.strip() == 'duration':
+            duration = parse_value(text)
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not duration > 0:
+        return spec, ()  # no duration given, or an invalid one: the plan refuses it
+    dropped = tuple(t for t in spec.times if t > duration)
+    if not dropped:
+        return spec, ()
+    kept = tuple(t for t in spec.times if t <= duration)
+    return dataclasses.replace(spec, times=kept), dropped
 
 
 def points(spec: SweepSpec) -> list[dict]:
@@ -353,17 +477,31 @@ def resolve_point(spec: SweepSpec, point: dict) -> dict:
 
     :raises ScenarioError: when a derived value fails (naming it and the point).
     """
+    return {**dict(spec.fixed), **point_values(spec, point)}
+
+
+def point_values(spec: SweepSpec, point: dict) -> dict:
+    """Return the values a point sets itself: the axes, then the derived values.
+
+    :raises ScenarioError: when a derived value fails (naming it and the point).
+    """
     values = dict(point)
     for key, expr in spec.derived:
         try:
             values[key] = expr.evaluate(values)
         except ExpressionError as exc:
             raise ScenarioError(f'derived.{key}', str(exc)) from None
-    return {**dict(spec.fixed), **values}
+    return values
 
 
-def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
+def plan_runs(spec: SweepSpec, allow_unstable: bool = False,
+              say: Callable[[str], None] | None = None) -> list[Run]:
     """Return every run of the spec, each scenario resolved and validated.
+
+    Each point's scenario is the scenario file, with the spec's ``set``, then ``sweep
+    --set`` (which so wins over ``set``: the command line is the user's last word), then
+    the point's axes and derived values (``--set`` of those is refused by
+    :func:`parse_spec`), then the seed.
 
     Order: seed by seed (the runs of one seed are the points of one realisation, with
     common random numbers), and within a seed the points of largest cost (N x steps) first
@@ -372,15 +510,25 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
     :param spec: the spec.
     :param allow_unstable: accept points whose dt violates a stability bound (as
         ``sim --allow-unstable``).
+    :param say: told the planning's progress every :data:`PLAN_EVERY` points of a larger
+        sweep (planning checks each point's scenario: about 3 ms a point).
     :raises ScenarioError: naming the point and the key a scenario rejects.
     """
-    from flock_swarm.presets import StepError, prepare
+    from flock_swarm.presets import StepError, load_mapping, prepare, set_values
+    base = load_mapping(spec.scenario)
+    try:
+        base = set_values(base, dict(spec.fixed))
+    except ScenarioError as exc:
+        raise ScenarioError('set', str(exc)) from None
     resolved = []
-    for point in points(spec):
-        values = resolve_point(spec, point)
+    todo = points(spec)
+    for number, point in enumerate(todo, 1):
+        if say is not None and number % PLAN_EVERY == 0:
+            say(f'[sweep] planning: {number}/{len(todo)} points checked')
+        values = point_values(spec, point)
         where = ', '.join(f'{k}={v!r}' for k, v in point.items())
         try:
-            sc, _ = prepare(spec.scenario, spec.overrides, spec.seeds[0], extra=values,
+            sc, _ = prepare(base, spec.overrides, spec.seeds[0], extra=values,
                             allow_unstable=allow_unstable)
         except StepError as exc:
             raise ScenarioError(where or 'dt', f'dt: {exc.reason} (sweep --allow-unstable '
@@ -389,6 +537,7 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
             if exc.key in ('scenario', '--set'):
                 raise
             raise ScenarioError(where or 'set', str(exc)) from None
+        _law_metrics(spec.metrics, sc)
         for t in spec.times:
             if t > sc.duration + 0.5 * sc.dt:
                 raise ScenarioError('times', f'{t:g} s is after the end of the run '
@@ -405,6 +554,17 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False) -> list[Run]:
             runs.append(Run(point, seed, data, scenario_digest(sc), sc.n_agents, sc.steps,
                             stack_key(sc)))
     return runs
+
+
+def _law_metrics(metrics: tuple[str, ...], sc: Scenario) -> None:
+    """Refuse a law-state metric whose key the scenario's law does not write."""
+    own = tuple(sc.law.state_summary.values())
+    for k, name in enumerate(metrics):
+        law = law_metric(name)
+        if law is not None and law[0] not in own:
+            raise ScenarioError(f'metrics[{k}]', f'{name}: protocol {sc.law.name} writes no '
+                                f'summary key {law[0]!r} (its own keys: '
+                                f'{", ".join(own) or "none"})')
 
 
 def stack_key(sc: Scenario) -> str | None:

@@ -86,10 +86,11 @@ class CuckerSmale(Law):
         return weight[:, None] * (pj - pi)
 
     def combine(self, q: np.ndarray, p: np.ndarray, s: np.ndarray, leader,
-                agents, dt: float) -> np.ndarray:
+                agents, dt: float, t: float) -> np.ndarray:
         """Return the alignment sums plus the informed agents' leader tracking.
 
-        Without the leader's state (``leader is None``: lost) every agent aligns only.
+        Without the leader's state (``leader is None``: lost) every agent aligns only. The
+        law does not depend on the time ``t`` of the step.
         """
         if leader is None:
             return s

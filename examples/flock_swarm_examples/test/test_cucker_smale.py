@@ -11,7 +11,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 
 from flock_swarm.plugin import LawSetup
-from flock_swarm.testing import assert_matches_sim
+from flock_swarm.testing import assert_matches_sim, check_law
 from flock_swarm_examples.cucker_smale import CuckerSmale
 from flock_swarm_examples.figure_eight import FigureEight
 
@@ -29,6 +29,13 @@ def test_two_agents_align_with_the_papers_weight():
     assert_allclose(to_i, 2.0 / np.sqrt(5.0) * np.array([[-1.0, 3.0]]), rtol=1e-15)
     # Antisymmetric, as the class says: the pair's momentum is conserved.
     assert_allclose(law.pair(qj, pj, qi, pi, np.ones(1)), -to_i, rtol=1e-15)
+
+
+def test_the_law_passes_check_law():
+    """Its antisymmetry claim, its shapes over a short run, one agent vs container vs sim."""
+    report = check_law(SCENARIO, SHORT, steps=10)
+    assert report['steps'] == 10 and report['agents'] == 12
+    check_law(CuckerSmale(K=2.0, beta=0.5))
 
 
 def test_the_leader_flies_the_figure_eight(flock_swarm_run):

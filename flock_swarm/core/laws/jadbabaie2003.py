@@ -50,7 +50,7 @@ class JadbabaieLeader(Law):
         """Return ``(theta_j, 1)``: neighbour heading and a count, summed over neighbours."""
         return np.stack((heading(pj), np.ones(pj.shape[0])), axis=-1)
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Average ``theta_i``, the neighbours' and (when within ``r``) ``theta_0``; eq. (38)."""
         if leader is None:
             b, theta_0 = np.zeros(q.shape[0]), 0.0

@@ -32,6 +32,8 @@ class OlfatiSaber2003Sink(Law):
 
     name: ClassVar[str] = 'os2003_sink'
     citation: ClassVar[str] = 'Olfati-Saber 2003, eq. (22) + (40): (alpha, alpha) protocol, sink'
+    #: The gradient and the velocity consensus are odd in (q_j - q_i, p_j - p_i).
+    antisymmetric: ClassVar[bool] = True
 
     d: float = 7.0
     r: float = 8.4
@@ -74,7 +76,7 @@ class OlfatiSaber2003Sink(Law):
                                    self.delta, self.k)
         return action[:, None] * unit + self.c_d * (pj - pi)
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Add the sink PD term ``-c1 (q_i - q_d) - c2 (p_i - p_d)`` ([OS03] eq. (40))."""
         if leader is None:
             return s

@@ -47,6 +47,8 @@ class SuParams(Law):
     c2: float = 0.5
     navigation: str = 'linear'
 
+    #: The gradient and the velocity consensus are odd in (q_j - q_i, p_j - p_i).
+    antisymmetric: ClassVar[bool] = True
     #: Whether only informed agents (``h_i = 1``) get navigational feedback.
     partial: ClassVar[bool] = False
     #: Whether the leader's acceleration ``f_gamma`` is fed forward.
@@ -117,7 +119,7 @@ class SuParams(Law):
     #: Whether ``f_gamma`` reaches the uninformed agents too (Section V.C's variant).
     feedforward_all: ClassVar[bool] = False
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Add the navigational feedback of [Su09] eq. (7), (10), (33) or Section V.C."""
         if leader is None:
             return s

@@ -33,6 +33,8 @@ class YuPinningObserver(Law):
     """
 
     name: ClassVar[str] = 'yu_pinning_observer'
+    #: The gradient and the velocity consensus are odd in (q_j - q_i, p_j - p_i).
+    antisymmetric: ClassVar[bool] = True
     citation: ClassVar[str] = ('Yu, Chen, Cao 2010, eq. (3) + (7): pinning observer-based '
                                'navigation feedback')
     strict_radius: ClassVar[bool] = False
@@ -70,7 +72,7 @@ class YuPinningObserver(Law):
         return pot.yu_pair_gain(dist, self.a, self.b, self.c_bar)[:, None] * dq \
             + self.c * (pj - pi)
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Add ``-D_i H_i (r_i - r_o) - D~_i H~_i (v_i - v_o)`` ([Yu10] eq. (7))."""
         gains = agents.data.get('nav_gains')
         if gains is None or leader is None:

@@ -37,6 +37,8 @@ class ZhouPseudoLeader(Law):
     citation: ClassVar[str] = ('Zhou, Wu, Yu, Small, Lu 2012, eq. (4): adaptive pseudo-leaders, '
                                'Theorems 1-2')
     all_pairs: ClassVar[bool] = True
+    #: The gradient and the velocity consensus are odd in (q_j - q_i, p_j - p_i).
+    antisymmetric: ClassVar[bool] = True
     state_summary: ClassVar[dict[str, str]] = {'h': 'adaptive_gain_final'}
 
     sigma: float = 0.1
@@ -79,7 +81,7 @@ class ZhouPseudoLeader(Law):
             * pot.sigma_grad(dq, self.sigma)
         return gradient + w[:, None] * (pj - pi)
 
-    def combine(self, q, p, s, leader, agents, dt):
+    def combine(self, q, p, s, leader, agents, dt, t=0.0):
         """Add ``u3 = -h_i (v_i - v_l)`` for pseudo-leaders ([Zhou12] eq. (4))."""
         if leader is None:
             return s
@@ -90,7 +92,7 @@ class ZhouPseudoLeader(Law):
         """Return ``h_i(0) = h0`` for every agent."""
         return {'h': np.full(n, self.h0)}
 
-    def state_rate(self, q, p, leader, agents):
+    def state_rate(self, q, p, leader, agents, s=None, t=0.0):
         """Return ``h_i' = k ||v_i - v_l||^2`` for pseudo-leaders, ``0`` otherwise."""
         if leader is None:
             return {'h': np.zeros(q.shape[0])}

@@ -37,7 +37,8 @@ class LeaderModel:
     """Base class of leader models: parameters as frozen dataclass fields, plus the ODE.
 
     Subclasses set :attr:`name` (equal to their entry-point name) and implement
-    :meth:`acceleration`; they may override :meth:`validate`, :meth:`jacobian` and
+    :meth:`acceleration`; they may override :meth:`validate`, :meth:`jacobian`,
+    :meth:`initial_state` (a model whose path fixes where it starts) and
     :meth:`from_section` (for a YAML layout other than one key per field).
     """
 
@@ -103,6 +104,18 @@ class LeaderModel:
         if not self.autonomous:
             raise ValueError(f'leader model {self.name} depends on time or position')
         return lambda p: self.acceleration(0.0, p, p)
+
+    def initial_state(self, dim: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return the leader's own ``(q_gamma(0), p_gamma(0))``, or ``None`` (the default).
+
+        ``None``: the scenario gives ``leader.position`` (and ``leader.velocity``). A model
+        whose parameters fix its start (a circle's centre, radius and phase) returns it;
+        the scenario then must not give either key.
+
+        :param dim: the scenario's dimension.
+        :return: the position and velocity, each of ``dim`` numbers, or ``None``.
+        """
+        return None
 
     def jacobian(self, p: np.ndarray) -> np.ndarray | None:
         """Return ``df/dp`` at one velocity (the RK4 step-size check), or ``None``: unchecked."""

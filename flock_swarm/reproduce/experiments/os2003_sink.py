@@ -1,15 +1,20 @@
-"""Olfati-Saber 2003, Section 5: flocking towards a sink (experiment, analysis, table rows,
-discussion, figure)."""
+"""Olfati-Saber 2003, Section 5: flocking towards a sink; the net becomes one flock whose
+topology stops switching."""
 
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.scenario import Scenario
-from flock_swarm.reproduce.common import (Experiment, FIG_SIZE, draw_last_net, fmt, late, plural,
-                                          pyplot, save_figure)
+from flock_swarm.reproduce.common import (FIG_SIZE, draw_last_net, fmt, late, plural, pyplot,
+                                          save_figure)
+from flock_swarm.reproduce.experiment import Experiment, FractionClaim, SetUp
+
+
+def invariant_flock(m: dict) -> bool:
+    """Return whether a run ends as one flock whose topology no longer switches."""
+    return m['components_final'] == 1 and m['topology_changes_last_quarter'] == 0
 
 
 def analyse_sink(sc: Scenario, summary: dict, series: dict) -> dict:
@@ -44,7 +49,7 @@ def analyse_sink(sc: Scenario, summary: dict, series: dict) -> dict:
 def discuss_sink(m: dict) -> str:
     """Return the discussion of Olfati-Saber 2003 Section 5."""
     one = m['components_final'] == 1
-    fixed = m['topology_changes_last_quarter'] == 0
+    fixed = invariant_flock(m)
     return (
         ('We reproduce the claim: ' if one and fixed else
          'We reproduce the flock but not yet a fixed topology: ' if one else
@@ -90,28 +95,23 @@ def figure_sink(sc: Scenario, summary: dict, series: dict, m: dict, path: Path) 
     return save_figure(fig, path)
 
 
-EXPERIMENTS = (
-    Experiment(
-        'os2003_sink', 'Olfati-Saber 2003, Section 5: flocking towards a sink',
-        'Olfati-Saber 2003',
+class Sink(Experiment):
+    """Olfati-Saber 2003, Section 5."""
+
+    key = 'os2003_sink'
+    title = 'Olfati-Saber 2003, Section 5: flocking towards a sink'
+    paper = 'Olfati-Saber 2003'
+    claim = (
         'Section 5, Fig. 4 (n = 100 agents, random positions, zero velocities, sink '
         '(q_d, p_d) = (0, 0) through the PD term (40), d_alpha = 7, r = 1.2 d_alpha): '
         '"an initially disconnected net ... evolves into **a flock** after going through a '
         'finite number of switching events that add more edges to the initial net. The '
-        '**topology of the flock is asymptotically invariant**." The paper gives no number.',
-        quick=('n_agents=20', 'duration=2'), ros=('n_agents=20', 'duration=20'),
-        ros_quick=('n_agents=4', 'duration=0.5')),
-)
-
-
-ANALYSES: dict[str, Callable[[Scenario, dict, dict], dict]] = {
-    'os2003_sink': analyse_sink,
-}
-
-
-#: Table rows of each experiment: (what, metric key, the paper's value).
-ROWS: dict[str, tuple[tuple[str, str, str], ...]] = {
-    'os2003_sink': (
+        '**topology of the flock is asymptotically invariant**." The paper gives no number.')
+    order = 200.0
+    quick = ('n_agents=20', 'duration=2')
+    ros = ('n_agents=20', 'duration=20')
+    ros_quick = ('n_agents=4', 'duration=0.5')
+    rows = (
         ('t_final [s] (paper: not given)', 't_final', 'not given'),
         ('r-disk components at t_final', 'components_final', '1 (a flock)'),
         ('edges at t_final', 'edges_final', '-'),
@@ -124,15 +124,28 @@ ROWS: dict[str, tuple[tuple[str, str, str], ...]] = {
         ('‖qbar - q_d‖ at t_final [m]', 'com_position_error', '-'),
         ('max speed at t_final [m/s]', 'speed_max_final', '-'),
         ('pairs ever closer than 1 m', 'collisions', '-'),
-        ('closest approach [m]', 'min_pair_distance', '-')),
-}
+        ('closest approach [m]', 'min_pair_distance', '-'))
+    criterion = FractionClaim(
+        'the agents end as one flock whose topology no longer switches (1 component, no '
+        'switch over the last quarter of the run)', invariant_flock,
+        'one flock, no late switch')
+    # The paper gives no run length; the two are reported each on its own.
+    setups = (SetUp('reproduce_os2003_sink', '300 s'),
+              SetUp('reproduce_os2003_sink_600s', '600 s'))
+    columns = (('time of the last topology switch [s]', 'last_topology_change_t', 'finite'),
+               ('switches over the last quarter', 'topology_changes_last_quarter', '0'),
+               ('r-disk components at t_final', 'components_final', '1'),
+               ('‖qbar - q_d‖ at t_final [m]', 'com_position_error', '-'))
+    analyse = staticmethod(analyse_sink)
+    discuss = staticmethod(discuss_sink)
+    figure = staticmethod(figure_sink)
+
+    def headline(self, res: dict) -> tuple[str, str]:
+        """Return the paper's claim and our components and late switches."""
+        m = res['metrics']
+        return ('one flock, invariant topology',
+                f'{m["components_final"]} component(s), '
+                f'{m["topology_changes_last_quarter"]} late switches')
 
 
-DISCUSSIONS: dict[str, Callable[[dict], str]] = {
-    'os2003_sink': discuss_sink,
-}
-
-
-FIGURES = {
-    'os2003_sink': figure_sink,
-}
+EXPERIMENT = Sink()

@@ -1,0 +1,738 @@
+"""The network between the agents: delay, loss, noise and sampled communication.
+
+The scenario's ``network:`` section (:func:`parse_network`) gives a :class:`NetworkSpec`;
+:class:`NetworkState` applies it to a run, one step at a time, for the whole swarm (``sim``)
+or for the agents one process hosts (the agents' controller): both get the same rows.
+``docs/network.md`` states the semantics; in short:
+
+- every ``period`` steps each agent sends its state ``(q_j, p_j)`` over each directed link
+  ``j -> i`` of the step (the pairs of the interaction graph at the sending step: within
+  the radius for an r-disk graph, the edges of a fixed graph, every pair for a law acting
+  on all pairs); the leader sends its state to the informed agents the same way;
+- a message sent at step ``k'`` is lost with the channel's probability, or arrives at
+  ``k' + d`` with the delay ``d`` drawn for it; at step ``k`` agent ``i`` holds, of each
+  sender, the most recent message that has arrived by ``k`` (its *age* is ``k - k'``),
+  with the Gaussian errors drawn for that message added; a message older than
+  ``max_age`` is dropped;
+- a sender of which ``i`` holds nothing is not a neighbour (before a first message, after
+  ``max_age``); on an r-disk graph a sender is a neighbour when the position held of it is
+  within the radius of ``i``'s own position (the current one under the ``communication``
+  delay model, the one of the message's sending step under ``input``);
+- an informed agent without any held leader state applies the law of an uninformed agent
+  (``combine`` with ``leader=None``).
+
+Every draw is a pure function of ``(seed, stream, step, receiver, sender)`` through the
+splitmix64 hash (:func:`uniforms`), vectorised in NumPy: the result does not depend on the
+order of evaluation, on which agents a process evaluates, or on the number of processes.
+The memory is the links of the last ``max_age`` sending steps (a few numbers per link) and
+the agents' own states over those steps: never an ``N x N`` array.
+"""
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from flock_swarm.core.checks import choice, integer, mapping, number, only
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.graphs import EdgeList, within_radius
+from flock_swarm.core.laws.base import AgentData, Law, control, state_rates
+from flock_swarm.core.leaders.base import LeaderState
+
+DELAY_LAWS = ('fixed', 'uniform', 'geometric')
+LOSS_MODELS = ('bernoulli', 'gilbert_elliott')
+#: The delay models of the consensus literature (Olfati-Saber & Murray 2004, Section VIII).
+DELAY_MODELS = ('communication', 'input')
+CHANNEL_KEYS = ('delay', 'loss', 'noise', 'period')
+NETWORK_KEYS = (*CHANNEL_KEYS, 'leader', 'model', 'max_age')
+#: A time in seconds is a whole number of steps when ``|x / dt - round(x / dt)|`` is below it.
+STEP_TOLERANCE = 1e-9
+#: The longest history kept [steps]: the window holds the agents' states and the links of
+#: every step within it, so a longer one would take memory for information the run drops.
+MAX_WINDOW = 100_000
+#: The sender id of the virtual leader in the draws (no agent has it: ids are < 10**6).
+LEADER = 0xFFFFFFFF
+
+# The streams of the draws: one per kind, so that no two draws of a message share a value.
+_DELAY, _LOSS, _GE_STEP, _GE_START, _NOISE = 1, 2, 3, 4, 16
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1, _MIX2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+# --------------------------------------------------------------------------------------------
+# The generator
+
+
+def splitmix64(x: np.ndarray) -> np.ndarray:
+    """Return splitmix64's output for the states ``x`` (Steele, Lea, Flood 2014).
+
+    ``z = x + 0x9E3779B97F4A7C15``, then ``z ^= z >> 30; z *= 0xBF58476D1CE4E5B9;
+    z ^= z >> 27; z *= 0x94D049BB133111EB; z ^= z >> 31``, all modulo ``2**64``.
+
+    :param x: ``uint64`` array.
+    :return: ``uint64`` array of the same shape.
+    """
+    z = x + _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+def uniforms(seed: int, stream: int, step, receiver: np.ndarray,
+             sender: np.ndarray) -> np.ndarray:
+    """Return one uniform in ``[0, 1)`` per ``(step, receiver, sender)``, a pure function.
+
+    The key is hashed in a chain: ``h = s(s(s(s(s(seed) ^ stream) ^ step) ^ receiver) ^
+    sender)`` with ``s`` = :func:`splitmix64`; the top 53 bits of ``h`` give the uniform.
+
+    :param seed: the scenario's seed.
+    :param stream: the kind of draw (delay, loss, noise component...).
+    :param step: the sending step (an int or an array broadcast with the ids).
+    :param receiver: receiving agent ids.
+    :param sender: sending agent ids (:data:`LEADER` for the leader).
+    :return: float array, the broadcast shape of ``step``, ``receiver`` and ``sender``.
+    """
+    with np.errstate(over='ignore'):
+        h = splitmix64(np.full(1, seed % (1 << 64), dtype=np.uint64))
+        h = splitmix64(h ^ np.uint64(stream))
+        h = splitmix64(h ^ np.asarray(step).astype(np.uint64))
+        h = splitmix64(h ^ np.asarray(receiver).astype(np.uint64))
+        h = splitmix64(h ^ np.asarray(sender).astype(np.uint64))
+    return (h >> np.uint64(11)).astype(np.float64) * 2.0 ** -53
+
+
+def normals(seed: int, stream: int, step, receiver: np.ndarray,
+            sender: np.ndarray) -> np.ndarray:
+    """Return standard normal draws (Box-Muller on two streams ``stream``, ``stream + 1``)."""
+    u1 = uniforms(seed, stream, step, receiver, sender)
+    u2 = uniforms(seed, stream + 1, step, receiver, sender)
+    return np.sqrt(-2.0 * np.log1p(-u1)) * np.cos(2.0 * np.pi * u2)
+
+
+# --------------------------------------------------------------------------------------------
+# The section
+
+
+@dataclass(frozen=True)
+class Delay:
+    """The delay of each message, in steps.
+
+    :ivar law: ``fixed`` (``low``), ``uniform`` (an integer in ``[low, high]``) or
+        ``geometric`` (``P(d) = p (1 - p)^d``, truncated at ``high``: the excess lands on it).
+    :ivar low: the fixed delay, or the smallest.
+    :ivar high: the largest delay.
+    :ivar p: the geometric law's parameter, ``1 / (1 + mean / dt)``.
+    """
+
+    law: str = 'fixed'
+    low: int = 0
+    high: int = 0
+    p: float = 1.0
+
+    def draw(self, u: np.ndarray) -> np.ndarray:
+        """Return the delays [steps] for uniforms ``u``."""
+        if self.law == 'fixed':
+            return np.full(u.shape, self.low, dtype=np.int64)
+        if self.law == 'uniform':
+            return self.low + np.floor(u * (self.high - self.low + 1)).astype(np.int64)
+        with np.errstate(divide='ignore'):
+            d = np.floor(np.log1p(-u) / np.log1p(-self.p)) if self.p < 1.0 else np.zeros(u.shape)
+        return np.minimum(d, self.high).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Which messages are lost.
+
+    :ivar model: ``bernoulli`` (each message independently with ``p``) or ``gilbert_elliott``
+        (a two-state Markov chain per directed link, advanced at each message: good -> bad
+        with ``p_good_bad``, bad -> good with ``p_bad_good``; a message is lost with
+        ``loss_good`` or ``loss_bad`` in the state the chain is in).
+    """
+
+    model: str = 'bernoulli'
+    p: float = 0.0
+    p_good_bad: float = 0.0
+    p_bad_good: float = 1.0
+    loss_good: float = 0.0
+    loss_bad: float = 1.0
+
+    @property
+    def active(self) -> bool:
+        """Return whether any message can be lost."""
+        if self.model == 'bernoulli':
+            return self.p > 0.0
+        return self.loss_good > 0.0 or (self.p_good_bad > 0.0 and self.loss_bad > 0.0)
+
+    @property
+    def bad_fraction(self) -> float:
+        """Return the stationary probability of the bad state."""
+        total = self.p_good_bad + self.p_bad_good
+        return self.p_good_bad / total if total > 0.0 else 0.0
+
+
+@dataclass(frozen=True)
+class Channel:
+    """What one kind of link does to its messages (the agents' links or the leader's)."""
+
+    delay: Delay = Delay()
+    loss: Loss = Loss()
+    noise_position: float = 0.0
+    noise_velocity: float = 0.0
+    period: int = 1
+
+    @property
+    def active(self) -> bool:
+        """Return whether the channel changes anything against exact, current states."""
+        return (self.delay.high > 0 or self.loss.active or self.noise_position > 0.0
+                or self.noise_velocity > 0.0 or self.period > 1)
+
+    @property
+    def oldest(self) -> int:
+        """Return the oldest age [steps] a message can have without a loss."""
+        return self.delay.high + self.period - 1
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """The scenario's ``network:`` section, in steps (see ``docs/network.md``).
+
+    :ivar agents: the channel of the agents' links.
+    :ivar leader: the channel of the leader's state to the informed agents.
+    :ivar model: ``communication`` (own state current) or ``input`` (own state delayed too).
+    :ivar max_age: information older than this [steps] is dropped.
+    """
+
+    agents: Channel = Channel()
+    leader: Channel = Channel()
+    model: str = 'communication'
+    max_age: int = 0
+
+    @property
+    def active(self) -> bool:
+        """Return whether a run differs from one without the section."""
+        return self.agents.active or self.leader.active
+
+
+def steps_of(value, key: str, dt: float) -> int:
+    """Return a time [s] as a whole number of steps; refuse one that is not.
+
+    The rule: ``x`` is ``round(x / dt)`` steps when ``|x / dt - round(x / dt)| <= 1e-9``.
+
+    :param value: the time from the scenario, ``>= 0``.
+    :param key: its dotted key.
+    :param dt: the step.
+    :return: the steps.
+    :raises ScenarioError: for a negative time or one between two steps.
+    """
+    x = number(value, key)
+    if x < 0.0:
+        raise ScenarioError(key, f'must be >= 0 s, got {value!r}')
+    steps = round(x / dt)
+    if abs(x / dt - steps) > STEP_TOLERANCE:
+        raise ScenarioError(key, f'must be a whole number of steps (dt = {dt:g} s), got '
+                            f'{value!r} = {x / dt:.6g} steps')
+    if steps > MAX_WINDOW:
+        raise ScenarioError(key, f'must be <= {MAX_WINDOW} steps, got {steps}')
+    return int(steps)
+
+
+def _probability(value, key: str) -> float:
+    x = number(value, key)
+    if not 0.0 <= x <= 1.0:
+        raise ScenarioError(key, f'must be in [0, 1], got {value!r}')
+    return x
+
+
+def _parse_delay(value, key: str, dt: float) -> Delay:
+    if not isinstance(value, dict):
+        steps = steps_of(0 if value is None else value, key, dt)
+        return Delay('fixed', steps, steps)
+    law = choice(value.get('law', 'fixed'), f'{key}.law', DELAY_LAWS)
+    if law == 'fixed':
+        only(value, ('law', 'value'), f'{key}.')
+        steps = steps_of(value.get('value', 0), f'{key}.value', dt)
+        return Delay('fixed', steps, steps)
+    if law == 'uniform':
+        only(value, ('law', 'min', 'max'), f'{key}.')
+        if 'max' not in value:
+            raise ScenarioError(f'{key}.max', 'missing (the largest delay [s])')
+        low = steps_of(value.get('min', 0), f'{key}.min', dt)
+        high = steps_of(value['max'], f'{key}.max', dt)
+        if high < low:
+            raise ScenarioError(f'{key}.max', f'must be >= min ({low * dt:g} s), got '
+                                f'{value["max"]!r}')
+        return Delay('uniform', low, high)
+    only(value, ('law', 'mean', 'max'), f'{key}.')
+    for name in ('mean', 'max'):
+        if name not in value:
+            raise ScenarioError(f'{key}.{name}', 'missing (geometric delay: mean and max [s])')
+    mean = number(value['mean'], f'{key}.mean')
+    if mean < 0.0:
+        raise ScenarioError(f'{key}.mean', f'must be >= 0 s, got {value["mean"]!r}')
+    high = steps_of(value['max'], f'{key}.max', dt)
+    return Delay('geometric', 0, high, 1.0 / (1.0 + mean / dt))
+
+
+def _parse_loss(value, key: str) -> Loss:
+    if not isinstance(value, dict):
+        return Loss('bernoulli', _probability(0 if value is None else value, key))
+    model = choice(value.get('model', 'bernoulli'), f'{key}.model', LOSS_MODELS)
+    if model == 'bernoulli':
+        only(value, ('model', 'p'), f'{key}.')
+        return Loss('bernoulli', _probability(value.get('p', 0), f'{key}.p'))
+    names = ('p_good_bad', 'p_bad_good', 'loss_good', 'loss_bad')
+    only(value, ('model', *names), f'{key}.')
+    for name in ('p_good_bad', 'p_bad_good'):
+        if name not in value:
+            raise ScenarioError(f'{key}.{name}', 'missing (a transition probability of the '
+                                'Gilbert-Elliott channel)')
+    probs = {name: _probability(value.get(name, default), f'{key}.{name}')
+             for name, default in zip(names, (0, 0, 0, 1))}
+    return Loss('gilbert_elliott', **probs)
+
+
+def _parse_channel(section: dict, prefix: str, dt: float) -> Channel:
+    noise = mapping(section.get('noise'), f'{prefix}noise')
+    only(noise, ('position', 'velocity'), f'{prefix}noise.')
+    stds = []
+    for name in ('position', 'velocity'):
+        std = number(noise.get(name, 0), f'{prefix}noise.{name}')
+        if std < 0.0:
+            raise ScenarioError(f'{prefix}noise.{name}', f'must be >= 0, got {std!r}')
+        stds.append(std)
+    period = integer(section.get('period', 1), f'{prefix}period')
+    if not 1 <= period <= MAX_WINDOW:
+        raise ScenarioError(f'{prefix}period', f'must be in [1, {MAX_WINDOW}] steps, got '
+                            f'{period}')
+    return Channel(_parse_delay(section.get('delay'), f'{prefix}delay', dt),
+                   _parse_loss(section.get('loss'), f'{prefix}loss'), stds[0], stds[1], period)
+
+
+def parse_network(value, dt: float) -> NetworkSpec:
+    """Validate the scenario's ``network:`` section; return it in steps.
+
+    :param value: the section (``None``: absent).
+    :param dt: the step [s].
+    :return: the spec (inactive when absent or all zero).
+    :raises ScenarioError: naming the first invalid key.
+    """
+    section = mapping(value, 'network')
+    only(section, NETWORK_KEYS, 'network.')
+    agents = _parse_channel(section, 'network.', dt)
+    leader_section = mapping(section.get('leader'), 'network.leader')
+    only(leader_section, CHANNEL_KEYS, 'network.leader.')
+    leader = _parse_channel(leader_section, 'network.leader.', dt)
+    model = choice(section.get('model', 'communication'), 'network.model', DELAY_MODELS)
+    oldest = max(agents.oldest, leader.oldest)
+    if 'max_age' in section:
+        max_age = steps_of(section['max_age'], 'network.max_age', dt)
+        if max_age < oldest:
+            raise ScenarioError('network.max_age', f'must be >= the largest delay plus the '
+                                f'period less one step ({oldest} steps = {oldest * dt:g} s), '
+                                f'or no message is ever used, got {section["max_age"]!r}')
+    else:
+        # A held state survives one lost refresh and is dropped at the second.
+        max_age = oldest + max(agents.period, leader.period)
+    if max_age > MAX_WINDOW:
+        raise ScenarioError('network.max_age', f'must be <= {MAX_WINDOW} steps, got '
+                            f'{max_age}')
+    return NetworkSpec(agents, leader, model, max_age)
+
+
+def refuse_in_ros(spec: NetworkSpec) -> None:
+    """Refuse an active section in a ROS run: the nodes do not apply the model yet.
+
+    A ROS run would otherwise ignore the section and differ from ``sim`` without a word.
+
+    :param spec: the scenario's ``network:`` section.
+    :raises ScenarioError: naming ``network`` when it is active.
+    """
+    if spec.active:
+        raise ScenarioError('network', 'not yet applied by the ROS nodes: run it with sim '
+                            '(docs/network.md)')
+
+
+# --------------------------------------------------------------------------------------------
+# A run's messages
+
+
+@dataclass
+class _Sent:
+    """The messages of one sending step over one channel (directed links, sorted by key)."""
+
+    step: int
+    key: np.ndarray
+    receiver: np.ndarray
+    sender: np.ndarray
+    arrival: np.ndarray
+    weight: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+    a: np.ndarray | None
+    bad: np.ndarray | None
+
+
+@dataclass
+class Held:
+    """What the receivers hold at a step, one row per (receiver, sender) with a message.
+
+    :ivar receiver: receiving agents.
+    :ivar sender: sending agents (:data:`LEADER` for the leader).
+    :ivar age: ``k - k'`` [steps].
+    :ivar weight: the link's weight at sending.
+    :ivar q: the position held (with its error).
+    :ivar p: the velocity held (with its error).
+    :ivar a: the leader's acceleration held (leader channel only).
+    """
+
+    receiver: np.ndarray
+    sender: np.ndarray
+    age: np.ndarray
+    weight: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+    a: np.ndarray | None = None
+
+
+class _Link:
+    """One channel's messages over the last ``max_age`` sending steps."""
+
+    def __init__(self, channel: Channel, seed: int, dim: int, window: int) -> None:
+        self.channel, self.seed, self.dim, self.window = channel, seed, dim, window
+        self.sent: deque[_Sent] = deque()
+
+    def send(self, k: int, receiver: np.ndarray, sender: np.ndarray, weight: np.ndarray,
+             q: np.ndarray, p: np.ndarray, a: np.ndarray | None = None) -> None:
+        """Send step ``k``'s messages (states already gathered per link, sender's values)."""
+        while self.sent and self.sent[0].step < k - self.window:
+            self.sent.popleft()
+        if k % self.channel.period:
+            return
+        ch, seed = self.channel, self.seed
+        key = receiver.astype(np.int64) * (LEADER + 1) + sender.astype(np.int64)
+        order = np.argsort(key, kind='stable')
+        key, receiver, sender = key[order], receiver[order], sender[order]
+        weight, q, p = weight[order], q[order], p[order]
+        a = a[order] if a is not None else None
+        lost, bad = self._lost(k, key, receiver, sender)
+        delay = ch.delay.draw(uniforms(seed, _DELAY, k, receiver, sender)) \
+            if ch.delay.high > 0 else np.zeros(key.size, dtype=np.int64)
+        arrival = np.where(lost, np.iinfo(np.int64).max, k + delay)
+        dim = q.shape[1]
+        if ch.noise_position > 0.0 or ch.noise_velocity > 0.0:
+            q, p = q.copy(), p.copy()
+            for c in range(dim):
+                if ch.noise_position > 0.0:
+                    q[:, c] += ch.noise_position * normals(seed, _NOISE + 2 * c, k,
+                                                           receiver, sender)
+                if ch.noise_velocity > 0.0:
+                    p[:, c] += ch.noise_velocity * normals(seed, _NOISE + 2 * (3 + c), k,
+                                                           receiver, sender)
+        self.sent.append(_Sent(k, key, receiver, sender, arrival, weight, q, p, a, bad))
+
+    def _lost(self, k, key, receiver, sender) -> tuple[np.ndarray, np.ndarray | None]:
+        loss, seed = self.channel.loss, self.seed
+        if not loss.active:
+            return np.zeros(key.size, dtype=bool), None
+        if loss.model == 'bernoulli':
+            return uniforms(seed, _LOSS, k, receiver, sender) < loss.p, None
+        # The chain of a link continues from its state at the channel's previous sending
+        # step; a link that did not exist then starts from the stationary distribution.
+        bad = uniforms(seed, _GE_START, k, receiver, sender) < loss.bad_fraction
+        prev = self.sent[-1] if self.sent else None
+        if prev is not None and prev.step == k - self.channel.period and prev.key.size:
+            at = np.minimum(np.searchsorted(prev.key, key), prev.key.size - 1)
+            known = prev.key[at] == key
+            u = uniforms(seed, _GE_STEP, k, receiver, sender)
+            was = prev.bad[at]
+            moved = np.where(was, u >= loss.p_bad_good, u < loss.p_good_bad)
+            bad = np.where(known, moved, bad)
+        p_loss = np.where(bad, loss.loss_bad, loss.loss_good)
+        return uniforms(seed, _LOSS, k, receiver, sender) < p_loss, bad
+
+    def held(self, k: int, receivers: np.ndarray | None) -> Held:
+        """Return, per link, the most recent message arrived by ``k`` within the window."""
+        parts = []
+        for sent in reversed(self.sent):
+            if sent.step < k - self.window:
+                break
+            ok = sent.arrival <= k
+            if receivers is not None:
+                ok &= receivers[sent.receiver]
+            if ok.any():
+                parts.append((sent, np.flatnonzero(ok)))
+        dim = self.dim
+        if not parts:
+            empty = np.zeros(0, dtype=np.int64)
+            return Held(empty, empty, empty, np.zeros(0), np.zeros((0, dim)),
+                        np.zeros((0, dim)), np.zeros((0, dim)))
+        keys = np.concatenate([s.key[idx] for s, idx in parts])
+        # Parts run from the newest sending step: the first occurrence of a key is its newest.
+        _, first = np.unique(keys, return_index=True)
+        part = np.concatenate([np.full(idx.size, n) for n, (_, idx) in enumerate(parts)])[first]
+        rows = np.concatenate([idx for _, idx in parts])[first]
+        # Only the chosen messages are gathered, each from its own sending step's record.
+        chosen = [(parts[n][0], part == n) for n in np.unique(part).tolist()]
+
+        def gather(name):
+            if getattr(parts[0][0], name) is None:
+                return None
+            like = getattr(parts[0][0], name)
+            out = np.empty((first.size, *like.shape[1:]), dtype=like.dtype)
+            for sent, mask in chosen:
+                out[mask] = getattr(sent, name)[rows[mask]]
+            return out
+        age = k - np.array([parts[n][0].step for n in range(len(parts))],
+                           dtype=np.int64)[part]
+        return Held(gather('receiver'), gather('sender'), age, gather('weight'),
+                    gather('q'), gather('p'), gather('a'))
+
+    def delivered(self, receivers: np.ndarray | None) -> tuple[int, int]:
+        """Return (messages not lost, messages) of the channel's latest sending step."""
+        if not self.sent:
+            return 0, 0
+        sent = self.sent[-1]
+        mask = np.ones(sent.key.size, dtype=bool) if receivers is None \
+            else receivers[sent.receiver]
+        lost = sent.arrival == np.iinfo(np.int64).max
+        return int((mask & ~lost).sum()), int(mask.sum())
+
+
+#: How the neighbours are decided on the held states: an r-disk graph (the radius), a fixed
+#: graph (its edges), a law acting on all pairs over an r-disk graph (weights within r).
+DISK, FIXED, ALL_PAIRS_DISK = 'disk', 'fixed', 'all_pairs_disk'
+
+
+class NetworkState:
+    """A run's messages, fed the true states every step, asked for the held ones.
+
+    ``sim`` feeds the whole swarm and evaluates every agent; the agents' controller feeds
+    the same true states (it receives every odometry) and evaluates the agents it hosts
+    (``ids``): the draws being pure functions of the link, both get the same rows.
+    """
+
+    def __init__(self, spec: NetworkSpec, seed: int, n: int, dim: int, law: Law,
+                 neighbourhood: str, coupling: float = 1.0) -> None:
+        """Create the state of a run.
+
+        :param spec: the ``network:`` section.
+        :param seed: the scenario's seed (keys every draw).
+        :param n: the number of agents.
+        :param dim: the dimension.
+        :param law: the law (its radius and strictness decide r-disk neighbours).
+        :param neighbourhood: :data:`DISK`, :data:`FIXED` or :data:`ALL_PAIRS_DISK`.
+        :param coupling: the law's coupling weight (weights of :data:`ALL_PAIRS_DISK`).
+        """
+        self.spec, self.n, self.dim, self.law = spec, n, dim, law
+        self.neighbourhood, self.coupling = neighbourhood, coupling
+        window = spec.max_age
+        self.links = _Link(spec.agents, seed, dim, window)
+        self.leader_links = _Link(spec.leader, seed, dim, window)
+        # The agents' own states over the window (the input delay model uses them).
+        self.own_q = np.zeros((window + 1, n, dim))
+        self.own_p = np.zeros((window + 1, n, dim))
+        self.step = -1
+        self.leader_now: LeaderState | None = None
+        # Since the last recorded instant: messages delivered and sent, ages summed, their
+        # count and largest (a record every few steps would otherwise alias with a period).
+        self._tally = [0, 0, 0, 0, -1]
+
+    def send(self, k: int, q: np.ndarray, p: np.ndarray, leader: LeaderState,
+             edges: EdgeList, informed: np.ndarray, receivers: np.ndarray | None = None) -> None:
+        """Send step ``k``'s messages: every agent's state over the step's links.
+
+        :param k: the step (called once per step, in order).
+        :param q: true positions of every agent.
+        :param p: true velocities of every agent.
+        :param leader: the leader's true state.
+        :param edges: the undirected interaction graph at ``k`` (its pairs are the links).
+        :param informed: which agents receive the leader's state.
+        :param receivers: the agents whose incoming messages to keep (``None``: all).
+        """
+        self.step, self.leader_now = k, leader
+        w = self.spec.max_age + 1
+        self.own_q[k % w], self.own_p[k % w] = q, p
+        rec = np.concatenate([edges.i, edges.j]).astype(np.int64)
+        snd = np.concatenate([edges.j, edges.i]).astype(np.int64)
+        weight = np.concatenate([edges.weight, edges.weight])
+        if receivers is not None:
+            keep = receivers[rec]
+            rec, snd, weight = rec[keep], snd[keep], weight[keep]
+        self.links.send(k, rec, snd, weight, q[snd], p[snd])
+        lrec = np.flatnonzero(informed if receivers is None else informed & receivers)
+        m = lrec.size
+        self.leader_links.send(k, lrec, np.full(m, LEADER, dtype=np.int64), np.ones(m),
+                               np.broadcast_to(leader.q, (m, self.dim)),
+                               np.broadcast_to(leader.p, (m, self.dim)),
+                               np.broadcast_to(leader.a, (m, self.dim)))
+
+    def control(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
+                agents: AgentData, dt: float, t: float = 0.0) -> tuple[np.ndarray, dict]:
+        """Return ``u`` of the agents ``ids`` on the held states, and the step's statistics.
+
+        :param ids: the agents to evaluate (ascending), ``None`` for all.
+        :param q: true positions of every agent at the current step.
+        :param p: true velocities of every agent.
+        :param agents: per-agent data of ``ids`` (``agents.subset(ids)``; all for ``None``).
+        :param dt: the step.
+        :param t: the time of the step (for a ``combine`` that takes it).
+        :return: ``u`` of ``ids`` and ``{'network_delivered', 'network_age_mean',
+            'network_age_max'}`` of their incoming links (ages in seconds; NaN when none).
+        """
+        k, law = self.step, self.law
+        ids = np.arange(self.n) if ids is None else np.asarray(ids)
+        hosted = np.zeros(self.n, dtype=bool)
+        hosted[ids] = True
+        row = np.full(self.n, -1, dtype=np.int64)
+        row[ids] = np.arange(ids.size)
+        held = self.links.held(k, hosted)
+        own_q, own_p = self._own(held.receiver, held.age, q, p)
+        use = np.ones(held.receiver.size, dtype=bool)
+        weight = held.weight
+        if self.neighbourhood != FIXED:
+            dq = held.q - own_q
+            near = within_radius(np.einsum('ek,ek->e', dq, dq), law.radius, law.strict_radius)
+            if self.neighbourhood == DISK:
+                use = near
+            else:
+                weight = np.where(near, self.coupling, 0.0)
+        # Column-major, as pair_sums hands them: the laws' per-component arithmetic then runs
+        # on contiguous memory (measured: 3x faster squared norms at N = 1000).
+        ends = [np.asfortranarray(x[use]) for x in (own_q, own_p, held.q, held.p)]
+        to_i = law.pair(*ends, weight[use])
+        at = row[held.receiver[use]]
+        s = np.empty((ids.size, to_i.shape[1]))
+        for col in range(to_i.shape[1]):
+            s[:, col] = np.bincount(at, weights=to_i[:, col], minlength=ids.size)
+        u = self._combine(ids, row, q, p, s, agents, dt,
+                          lambda *args: control(law, *args, t=t))
+        ages = held.age[use]
+        got, total = self.links.delivered(hosted)
+        tally = self._tally
+        if k % self.spec.agents.period == 0:
+            tally[0] += got
+            tally[1] += total
+        tally[2] += int(ages.sum())
+        tally[3] += ages.size
+        tally[4] = max(tally[4], int(ages.max()) if ages.size else -1)
+        return u, _statistics([got, total, int(ages.sum()), ages.size,
+                               int(ages.max()) if ages.size else -1], dt)
+
+    def recorded(self, dt: float) -> dict:
+        """Return the statistics of the steps since the last call, and start anew.
+
+        ``network_delivered``: of the messages sent at those steps, the fraction not lost;
+        ``network_age_mean`` and ``network_age_max``: the mean and largest age [s] of the
+        neighbour states the law used at those steps (NaN when none).
+        """
+        out = _statistics(self._tally, dt)
+        self._tally = [0, 0, 0, 0, -1]
+        return out
+
+    def advance_state(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
+                      agents: AgentData, dt: float, t: float = 0.0) -> None:
+        """Advance the law's adaptive state in place with the leader's state held.
+
+        The same explicit step as :func:`flock_swarm.core.laws.base.advance_state`, each
+        informed agent using the leader's state it holds (own state as in :meth:`control`).
+        A ``state_rate`` that takes the pair sums receives ``s=None`` under the network model
+        (the sums of the held states are :meth:`control`'s, not kept).
+        """
+        if not agents.state:
+            return
+        ids = np.arange(self.n) if ids is None else np.asarray(ids)
+        row = np.full(self.n, -1, dtype=np.int64)
+        row[ids] = np.arange(ids.size)
+
+        def rate(qg, pg, sg, leader, group, dt_):
+            return state_rates(self.law, qg, pg, leader, group, None, t)
+        rates = self._combine(ids, row, q, p, None, agents, dt, rate)
+        for key, value in rates.items():
+            agents.state[key] += dt * value
+
+    def _own(self, receiver: np.ndarray, age: np.ndarray, q: np.ndarray,
+             p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return each receiver's own state: current, or at the message's sending step."""
+        if self.spec.model == 'communication':
+            return q[receiver], p[receiver]
+        slot = (self.step - age) % (self.spec.max_age + 1)
+        return self.own_q[slot, receiver], self.own_p[slot, receiver]
+
+    def _combine(self, ids, row, q, p, s, agents, dt, fn):
+        """Apply ``fn(q, p, s, leader, group, dt)`` per group of agents sharing a leader state.
+
+        Uninformed agents use the leader's true state, as without the section (they do not
+        receive it); informed agents the one they hold (``None`` when they hold none), with
+        their own state at its sending step under the ``input`` model.
+        """
+        leader = self.leader_now
+        qs, ps = q[ids], p[ids]
+        # Without a leader channel every informed agent holds the leader's current state (age
+        # 0, so its own state is current under either delay model too).
+        if not self.spec.leader.active or not agents.informed.any():
+            return fn(qs, ps, s, leader, agents, dt)
+        held = self.leader_links.held(self.step, self._mask(ids))
+        key = np.full(ids.size, -1, dtype=np.int64)  # -1: the true leader
+        key[agents.informed] = -2  # -2: informed, nothing held
+        at = row[held.receiver]
+        informed_rows = agents.informed[at]
+        at, which = at[informed_rows], np.flatnonzero(informed_rows)
+        noisy = self.spec.leader.noise_position > 0 or self.spec.leader.noise_velocity > 0
+        key[at] = at if noisy else held.age[which]
+        groups = {}
+        for value in np.unique(key):
+            members = np.flatnonzero(key == value)
+            if value == -1:
+                groups[value] = (members, leader, qs[members], ps[members])
+            elif value == -2:
+                groups[value] = (members, None, qs[members], ps[members])
+            else:
+                first = which[np.searchsorted(at, members[0])]
+                state = LeaderState(held.q[first], held.p[first], held.a[first])
+                own_q, own_p = qs[members], ps[members]
+                if self.spec.model == 'input':
+                    own_q, own_p = self._own(ids[members], np.full(members.size,
+                                                                   held.age[first]), q, p)
+                groups[value] = (members, state, own_q, own_p)
+        out = None
+        for members, state, own_q, own_p in groups.values():
+            part = fn(own_q, own_p, None if s is None else s[members], state,
+                      agents.subset(members), dt)
+            out = _scatter(out, members, part, ids.size)
+        return out
+
+    def _mask(self, ids: np.ndarray) -> np.ndarray:
+        mask = np.zeros(self.n, dtype=bool)
+        mask[ids] = True
+        return mask
+
+
+def _statistics(tally: list[int], dt: float) -> dict:
+    """Return the recorded statistics of ``[delivered, sent, age sum, ages, age max]``."""
+    got, total, age_sum, count, age_max = tally
+    return {'network_delivered': got / total if total else np.nan,
+            'network_age_mean': age_sum / count * dt if count else np.nan,
+            'network_age_max': age_max * dt if count else np.nan}
+
+
+def _scatter(out, members: np.ndarray, part, size: int):
+    """Put a group's rows (an array or a mapping of arrays) into the full result."""
+    if isinstance(part, dict):
+        out = {} if out is None else out
+        for key, value in part.items():
+            if key not in out:
+                out[key] = np.zeros((size, *np.shape(value)[1:]))
+            out[key][members] = value
+        return out
+    if out is None:
+        out = np.zeros((size, *part.shape[1:]))
+    out[members] = part
+    return out
+
+
+def neighbourhood_of(graph_type: str, all_pairs: bool) -> str:
+    """Return how a law on a graph type decides its neighbours on held states."""
+    if graph_type != 'disk':
+        return FIXED
+    return ALL_PAIRS_DISK if all_pairs else DISK

@@ -1,0 +1,88 @@
+"""The layers of docs/architecture.md, checked on the imports of every module of the package.
+
+commands (``flock_swarm.cli``) -> public API (``plugin``, ``testing``) -> libraries (nodes,
+analysis, study, reproduction) -> io (bags, scenario files, outputs, the topic contract) ->
+core. A module imports only its own layer and the layers below it; the core imports no
+rclpy, YAML, plotting, bag or file and process modules. Imports are read from the source
+(every ``import``, also inside functions), so a lazy import counts like any other.
+"""
+
+from pathlib import Path
+
+import pytest
+
+from conftest import imported_modules
+
+PACKAGE = Path(__file__).resolve().parent.parent / 'flock_swarm'
+#: The layers, lowest first, and the modules of each (a name covers its submodules).
+LAYERS = {
+    'core': ('flock_swarm.core',),
+    'io': ('flock_swarm.bag', 'flock_swarm.contract', 'flock_swarm.console',
+           'flock_swarm.foxglove_ws', 'flock_swarm.outputs', 'flock_swarm.plots',
+           'flock_swarm.presets', 'flock_swarm.scenario_yaml'),
+    'libraries': ('flock_swarm.nodes', 'flock_swarm.analysis', 'flock_swarm.study',
+                  'flock_swarm.reproduce', 'flock_swarm.launch_plan', 'flock_swarm.security'),
+    'public': ('flock_swarm.plugin', 'flock_swarm.testing'),
+    'commands': ('flock_swarm.cli',),
+}
+ORDER = list(LAYERS)
+#: Entry modules that run a command when executed with ``python -m`` (a way in, not a library).
+ENTRY_MODULES = {'flock_swarm.reproduce.__main__'}
+#: What the numerical core must not import: ROS, YAML, plotting, bags, files and processes.
+CORE_FORBIDDEN = ('rclpy', 'rosidl_runtime_py', 'rosbags', 'yaml', 'matplotlib', 'mcap',
+                  'json', 'pathlib', 'shutil', 'tempfile', 'subprocess', 'socket', 'pickle',
+                  'io', 'os')
+
+
+def module_name(path: Path) -> str:
+    """Return the dotted name of a package file."""
+    parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def layer_of(name: str) -> str | None:
+    """Return the layer of a flock_swarm module (``None``: the package root and its
+    ``__version__``, which every layer may import)."""
+    for layer, prefixes in LAYERS.items():
+        if any(name == p or name.startswith(p + '.') for p in prefixes):
+            return layer
+    return None
+
+
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob('*.py'))}
+
+
+def test_every_module_has_a_layer():
+    unplaced = [m for m in MODULES if m != 'flock_swarm' and layer_of(m) is None]
+    assert not unplaced, f'modules in no layer (add them to LAYERS and docs/architecture.md): ' \
+                         f'{unplaced}'
+
+
+@pytest.mark.parametrize('name', sorted(m for m in MODULES if layer_of(m) == 'core'))
+def test_the_core_imports_no_ros_yaml_plotting_or_io(name):
+    bad = sorted(i for i in imported_modules(MODULES[name])
+                 if i.split('.')[0] in CORE_FORBIDDEN
+                 or (i.startswith('flock_swarm.') and layer_of(i) not in ('core', None)))
+    assert not bad, f'{name} imports {bad}'
+
+
+@pytest.mark.parametrize('name', sorted(m for m in MODULES if layer_of(m) is not None))
+def test_a_module_imports_only_its_layer_and_those_below(name):
+    if name in ENTRY_MODULES:
+        return
+    own = ORDER.index(layer_of(name))
+    above = sorted(i for i in imported_modules(MODULES[name])
+                   if i.startswith('flock_swarm.') and layer_of(i) is not None
+                   and ORDER.index(layer_of(i)) > own)
+    assert not above, f'{name} ({ORDER[own]}) imports {above} from a layer above it'
+
+
+def test_the_layer_check_sees_a_violation(tmp_path):
+    # The check itself: a core module importing rclpy and a command is caught.
+    bad = tmp_path / 'bad.py'
+    bad.write_text('import numpy\n\n\ndef f():\n    import rclpy\n'
+                   '    from flock_swarm.cli import sim\n')
+    found = imported_modules(bad)
+    assert {'rclpy', 'flock_swarm.cli'} <= found
+    assert layer_of('flock_swarm.cli.sim') == 'commands'
+    assert ORDER.index('commands') > ORDER.index('core')

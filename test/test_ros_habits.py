@@ -1,0 +1,195 @@
+"""What ROS users do by habit (issue 24, item 4): ``use_sim_time``, a waiting world that says
+who it waits for, a second world on the same domain, parameters that read back the values in
+use."""
+
+import json
+import subprocess
+
+import pytest
+
+from flock_swarm.core.run import simulate
+from flock_swarm.outputs import json_text
+from flock_swarm.testing import SIM_ONLY, Swarm, compare_runs
+
+pytestmark = pytest.mark.ros
+
+RUN_TIMEOUT = 240.0
+SMALL = ['n_agents=3', 'informed.count=1', 'duration=0.3', 'record_every=1']
+
+
+def steady(node) -> bool:
+    """Return whether every timer of ``node`` runs on the steady clock."""
+    from rclpy.clock import ClockType
+    return bool(node.timers) and all(t.clock.clock_type == ClockType.STEADY_TIME
+                                     for t in node.timers)
+
+
+def test_the_world_refuses_use_sim_time_with_one_line(tmp_path, ros_domain, monkeypatch,
+                                                      capfd):
+    """The world publishes ``/clock``: following it, it never started and logged nothing."""
+    from flock_swarm.nodes.world import main
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+    status = main(['world', '--ros-args', '-p', 'use_sim_time:=true', '-p',
+                   f'out_dir:={tmp_path / "out"}'])
+    out, err = capfd.readouterr()
+    assert status == 2 and out == ''
+    assert err == ('world: error: use_sim_time: must be false: the world publishes /clock '
+                   'itself (it is the simulation clock); the leader and the agents accept '
+                   'either value\n')
+
+
+def test_a_use_sim_time_of_the_wrong_type_is_one_line(tmp_path, ros_domain, monkeypatch,
+                                                      capfd):
+    """rclpy logs a line of its own first (while it creates the node) and carries on with
+    wall time: the node refuses to."""
+    from flock_swarm.nodes.leader import main
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+    status = main(['leader', '--ros-args', '-p', 'use_sim_time:=1'])
+    _, err = capfd.readouterr()
+    assert status == 2
+    assert err.endswith('\nleader: error: use_sim_time: expected true or false, got 1\n')
+
+
+def test_leader_and_agents_run_at_full_speed_under_use_sim_time(tmp_path, ros_domain):
+    """Their ROS clock follows ``/clock``, their timers the steady clock (on the ROS clock
+    they slowed from ~500 to ~22 steps/s), and the run is ``sim``'s, bit for bit;
+    ``expect_subscribers`` reads back the number waited for."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes.leader import LeaderNode
+    with Swarm('demo', tmp_path / 'run', SMALL, domain_id=ros_domain,
+               agent_params={'use_sim_time': True}) as swarm:
+        swarm.remove(swarm.leader)
+        leader = swarm.add(LeaderNode(context=swarm.context, parameter_overrides=swarm.parameters(
+            expect_subscribers=2, use_sim_time=True)))
+        for node in (leader, swarm.agents):
+            assert node.get_clock().ros_time_is_active
+            assert steady(node)
+            assert node.get_parameter('use_sim_time').value is True
+        assert steady(swarm.world) and not swarm.world.get_clock().ros_time_is_active
+        # Given as -1, expect_subscribers reads back the number waited for once known.
+        assert swarm.world.get_parameter('expect_subscribers').value == -1
+        swarm.spin_until(lambda: swarm.world.k >= 1, RUN_TIMEOUT, 'the first step')
+        assert swarm.world.get_parameter('expect_subscribers').value == 1  # the container
+        swarm.spin_until(lambda: leader.matched, RUN_TIMEOUT, 'the leader to start')
+        assert leader.get_parameter('expect_subscribers').value == 2  # the world, the container
+        assert not leader.set_parameters([Parameter('expect_subscribers', value=5)])[0].successful
+        run = swarm.run(RUN_TIMEOUT)
+    summary = run.summary
+    assert summary['status'] == 'completed' and not summary['missed_commands']
+    ref = simulate(run.scenario)
+    want = {k: v for k, v in json.loads(json_text(ref.summary)).items() if k not in SIM_ONLY}
+    assert compare_runs(want, ref.series, summary, run.timeseries(), 0.0) == []
+
+
+@pytest.mark.parametrize('kind', ['world', 'leader', 'agent'])
+def test_use_sim_time_is_read_only(kind, tmp_path, ros_context):
+    """``ros2 param set NODE use_sim_time true`` is refused with a reason, not "successful"
+    while nothing follows the new clock."""
+    import importlib
+
+    from rclpy.parameter import Parameter
+    module = importlib.import_module(f'flock_swarm.nodes.{kind}')
+    cls = {'world': 'WorldNode', 'leader': 'LeaderNode', 'agent': 'AgentNode'}[kind]
+    params = [Parameter('scenario', value='demo')]
+    if kind == 'world':
+        params.append(Parameter('out_dir', value=str(tmp_path / 'out')))
+    node = getattr(module, cls)(context=ros_context, parameter_overrides=params)
+    try:
+        descriptor = node.describe_parameter('use_sim_time')
+        assert descriptor.read_only and descriptor.description
+        result, = node.set_parameters([Parameter('use_sim_time', value=True)])
+        assert not result.successful and 'read-only' in result.reason
+        assert node.get_parameter('use_sim_time').value is False
+        assert not node.get_clock().ros_time_is_active
+    finally:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        node.destroy_node()
+
+
+def test_id_list_names_agents_in_ranges():
+    from flock_swarm.nodes.world import id_list
+    assert id_list([3]) == 'agent 3'
+    assert id_list([0, 1, 2, 5, 7, 8]) == 'agents 0-2, 5, 7-8'
+
+
+def test_a_waiting_world_says_who_is_missing(tmp_path, ros_context, capfd):
+    """Every few seconds (WAIT_LOG_EVERY) a line names the agents, the leader and the
+    subscribers the start waits for; it logged nothing before."""
+    from rclpy.parameter import Parameter
+
+    from flock_swarm.nodes import world as world_module
+    assert 2.0 <= world_module.WAIT_LOG_EVERY <= 10.0
+    world = world_module.WorldNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value='demo'), Parameter('n_agents', value=4),
+        Parameter('informed.count', value=1), Parameter('out_dir', value=str(tmp_path / 'o'))])
+    try:
+        assert not world.ready_to_start()  # just created: no line yet
+        world.wait_logged -= world_module.WAIT_LOG_EVERY
+        assert not world.ready_to_start()
+        assert not world.ready_to_start()  # one line per period
+    finally:
+        world.close()
+        world.destroy_node()
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if 'waiting' in line]
+    assert len(lines) == 1, err
+    assert lines[0].endswith(
+        's for agents 0-3 (nobody publishes their cmd_accel); 1 subscriber(s) of the odometry '
+        'of agents 0-3; the leader (nobody publishes /leader/odom); a subscriber of /clock '
+        '(the leader)'), lines[0]
+
+
+def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_domain,
+                                                               monkeypatch, capfd):
+    """A world that finds another world (or a replay) on its domain before its start refuses
+    (a by-hand run mixed silently with another before). The first world may refuse too if it
+    sees the second before the second has gone; a world that has started does not look."""
+    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.supervisor import stop
+    from flock_swarm.nodes.world import main
+    from conftest import subprocess_env
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
+    args = ['--ros-args', '-p', 'scenario:=demo', '-p', 'start_timeout:=60.0']
+    first = subprocess.Popen(executable('world') + args + ['-p', f'out_dir:={tmp_path / "a"}'],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+        status = main(['world'] + args + ['-p', f'out_dir:={tmp_path / "b"}'])
+        out, err = capfd.readouterr()
+    finally:
+        stop([first])
+    assert status == 2 and out == ''
+    assert err.endswith(f'world: error: ROS_DOMAIN_ID: another world or a replay publishes '
+                        f'/clock or /swarm/status on domain {ros_domain} (nodes: /world): '
+                        'give each run a domain of its own\n'), err
+    # Before that line, at most the lines of a wait (if discovery took 5 s).
+    assert all('waiting' in line for line in err.splitlines()[:-1]), err
+
+
+def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domain):
+    """The harness (``swarm``) raises the world's refusal (``swarm`` prints it as one line);
+    here the swarm waits for an absent agent, so it meets the other world before its
+    start."""
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.nodes.harness import executable, run_in_process
+    from flock_swarm.nodes.supervisor import stop
+    from conftest import subprocess_env
+    env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
+    first = subprocess.Popen(executable('world') + [
+        '--ros-args', '-p', 'scenario:=demo', '-p', 'start_timeout:=60.0', '-p',
+        f'out_dir:={tmp_path / "a"}'], env=env, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)
+    try:
+        with pytest.raises(ScenarioError) as err:
+            run_in_process('demo', tmp_path / 'b', domain_id=ros_domain, agents=[0],
+                           world_params={'start_timeout': 60.0}, timeout=RUN_TIMEOUT)
+    finally:
+        stop([first])
+    assert str(err.value) == (f'ROS_DOMAIN_ID: another world or a replay publishes /clock or '
+                              f'/swarm/status on domain {ros_domain} (nodes: /world): give '
+                              'each run a domain of its own')
+    assert not (tmp_path / 'b' / 'summary.json').exists()
+    assert not (tmp_path / 'b' / 'bag').exists()  # the same --out can be used again
