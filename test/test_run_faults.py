@@ -24,7 +24,8 @@ from flock_swarm.cli.sim import main as sim_main
 from flock_swarm.core.faults import RunFault
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.controller import AgentController
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, stop
+from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.supervisor import stop
 from flock_swarm.presets import load
 from flock_swarm.testing import wait_for
 from broken_law import nan_command_for
@@ -67,8 +68,8 @@ def summary_of(out):
      ['law flock_swarm.laws:nan_mid_run (faulty_plugins:NotFinite) returned a non-finite '
       f'command at step {FAULT_STEP} (agent 2)']),
     ('shape_mid_run', 'constant_velocity',
-     ['law flock_swarm.laws:shape_mid_run (faulty_plugins:WrongShape): combine() returned '
-      f'shape (6, 1) for 6 agents in 2-D, not (6, 2) at step {FAULT_STEP}']),
+     ['law flock_swarm.laws:shape_mid_run (faulty_plugins:WrongShape): ',
+      f'combine() returned shape (6, 1), not (6, 2) at t = 1 s (step {FAULT_STEP})']),
     ('pull', 'raises_mid_run',
      ['leader model flock_swarm.leaders:raises_mid_run (faulty_plugins:Stalls) raised '
       f'RuntimeError at step {FAULT_STEP - 1}: the leader lost its track']),

@@ -92,9 +92,9 @@ def evaluate_law(law: Law, step: int, ids: Sequence[int], dim: int,
     try:
         u = evaluate()
     except PluginError as exc:
-        # The law's evaluation checks each output's shape at every step (core/laws/base.py).
-        raise RunFault(f'{law_label(law)}: {unnamed(law, exc.reason)} (step {step})', SHAPE,
-                       step, ids) from None
+        # The law's evaluation checks each output's shape at every step (core/laws/base.py):
+        # its line (key, law, hook, time) stays whole.
+        raise RunFault(f'{law_label(law)}: {exc} (step {step})', SHAPE, step, ids) from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         agents = _first_raising(ids, locate) or list(ids)
         raise RunFault(f'{law_label(law)} raised {type(exc).__name__} at step {step} '
@@ -133,8 +133,7 @@ def evaluate_state(law: Law, step: int, ids: Sequence[int], advance: Callable[[]
     try:
         advance()
     except PluginError as exc:
-        raise RunFault(f'{law_label(law)}: {unnamed(law, exc.reason)} (step {step})', SHAPE,
-                       step, ids) from None
+        raise RunFault(f'{law_label(law)}: {exc} (step {step})', SHAPE, step, ids) from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         raise RunFault(f'{law_label(law)}: state_rate() raised {type(exc).__name__} at step '
                        f'{step} ({agents_text(ids)}): {one_line(str(exc))}', RAISED, step,
