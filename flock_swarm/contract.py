@@ -42,6 +42,9 @@ STATUS = 'swarm/status'
 #: it to a late joiner.
 SCENARIO = 'swarm/scenario'
 SCENARIO_TYPE = STATUS_TYPE
+#: Faults the leader and the agent nodes report to the world (not recorded in the bag:
+#: ``summary.json`` tells them); type :data:`METRICS_TYPE`, QoS :data:`FAULTS_QOS`.
+FAULTS = 'swarm/faults'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
@@ -130,6 +133,10 @@ TELEMETRY_QOS = QosSpec(depth=5)
 STATUS_QOS = QosSpec(depth=1, latched=True)
 #: /swarm/scenario: latched (transient local), published once before the run.
 SCENARIO_QOS = QosSpec(depth=1, latched=True)
+#: /swarm/faults: reliable, and latched (transient local) so that a world that matches a
+#: failed node late still learns its fault; the depth covers a run of non-finite commands
+#: reported step after step.
+FAULTS_QOS = QosSpec(depth=10, latched=True)
 #: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
 #: acknowledgements (it matches the reliable writers of the contract); the depth covers a
 #: step's burst.

@@ -6,6 +6,7 @@ world node, ``analyze`` and ``reproduce``; the files are described in ``docs/out
 
 import json
 import math
+import os
 from pathlib import Path
 import shutil
 import tempfile
@@ -161,8 +162,12 @@ class SpooledRecorder(Recorder):
             self._spool = None
 
 
-def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
-    """Write ``summary.json``, ``timeseries.npz`` and the scenario used, into ``out``.
+def write_outputs(result: SimResult, out: Path, sc: Scenario) -> list[Path]:
+    """Write ``timeseries.npz``, the scenario used and ``summary.json`` into ``out``.
+
+    Each file is written whole under a temporary name and renamed into place
+    (:func:`write_atomically`), ``summary.json`` last: its presence means the other files
+    are complete, and a failed write (a full disk) leaves no file that looks valid.
 
     A run that recorded no instant (stopped before its first step) has no time series: no
     ``timeseries.npz`` is written, rather than an archive without arrays.
@@ -170,15 +175,58 @@ def write_outputs(result: SimResult, out: Path, sc: Scenario) -> None:
     :param result: the run.
     :param out: the output directory (created).
     :param sc: the scenario (its mapping is written as ``scenario.json`` for provenance).
+    :return: the files written.
+    :raises OSError: naming the file that could not be written (``filename``); the files
+        before it are written.
     """
     out.mkdir(parents=True, exist_ok=True)
-    if result.series:
-        np.savez_compressed(out / 'timeseries.npz', **result.series)
-    (out / 'scenario.json').write_text(json_text(sc.raw))
-    # summary.json last: its presence means the other files are complete.
-    tmp = out / 'summary.json.tmp'
-    tmp.write_text(json_text(result.summary))
-    tmp.replace(out / 'summary.json')
+    series = [write_timeseries(out / 'timeseries.npz', result.series)] if result.series else []
+    return series + [write_text(out / 'scenario.json', json_text(sc.raw)),
+                     write_text(out / 'summary.json', json_text(result.summary))]
+
+
+def write_atomically(path: Path, write: Callable[[BinaryIO], None]) -> Path:
+    """Write ``path`` through a temporary file next to it, renamed into place once whole.
+
+    So ``path`` is either complete or as it was: a write that fails (a full disk) removes
+    the temporary file and leaves no truncated or empty file that would look valid.
+
+    :param path: the file.
+    :param write: writes the content into the binary file it is given.
+    :return: ``path``.
+    :raises OSError: when it cannot be written, its ``filename`` the path (not the
+        temporary name) and its ``strerror`` the reason.
+    """
+    path = Path(path)
+    tmp = path.with_name(f'.{path.name}.tmp')
+    try:
+        with open(tmp, 'wb') as stream:
+            write(stream)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+        raise
+    return path
+
+
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`write_atomically`)."""
+    return write_atomically(path, lambda stream: stream.write(text.encode('utf-8')))
+
+
+def write_timeseries(path: Path, series: dict[str, np.ndarray]) -> Path:
+    """Write a time series as a compressed ``.npz`` atomically (:func:`write_atomically`)."""
+    return write_atomically(path, lambda stream: np.savez_compressed(stream, **series))
+
+
+def write_error(exc: OSError) -> str:
+    """Return ``cannot write FILE: REASON``, the line of a failed write."""
+    return f'cannot write {exc.filename}: {exc.strerror or exc}'
 
 
 def ensure_writable(out: Path) -> None:

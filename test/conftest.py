@@ -5,6 +5,7 @@ The generic ones (``ros_domain``, ``other_ros_domain``, ``flock_swarm_run``,
 plugin every user's tests get too.
 """
 
+import contextlib
 import os
 from pathlib import Path
 import shutil
@@ -43,6 +44,28 @@ def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
                              env=env, stdout=subprocess.DEVNULL, stderr=world_stderr,
                              text=True)
     return others, world
+
+
+@contextlib.contextmanager
+def small_filesystem(where: Path, size: str):
+    """Mount a tmpfs of ``size`` (``mount -o size=``, e.g. ``3m``) on ``where`` for the block
+    (the tests run as root), unmounted after it: a real disk that fills up.
+
+    Skips the test, with the reason, only when mounting fails (no root, no mount(8), a
+    container without the capability).
+    """
+    import pytest
+    where.mkdir(parents=True, exist_ok=True)
+    if shutil.which('mount') is None or os.geteuid() != 0:
+        pytest.skip('a small tmpfs needs root and mount(8): not available here')
+    res = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={size}', 'tmpfs', str(where)],
+                         capture_output=True, text=True)
+    if res.returncode != 0:
+        pytest.skip(f'cannot mount a tmpfs here: {res.stderr.strip()}')
+    try:
+        yield where
+    finally:
+        subprocess.run(['umount', '-l', str(where)], check=False)
 
 
 def source_files() -> list[str]:

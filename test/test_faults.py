@@ -9,7 +9,6 @@ import json
 import math
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -40,7 +39,7 @@ from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from flock_swarm.testing import wait_for
 from broken_law import nan_command_for
-from conftest import start_nodes
+from conftest import small_filesystem, start_nodes
 from ros_messages import make_accel, make_odometry
 
 pytestmark = pytest.mark.ros
@@ -161,13 +160,15 @@ def test_duplicate_agent_id_is_reported(tmp_path, ros_domain):
 
 
 def test_non_finite_command_is_published_as_zero(tmp_path, ros_domain, monkeypatch, capfd):
-    """A law that returns NaN for agent 1 at every step: the agent node publishes a zero
-    command for it (counted, logged once) instead of one the world would reject, so the
-    world misses no command and records agent 1's input as zero."""
+    """A law that returns NaN for agent 1 at every step, the agents run with
+    ``non_finite:=zero``: the agent node publishes a zero command for it (counted, logged
+    once) instead of one the world would reject, so the world misses no command and records
+    agent 1's input as zero."""
     nan_command_for(monkeypatch, 1)
     path, sc, out = scenario_of(tmp_path, ['n_agents=4', 'informed.count=2', 'duration=0.5',
                                            'record_every=1'])
-    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+    with InProcessSwarm(path, out, domain_id=ros_domain,
+                        agent_params={'non_finite': 'zero'}) as swarm:
         swarm.spin_to_end(RUN_TIMEOUT)
         counts = dict(swarm.agents.controller.non_finite)
     summary = json.loads((out / 'summary.json').read_text())
@@ -492,16 +493,8 @@ def test_sigkilled_world_bag_is_recovered_by_analyze(tmp_path, ros_domain, capsy
 @pytest.fixture
 def small_disk(tmp_path):
     """A 256 KiB tmpfs (as root); skip with the reason where it cannot be mounted."""
-    where = tmp_path / 'small'
-    where.mkdir()
-    if shutil.which('mount') is None or os.geteuid() != 0:
-        pytest.skip('a small tmpfs needs root and mount(8): not available here')
-    res = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=256k', 'tmpfs', str(where)],
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        pytest.skip(f'cannot mount a tmpfs here: {res.stderr.strip()}')
-    yield where
-    subprocess.run(['umount', '-l', str(where)], check=False)
+    with small_filesystem(tmp_path / 'small', '256k') as where:
+        yield where
 
 
 def test_full_disk_stops_cleanly_and_keeps_the_bag(tmp_path, small_disk, ros_domain):

@@ -171,20 +171,33 @@ def test_stacked_realisations_equal_their_own_runs():
         assert_same_run(res, alone)
 
 
-def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypatch):
-    # The Su laws do not diverge at moderate positions: inject NaN inputs for informed agents
-    # beyond x = 25, which some realisations reach at different steps, one never.
-    real_control = run.swarm_control
+@pytest.mark.parametrize('fault, status', [('state', 'diverged'), ('law', 'failed')])
+def test_a_diverging_realisation_leaves_the_stack_and_the_others_go_on(monkeypatch, fault,
+                                                                       status):
+    # The Su laws do not diverge at moderate positions: for informed agents beyond x = 25,
+    # which some realisations reach at different steps, one never, make the state overflow
+    # (diverged), or the law give NaN inputs at that plausible state (failed: the law's
+    # fault, told apart from a divergence).
+    real_control, real_step, informed = run.swarm_control, run.step_agents, []
 
     def failing(law, q, p, edges, leader, agents, dt, *t):
         u = real_control(law, q, p, edges, leader, agents, dt, *t)
-        u[(q[:, 0] > 25.0) & agents.informed] = np.nan
+        informed[:] = [(q[:, 0] > 25.0) & agents.informed]
+        if fault == 'law':
+            u[informed[0]] = np.nan
         return u
 
+    def overflowing(q, p, u, dt, intrinsic):
+        q, p = real_step(q, p, u, dt, intrinsic)
+        p[informed[0]] = np.inf
+        return q, p
+
     monkeypatch.setattr(run, 'swarm_control', failing)
+    if fault == 'state':
+        monkeypatch.setattr(run, 'step_agents', overflowing)
     scenarios = fig3_realisations(20, 20.0, (1.0, 0.0, 0.5), 4.0)
     alone = [simulate(sc) for sc in scenarios]
-    assert [r.summary['status'] for r in alone] == ['diverged', 'completed', 'diverged']
+    assert [r.summary['status'] for r in alone] == [status, 'completed', status]
     assert alone[0].summary['steps'] != alone[2].summary['steps']
     for res, own in zip(simulate_stack(scenarios), alone):
         assert res.summary['steps'] == own.summary['steps']

@@ -392,12 +392,12 @@ def test_controller_realtime_answers_from_the_latest_inputs():
 
 
 def test_controller_publishes_zero_for_a_non_finite_command(monkeypatch, caplog):
-    """A law returning NaN for agent 1 gives it a zero command, counted at every step and
-    logged once; the other agent's command is untouched."""
+    """With ``non_finite='zero'``, a law returning NaN for agent 1 gives it a zero command,
+    counted at every step and logged once; the other agent's command is untouched."""
     nan_command_for(monkeypatch, 1)
     sc = small()
     real = realize(sc)
-    ctrl = AgentController(sc, [1, 2], LOG, now=0.0)
+    ctrl = AgentController(sc, [1, 2], LOG, now=0.0, non_finite='zero')
     leader = leader_at(sc, 0)
     want = sim_commands(sc, real.q0, real.p0, leader)
     with caplog.at_level(logging.WARNING, logger=LOG.name):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from flock_swarm import testing
-from flock_swarm.core import summary
+from flock_swarm.core import run, summary
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.run import simulate
 from flock_swarm.core.summary import SUMMARY_KEYS, SummaryKey
@@ -38,6 +38,19 @@ def summaries():
     for name, overrides in RUNS:
         dt = load(name).dt
         out.append(simulate(load(name, [*overrides, f'duration={20 * dt!r}'])).summary)
+    # A run whose law gives a non-finite command writes the key telling the failure.
+    sc = load('demo', ['n_agents=5', 'informed.count=2', 'duration=0.5'])
+    calls, real_control = [], run.swarm_control
+
+    def nan_from_step_3(*args):
+        calls.append(1)
+        u = real_control(*args)
+        return u * np.nan if len(calls) > 3 else u
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(run, 'swarm_control', nan_from_step_3)
+        failed = simulate(sc).summary
+    assert failed['status'] == 'failed'
+    out.append(failed)
     return out
 
 

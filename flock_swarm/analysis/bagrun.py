@@ -112,6 +112,9 @@ class RunData:
     #: Commands the world did not receive in time, per agent, and steps without the leader.
     missed_commands_per_agent: list[int] = field(default_factory=list)
     leader_missed: int = 0
+    #: The agents whose law gave a non-finite command, by step, as ``/swarm/metrics`` told
+    #: (``None``: the bag's metrics do not count them, a bag of an older world).
+    non_finite_at: dict[int, list[int]] | None = None
     #: Whether the bag has the leader's state (otherwise the centre of mass stands in).
     has_leader: bool = True
     #: The reader's warning for a truncated or unfinished bag.
@@ -490,14 +493,10 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
 
     mode = meta.get('mode') if meta is not None else None
     index = {int(k): row for row, k in enumerate(steps)}
-    missed: dict[int, list[int]] = {}
-    for stamp, values in raw.metrics:
-        try:
-            ids = json.loads(values.get('missed_this_step', '[]'))
-        except json.JSONDecodeError:
-            ids = []
-        if ids and step_of(stamp) in index:
-            missed[step_of(stamp)] = [int(i) for i in ids if 0 <= int(i) < n]
+    missed = _agents_by_step(raw.metrics, 'missed_this_step', index, n, step_of)
+    non_finite = None
+    if any('non_finite_this_step' in values for _, values in raw.metrics):
+        non_finite = _agents_by_step(raw.metrics, 'non_finite_this_step', index, n, step_of)
     u = _commands(raw.cmd, steps, index, missed, n, dim, step_of, mode == 'realtime')
     if mode == 'realtime' and sc is not None and sc.intrinsic is None:
         # Which held command the world applied is not in the bag, but the double integrator
@@ -541,9 +540,25 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         eta_tolerance=float(eta_tolerance), collision_distance=float(collision_distance),
         record_every=sc.record_every if sc is not None else 1, scenario=sc, mode=mode,
         missed_commands_per_agent=[int(x) for x in per_agent], leader_missed=leader_missed,
+        non_finite_at=non_finite,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
         informed_known=informed_known)
+
+
+def _agents_by_step(metrics: list, key: str, index: dict[int, int], n: int,
+                    step_of: Callable[[int], int]) -> dict[int, list[int]]:
+    """Return ``{step: agents}`` of a ``/swarm/metrics`` value listing agents (a JSON list,
+    ``missed_this_step``, ``non_finite_this_step``), for the complete steps."""
+    found: dict[int, list[int]] = {}
+    for stamp, values in metrics:
+        try:
+            ids = json.loads(values.get(key, '[]'))
+        except json.JSONDecodeError:
+            ids = []
+        if ids and step_of(stamp) in index:
+            found[step_of(stamp)] = [int(i) for i in ids if 0 <= int(i) < n]
+    return found
 
 
 def _commands(cmds: list, steps: np.ndarray, index: dict[int, int],

@@ -15,7 +15,7 @@ from flock_swarm.analysis.bagrun import Progress, RunData
 from flock_swarm.analysis.compare import VERIFY_TOLERANCE, Verification, verify_run
 from flock_swarm.analysis.recompute import recompute, summarize
 from flock_swarm.core.metrics import STEP_METRICS
-from flock_swarm.outputs import json_text
+from flock_swarm.outputs import json_text, write_text, write_timeseries
 
 
 @dataclass
@@ -81,12 +81,10 @@ def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None
         })
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out / 'timeseries.npz', **series)
-    files = [out / 'timeseries.npz', write_csv(series, out / 'timeseries.csv')]
+    files = [write_timeseries(out / 'timeseries.npz', series),
+             write_csv(series, out / 'timeseries.csv')]
     if run.scenario is not None:
-        (out / 'scenario.json').write_text(
-            json_text(run.scenario.raw))
-        files.append(out / 'scenario.json')
+        files.append(write_text(out / 'scenario.json', json_text(run.scenario.raw)))
 
     def wrote(path: Path) -> None:
         files.append(path)
@@ -97,10 +95,7 @@ def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None
                   informed=run.informed, eta_tolerance=run.eta_tolerance,
                   collision_distance=run.collision_distance, snapshots=snapshots,
                   animate=animate, progress=wrote)
-    tmp = out / 'summary.json.tmp'
-    tmp.write_text(json_text(summary))
-    tmp.replace(out / 'summary.json')
-    files.append(out / 'summary.json')
+    files.append(write_text(out / 'summary.json', json_text(summary)))
     return Analysis(summary, series, files, verification)
 
 

@@ -40,15 +40,20 @@ def recompute(run: RunData, record_every: int | None = None,
     sc = run.scenario
     real = realize(sc) if sc is not None else None
     static = static_graph(sc, real) if sc is not None else None
+    # The non-finite commands counted so far, per agent, recorded as the world records them.
+    non_finite = None if run.non_finite_at is None else np.zeros(run.n_agents, dtype=int)
     for row, k in enumerate(run.steps):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
         covered, radius = disk_graph(q, run.radius, run.strict_radius), run.radius
         if sc is not None:
             covered, radius = observed_pairs(sc, real, q, static, covered)
+        extra = {key: values[row] for key, values in run.state.items()}
+        if non_finite is not None:
+            non_finite[run.non_finite_at.get(int(k), [])] += 1
+            extra['non_finite_commands'] = non_finite.copy()
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
-                    covered, radius, row == last,
-                    **{key: values[row] for key, values in run.state.items()})
+                    covered, radius, row == last, **extra)
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
     return log.rec.arrays(), log.metrics
 
@@ -78,9 +83,13 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
     facts = (run_facts(run.scenario, realize(run.scenario)) if run.scenario is not None
              else RunFacts(run.n_agents, run.dt, run.eta_tolerance, run.collision_distance,
                            informed_known=run.informed_known))
+    counted = {} if run.non_finite_at is None else {
+        'non_finite_commands_per_agent': [int(x) for x in np.bincount(
+            [i for ids in run.non_finite_at.values() for i in ids],
+            minlength=run.n_agents)]}
     return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), _status(run)),
                       mode=run.mode,
                       missed_commands=int(sum(run.missed_commands_per_agent)),
                       missed_commands_per_agent=run.missed_commands_per_agent,
                       leader_missed=run.leader_missed, bag=str(run.bag),
-                      complete_steps=int(len(run.steps)), bag_warning=run.warning)
+                      complete_steps=int(len(run.steps)), bag_warning=run.warning, **counted)

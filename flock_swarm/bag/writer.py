@@ -663,7 +663,13 @@ class BagWriter:
         self._closed = True
         self._finish_file()
         text = dump_yaml({'rosbag2_bagfile_information': self.bag_metadata()})
-        # Written whole then renamed: a metadata.yaml is either absent or complete.
+        # Written whole then renamed: a metadata.yaml is either absent or complete, and a
+        # failed write (a full disk) leaves no partial file behind either.
         tmp = self._path / f'.{METADATA_FILENAME}.tmp'
-        tmp.write_text(text, encoding='utf-8')
-        os.replace(tmp, self._path / METADATA_FILENAME)
+        try:
+            tmp.write_text(text, encoding='utf-8')
+            os.replace(tmp, self._path / METADATA_FILENAME)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise OSError(exc.errno, exc.strerror, str(self._path / METADATA_FILENAME)) \
+                from None

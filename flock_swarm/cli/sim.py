@@ -15,12 +15,15 @@ from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, St
                                  out_dir, signal_name)
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
+from flock_swarm.core.faults import RunFault
 from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
-from flock_swarm.outputs import ensure_writable, write_outputs
+from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
 #: Exit status when the state stopped being finite.
 EXIT_DIVERGED = 1
+#: Exit status when the law or the leader model failed during the run (status ``failed``).
+EXIT_FAILED = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -114,6 +117,10 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
             f'of {sc.dt:g} s, seed {sc.seed}')
     try:
         result = simulate(sc, progress=say)
+    except RunFault as fault:
+        # The fault came before the first recorded instant: nothing to write.
+        print(f'sim: error: {fault}', file=sys.stderr)
+        return EXIT_FAILED
     except PluginError as exc:
         # A law's output of the wrong shape at some step: the run cannot go on (status 1,
         # a failed run, not a usage error).
@@ -126,14 +133,14 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
 def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSignals) -> int:
     """Write the outputs of ``result`` and say how the run ended; return the exit status."""
     try:
-        write_outputs(result, out, sc)
+        written = write_outputs(result, out, sc)
         if args.plots and result.series:
             from flock_swarm.plots import plot_timeseries
             for path in plot_timeseries(result.series, out, sc.name):
                 if say:
                     say(f'[sim] wrote {path}')
     except OSError as exc:
-        print(f'sim: error: --out: writing {out} failed: {exc.strerror}', file=sys.stderr)
+        print(f'sim: error: --out: {write_error(exc)}', file=sys.stderr)
         return EXIT_USAGE
     s = result.summary
     if say:
@@ -141,9 +148,12 @@ def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSign
             say(f'[sim] stopped by {signal_name(stop.first)}')
         say('[sim] ' + result_line(s, sc.headline, ('collisions', 'components_final')))
         if result.series:
-            say(f'[sim] wrote {out / "summary.json"} and {out / "timeseries.npz"}')
+            say(f'[sim] wrote {written[-1]} and {written[0]}')
         else:
             say(f'[sim] wrote {out / "summary.json"} (nothing was recorded: no time series)')
+    if s['status'] == 'failed':
+        print(f'sim: error: {s["failure"]}', file=sys.stderr)
+        return EXIT_FAILED
     if s['status'] == 'diverged':
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)

@@ -189,21 +189,32 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
             return EXIT_USAGE
     if stop.stopped:
         say(f'[swarm] stopped by {signal_name(stop.first)}')
-    if not summary:
-        print('swarm: error: the world wrote no summary', file=sys.stderr)
+    if not summary or not (out / 'summary.json').is_file():
+        # A full disk may have stopped it: the summary in memory says why.
+        why = summary.get('failure') if summary else None
+        print(f'swarm: error: the world wrote no {out / "summary.json"}'
+              + (f' ({why})' if why else ''), file=sys.stderr)
         return stop.status(EXIT_FAILURE)
+    status = 0 if summary['status'] == 'completed' else EXIT_FAILURE
     written = [out / 'timeseries.npz']
     with stop.held():
         if not args.no_plots and written[0].is_file():
             import numpy as np
+            from flock_swarm.outputs import write_error
             from flock_swarm.plots import plot_timeseries
-            with np.load(written[0]) as data:
-                written += plot_timeseries(dict(data), out, sc.name)
+            try:
+                with np.load(written[0]) as data:
+                    written += plot_timeseries(dict(data), out, sc.name)
+            except OSError as exc:
+                print(f'swarm: error: {write_error(exc)}', file=sys.stderr)
+                status = EXIT_FAILURE
     say('[swarm] ' + result_line(summary, sc.headline, ('collisions', 'missed_commands')))
     # Only what is there: a run stopped before its first step has no bag and no time series.
     written = [path for path in [out / 'bag', out / 'summary.json', *written] if path.exists()]
     say('[swarm] wrote ' + ', '.join(str(path) for path in written))
-    return stop.status(0 if summary['status'] == 'completed' else EXIT_FAILURE)
+    if summary.get('failure'):
+        print(f'swarm: error: {summary["failure"]}', file=sys.stderr)
+    return stop.status(status)
 
 
 def _say(line: str) -> None:

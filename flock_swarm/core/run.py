@@ -16,12 +16,16 @@ from typing import Callable
 import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
+from flock_swarm.core.faults import (RunFault, advance_leader, evaluate_law, evaluate_state,
+                                     leader_state, non_finite_fault, non_finite_rows,
+                                     state_blew_up, unnamed)
 from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed_graph
 from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
-from flock_swarm.core.laws.base import (AgentData, StepViolation, advance_state, output_problem,
-                                        pair_sums, swarm_control)
+from flock_swarm.core.laws.base import (AgentData, Law, StepViolation, advance_state,
+                                        group_control, output_problem, pair_sums,
+                                        swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
@@ -204,34 +208,34 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
 
     A law from a plugin is code this package has never seen: an exception, a wrong shape or
     non-finite values are reported before the run as one line naming its entry point, not
-    as a traceback or a silently diverged run.
+    as a traceback or a silently diverged run. The leader model's acceleration at ``t = 0``
+    is checked the same way (an exception, a wrong shape, a non-finite value): mid-run,
+    :mod:`flock_swarm.core.faults` checks every later step.
 
     :param sc: the scenario.
     :param real: its realisation.
     :raises PluginError: naming the entry point and what went wrong.
     """
+    try:
+        leader = leader_state(VirtualLeader(sc.leader.model, sc.leader.position,
+                                            sc.leader.velocity), 0, sc.dim)
+    except RunFault as fault:
+        raise PluginError('leader.model', fault.line) from None
     entry = entries(LAW_GROUP).get(sc.law.name)
     label = entry.label if entry is not None else sc.law.name
-    leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity).state
     try:
         with np.errstate(all='ignore'):
             edges = interaction_graph(sc, real, real.q0, static_graph(sc, real))
             u = swarm_control(sc.law, real.q0, real.p0, edges, leader, real.agents, sc.dt)
     except PluginError as exc:
-        raise PluginError('protocol.name', f'{label}: {_unnamed(sc.law, exc.reason)}') from None
+        raise PluginError('protocol.name', f'{label}: {unnamed(sc.law, exc.reason)}') from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
         raise PluginError('protocol.name', f'{label}: raised {type(exc).__name__} at the '
                           f'initial state: {exc}') from None
     problem = output_problem(sc.law, 'combine()', u, (sc.n_agents, sc.dim))
     if problem is not None:
-        raise PluginError('protocol.name', f'{label}: {_unnamed(sc.law, problem)} at the '
+        raise PluginError('protocol.name', f'{label}: {unnamed(sc.law, problem)} at the '
                           'initial state')
-
-
-def _unnamed(law, reason: str) -> str:
-    """Return a law's error without the law's name in front (the entry point names it)."""
-    prefix = f'{law.name}: '
-    return reason[len(prefix):] if reason.startswith(prefix) else reason
 
 
 def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
@@ -258,8 +262,9 @@ def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
     :param sc: the validated scenario.
     :param progress: called with a one-line status roughly every ``progress_every`` seconds.
     :param progress_every: wall-clock seconds between progress lines.
-    :return: the result; ``summary['status']`` is ``completed``, ``interrupted`` or
-        ``diverged``.
+    :return: the result; ``summary['status']`` is ``completed``, ``interrupted``,
+        ``diverged`` (the state stopped being finite) or ``failed`` (a fault of the law or
+        the leader model: ``summary['failure']`` tells it in one line).
     """
     return simulate_stack([sc], progress, progress_every)[0]
 
@@ -273,7 +278,9 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     informed set, initial boxes) and the stack's graph links no two of them, with every
     realisation's edges in the order of its own run: each result is that of
     :func:`simulate` on its scenario alone, up to the summation order of the metrics.
-    Realisations that diverge leave the stack at that step; the others go on.
+    Realisations that diverge, or whose law gives a non-finite command, leave the stack at
+    that step; the others go on. A law or leader model that raises (or returns the wrong
+    shape) fails every realisation still running.
 
     :param scenarios: the realisations; more than one must agree in everything but seed,
         informed set and initial state (:func:`stack_mismatch`).
@@ -302,11 +309,16 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     for g, (s, real) in enumerate(zip(scenarios, reals)):
         status, step = stack.outcome[g]
         log = stack.logs[g]
+        if not log.rec.count and g in stack.failures:
+            # A fault before the first recorded instant (the start checks passed, so the
+            # law or model is not deterministic): there is no run to summarise.
+            raise RunFault(stack.failures[g], 'raised', step)
         series = log.rec.arrays()
+        failure = {'failure': stack.failures[g]} if g in stack.failures else {}
         summary = build_summary(
             s, real, series, log.metrics, step, status,
             pseudo_leader_reselections=0 if stack.reselector is None else stack.reselector.count,
-            wall_time_s=round(wall, 3))
+            wall_time_s=round(wall, 3), **failure)
         results.append(SimResult(summary, series))
     return results
 
@@ -379,6 +391,8 @@ class _Stack:
         self.size = sc.n_agents
         self.logs = [RunLog.for_scenario(s) for s in scenarios]
         self.outcome: dict[int, tuple[str, int]] = {}
+        #: The line telling why a realisation failed (status ``failed``), by realisation.
+        self.failures: dict[int, str] = {}
         self.active = list(range(len(scenarios)))
         self.q = np.concatenate([r.q0 for r in reals])
         self.p = np.concatenate([r.p0 for r in reals])
@@ -414,21 +428,76 @@ class _Stack:
             ok &= np.isfinite(a).all(axis=1)
         return ~ok.reshape(len(self.active), self.size).all(axis=1)
 
-    def end(self, gone: np.ndarray, status: str, step: int) -> np.ndarray:
-        """End the realisations flagged in ``gone`` at ``step``; return the rows kept."""
+    def end(self, gone: np.ndarray, status: str | dict[int, str], step: int,
+            failures: dict[int, str] | None = None) -> np.ndarray:
+        """End the realisations flagged in ``gone`` at ``step``; return the rows kept.
+
+        :param status: their status, or ``{b: status}`` for each flagged realisation ``b``
+            (its index among the active ones).
+        :param failures: ``{b: line}``: why realisation ``b`` failed.
+        """
         keep = np.repeat(~gone, self.size)
         for b in np.flatnonzero(gone).tolist():
-            self.outcome[self.active[b]] = (status, step)
+            g = self.active[b]
+            self.outcome[g] = (status if isinstance(status, str) else status[b], step)
+            if failures and b in failures:
+                self.failures[g] = failures[b]
         self.active = [g for g, out in zip(self.active, gone.tolist()) if not out]
         self.q, self.p = self.q[keep], self.p[keep]
         self.agents = self.agents.subset(keep)
         self.graph = self._new_graph()
         return keep
 
-    def finish(self, status: str, step: int) -> None:
-        """End every realisation still running."""
+    def finish(self, status: str, step: int, failure: str | None = None) -> None:
+        """End every realisation still running (``failure``: why they failed)."""
         for g in self.active:
             self.outcome[g] = (status, step)
+            if failure is not None:
+                self.failures[g] = failure
+
+    def control(self, law: Law, edges: EdgeList, leader: LeaderState, dt: float,
+                step: int) -> np.ndarray:
+        """Return the law's commands of every active row (:func:`swarm_control`), checked.
+
+        :raises RunFault: when the law raised (naming the first agent that raises alone) or
+            returned the wrong shape.
+        """
+        q, p, agents = self.q, self.p, self.agents
+
+        t = step * dt
+
+        def alone(row: int) -> np.ndarray:
+            one = np.array([row])
+            return group_control(law, one, q, p, edges, leader, agents.subset(one), dt, t)
+        return evaluate_law(law, step, np.arange(q.shape[0]) % self.size, q.shape[1],
+                            lambda: swarm_control(law, q, p, edges, leader, agents, dt, t),
+                            alone)
+
+    def end_non_finite(self, u: np.ndarray, leader: LeaderState, law: Law,
+                       step: int) -> np.ndarray | None:
+        """End the realisations given a non-finite command; return the other rows of ``u``.
+
+        A realisation whose state has blown up (:func:`state_blew_up`) has ``diverged``; in
+        the others the law gave a non-finite command at a plausible state: ``failed``,
+        naming the law, the agents and the step.
+
+        :return: the commands of the realisations still running (``None``: none is).
+        """
+        if np.isfinite(u).all():
+            return u
+        m = self.size
+        bad = non_finite_rows(u).reshape(len(self.active), m)
+        gone = bad.any(axis=1)
+        status, failures = {}, {}
+        for b in np.flatnonzero(gone).tolist():
+            rows = slice(b * m, (b + 1) * m)
+            if state_blew_up(self.q[rows], self.p[rows], leader):
+                status[b] = 'diverged'
+            else:
+                status[b] = 'failed'
+                failures[b] = non_finite_fault(law, step, np.flatnonzero(bad[b])).line
+        u = u[self.end(gone, status, step, failures)]
+        return u if self.active else None
 
     def extra(self, rows: slice) -> dict:
         """Return the per-agent protocol state to record for some rows."""
@@ -441,7 +510,8 @@ def stack_agents(parts: list[AgentData]) -> AgentData:
 
 
 def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every):
-    """Advance the stack to the end (or divergence of all, or Ctrl-C); record how each ended."""
+    """Advance the stack to the end (or divergence or failure of all, or Ctrl-C); record how
+    each ended."""
     sc = stack.scenarios[0]
     law, dt, steps, every = sc.law, sc.dt, sc.steps, sc.record_every
     step = 0
@@ -453,21 +523,22 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                 stack.end(gone, 'diverged', step)
             if not stack.active:
                 return
-            state = leader.state
+            state = leader_state(leader, step, sc.dim)
             edges = stack.edges()
             if stack.reselector is not None:
                 stack.reselector.update(stack.agents, edges)
+            n_rows = stack.q.shape[0]
             if stack.net is None:
-                u = swarm_control(law, stack.q, stack.p, edges, state, stack.agents, dt,
-                                  step * dt)
+                u = stack.control(law, edges, state, dt, step)
             else:
                 stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
-                u = stack.net.control(None, stack.q, stack.p, stack.agents, dt, step * dt)[0]
-            gone = stack.failed(u)
-            if gone.any():
-                u = u[stack.end(gone, 'diverged', step)]
-                if not stack.active:
-                    return
+                u = evaluate_law(law, step, np.arange(n_rows) % stack.size, sc.dim,
+                                 lambda: stack.net.control(None, stack.q, stack.p, stack.agents,
+                                                           dt, step * dt)[0])
+            u = stack.end_non_finite(u, state, law, step)
+            if u is None:
+                return
+            if u.shape[0] != n_rows:
                 edges = stack.edges()
             q, p, m = stack.q, stack.p, stack.size
             covered, radius = whole_run_pairs(sc, q, stack.static, edges)
@@ -484,12 +555,14 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             if step == steps:
                 break
             if stack.net is None:
-                advance_state(law, q, p, state, stack.agents, dt,
-                              lambda: pair_sums(law, q, p, edges), step * dt)
+                evaluate_state(law, step, range(m), lambda: advance_state(
+                    law, q, p, state, stack.agents, dt, lambda: pair_sums(law, q, p, edges),
+                    step * dt))
             else:
-                stack.net.advance_state(None, q, p, stack.agents, dt, step * dt)
+                evaluate_state(law, step, range(m), lambda: stack.net.advance_state(
+                    None, q, p, stack.agents, dt, step * dt))
             stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
-            leader.step(dt)
+            advance_leader(leader, dt, step, sc.dim)
             now = time.monotonic()
             if progress is not None and now - last >= progress_every:
                 last = now
@@ -501,6 +574,10 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                          f'({rate:.0f} steps/s){stacked}')
     except KeyboardInterrupt:
         stack.finish('interrupted', step)
+        return
+    except RunFault as fault:
+        # A fault of the law or the leader model: every realisation meets it (one stack).
+        stack.finish('failed', step, fault.line)
         return
     stack.finish('completed', step)
 
@@ -517,7 +594,7 @@ def build_summary(sc: Scenario, real: Realization, series: dict, run: RunMetrics
     :param series: the recorded time series.
     :param run: the whole-run metrics.
     :param step: the last step reached.
-    :param status: ``completed``, ``interrupted`` or ``diverged``.
+    :param status: ``completed``, ``interrupted``, ``diverged`` or ``failed``.
     :param given: the keys a front end gives (``wall_time_s``...), written in their place.
     :return: the summary (the keys of ``docs/outputs.md``, provenance included).
     """

@@ -206,10 +206,16 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('protocol', PROVENANCE, 'the law (`protocol.name`)', lambda x: x.facts.protocol),
     _K('dt', RUN_SETTING, 'the step [s]', lambda x: x.facts.dt),
     _K('status', PROVENANCE, '`completed`, `interrupted` (a stop signal: everything up to '
-       'then is written; stopped before the first step, the measures are null) or `diverged` '
+       'then is written; stopped before the first step, the measures are null), `diverged` '
        '(the state stopped being finite; the last finite recorded state is written, exit '
-       'status 1); a ROS run also `recording_failed` and `failed` (another process of the '
-       'run died), its analysis `truncated`', lambda x: x.status),
+       'status 1) or `failed` (a fault of the law or the leader model, or in a ROS run of a '
+       'node, or another process of the run died: everything up to the fault is written, '
+       'exit status 1); a ROS run also `recording_failed`, its analysis `truncated`',
+       lambda x: x.status),
+    _K('failure', PROVENANCE, 'status `failed` or `recording_failed`: the one line telling '
+       'the fault (the law or leader model by its entry point, or the node, with the agent '
+       'and the step; or the file that could not be written); absent otherwise',
+       writers=(SIM, WORLD)),
     _K('flock_swarm_version', PROVENANCE, 'the package version that ran it',
        lambda x: __version__),
     _K('pseudo_leader_certificate', PROVENANCE, 'Zhou\'s Theorem 1 certificate '
@@ -234,6 +240,10 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),
     _K('missed_commands_per_agent', BOOKKEEPING, 'the same, per agent',
+       writers=(WORLD, ANALYZE)),
+    _K('non_finite_commands_per_agent', BOOKKEEPING, 'commands the law gave non-finite, per '
+       'agent, as the agent nodes reported them (`swarm/faults`): the first fails the run, '
+       'unless the agents run with `non_finite:=zero` (a zero command is applied instead)',
        writers=(WORLD, ANALYZE)),
     _K('rejected_messages', BOOKKEEPING, 'messages the world\'s input guard rejected, by '
        'reason', writers=(WORLD,)),
@@ -304,6 +314,23 @@ def summary_of(inputs: SummaryInputs, **given: Any) -> dict:
         value = key.value(inputs)
         if value is not ABSENT:
             out[key.name] = value
+    return out
+
+
+def with_failure(summary: Mapping[str, Any], status: str, line: str) -> dict:
+    """Return ``summary`` with ``status`` and the line telling the failure (``failure``, in
+    its place: after ``status``).
+
+    :param summary: a summary (:func:`summary_of`).
+    :param status: the run's status (``failed``, ``recording_failed``).
+    :param line: why.
+    """
+    out: dict[str, Any] = {}
+    for key, value in summary.items():
+        if key != 'failure':
+            out[key] = status if key == 'status' else value
+        if key == 'status':
+            out['failure'] = line
     return out
 
 

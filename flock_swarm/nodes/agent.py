@@ -6,7 +6,11 @@ the leader's state if informed, and calls the same law functions as ``sim``
 (:func:`flock_swarm.core.laws.base.group_control`). Each command is stamped with the
 odometry stamp it answers. The decisions, and the adaptive state (Zhou's gain ``h_i``), are
 those of :class:`~flock_swarm.nodes.controller.AgentController` (no ROS); this node is its
-plumbing. A command the law returns non-finite is published as zero (counted, logged). For a
+plumbing. A law that raises, returns the wrong shape or a non-finite command fails the run:
+the node reports it to the world on ``swarm/faults``
+(:class:`~flock_swarm.nodes.fault_report.FaultReporter`), logs one line and exits with
+status 1. With ``non_finite:=zero`` a non-finite command is published as zero instead
+(counted, logged, reported to the world, which counts it per agent). For a
 law with adaptive state, each agent publishes the state its command was computed with on
 ``agent_<i>/state`` (``sensor_msgs/JointState``, stamped like the command and sent before it),
 so the world records what ``sim`` records.
@@ -31,8 +35,11 @@ from sensor_msgs.msg import JointState
 
 from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
                                   odom_topic, qos_profile, state_topic)
+from flock_swarm.core.faults import RunFault, non_finite_fault
 from flock_swarm.nodes.clock import StepClock
-from flock_swarm.nodes.controller import AgentController, OdometryInbox, parse_agent_ids
+from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, AgentController,
+                                          OdometryInbox, parse_agent_ids)
+from flock_swarm.nodes.fault_report import FaultReporter
 from flock_swarm.nodes.graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
@@ -62,6 +69,11 @@ AGENT_PARAMS = COMMON_PARAMS + (
     _timeout('leader_start_timeout', 30.0, 'lockstep: seconds to wait for the leader\'s first '
              'state (it answers its first tick only once every node has matched its topics, up '
              'to its own start_timeout) before the agents apply the uninformed law'),
+    Param('non_finite', NON_FINITE_FAIL, "a non-finite command of the law: 'fail' ends the run "
+          "(reported to the world on swarm/faults, the node exits with status 1); 'zero' "
+          'publishes a zero command instead and goes on (counted, reported)',
+          lambda v: v in (NON_FINITE_FAIL, NON_FINITE_ZERO),
+          "must be 'fail' or 'zero', got {value!r}"),
 ) + LIMIT_PARAMS + (KEEP_RUNNING,)
 
 
@@ -84,7 +96,11 @@ class AgentNode(Node):
         params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
-                                          leader_start_timeout=params['leader_start_timeout'])
+                                          leader_start_timeout=params['leader_start_timeout'],
+                                          non_finite=params['non_finite'])
+        self.reporter = FaultReporter(self)
+        #: The line of the fault that ended this node's part of the run, or ``None``.
+        self.failure: str | None = None
         self.clock = StepClock(sc.dt)
         self.lockstep = params['mode'] == 'lockstep'
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
@@ -226,8 +242,22 @@ class AgentNode(Node):
 
     def try_answer(self, k: int) -> None:
         """Answer step ``k`` once every odometry is in, and the leader's state or its timeout."""
-        if self.controller.ready(k, time.monotonic()):
-            self.publish_commands(self.controller.answer(k), self.clock.ns(k))
+        if self.failure is None and self.controller.ready(k, time.monotonic()):
+            self.answer(lambda: self.controller.answer(k), k)
+
+    def answer(self, compute, k: int) -> None:
+        """Publish the commands ``compute()`` returns for step ``k``; a fault of the law is
+        reported instead (and this node answers no more)."""
+        try:
+            u = compute()
+        except RunFault as fault:
+            self.failure = self.reporter.report(fault, self.clock.stamp(k)).line
+            return
+        if self.controller.zeroed:
+            # Before the commands, so that the world has it when it closes the step.
+            self.reporter.report(non_finite_fault(self.scenario.law, k, self.controller.zeroed),
+                                 self.clock.stamp(k), fatal=False)
+        self.publish_commands(u, self.clock.ns(k))
 
     def on_lockstep_timer(self) -> None:
         """Take a step's odometry that stopped short of every agent's (one by one); answer a
@@ -278,16 +308,19 @@ class AgentNode(Node):
 
     def on_timer(self) -> None:
         """Realtime mode: answer with the latest known states (zero-order hold)."""
-        u = self.controller.realtime_answer(time.monotonic())
-        if u is not None:
-            self.publish_commands(u, self.clock.ns(self.controller.latest_step))
+        if self.failure is None and self.controller.latest.has_odometry(self.scenario.n_agents):
+            self.answer(lambda: self.controller.realtime_answer(time.monotonic()),
+                        self.controller.latest_step)
 
     def check_claims(self) -> None:
         """Report another node publishing commands for one of our agents (a duplicate id)."""
         check_claims(self, self.scenario.n_agents, self.duplicates, self.controller.ids)
 
     def close(self) -> None:
-        """Log what was rejected and what was replaced by zero (called on shutdown)."""
+        """Log what was rejected and what was replaced by zero; let a fault report reach
+        the world (called on shutdown)."""
+        if self.failure is not None:
+            self.reporter.wait_acknowledged()
         if self.guard.rejected:
             self.get_logger().warning(f'rejected inputs: {self.guard.counts()}')
         if self.controller.non_finite:
@@ -303,8 +336,7 @@ def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     found = [m.group(1) for a in argv for m in [re.search(r'^agent_id:=(\d+)$', a)] if m]
     name = f'agent_{found[-1]}' if found else 'agent'
-    return run_node('agent', lambda: AgentNode(node_name=name), args,
-                    until=lambda node: node.world_finished())
+    return run_agents('agent', lambda: AgentNode(node_name=name), args)
 
 
 def container_main(args: list[str] | None = None) -> int:
@@ -313,8 +345,19 @@ def container_main(args: list[str] | None = None) -> int:
     It hosts every agent of the scenario unless ``-p agent_ids:='0-49'`` says otherwise; the
     node is named ``agents``.
     """
-    return run_node('agents', lambda: AgentNode(default_agent_ids='all', node_name='agents'),
-                    args, until=lambda node: node.world_finished())
+    return run_agents('agents', lambda: AgentNode(default_agent_ids='all', node_name='agents'),
+                      args)
+
+
+def run_agents(name: str, factory, args: list[str] | None) -> int:
+    """Run an agent node until the world's end or a fault of its law; return the status.
+
+    :return: :func:`run_node`'s status, or 1 when the law failed (reported to the world).
+    """
+    built: list[AgentNode] = []
+    status = run_node(name, lambda: built.append(factory()) or built[0], args,
+                      until=lambda node: node.world_finished() or node.failure is not None)
+    return 1 if status == 0 and built and built[0].failure is not None else status
 
 
 if __name__ == '__main__':

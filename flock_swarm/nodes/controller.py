@@ -22,6 +22,8 @@ import numpy as np
 from flock_swarm.contract import state_labels
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fault,
+                                     non_finite_rows, state_blew_up)
 from flock_swarm.core.laws.base import advance_state, group_control, group_sums
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.pseudo_leaders import Reselector
@@ -34,6 +36,9 @@ from flock_swarm.nodes.wire import OdometryBatch
 
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
 MAX_PENDING = 8
+#: What the agents do with a non-finite command of the law (the ``non_finite`` parameter):
+#: fail the run (the default), or apply a zero command instead and go on (counted).
+NON_FINITE_FAIL, NON_FINITE_ZERO = 'fail', 'zero'
 
 
 @dataclass
@@ -134,17 +139,22 @@ class AgentController:
     It also follows the leader (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`): a step
     whose odometry is complete waits for the leader's state at most ``leader_timeout``
     (``leader_start_timeout`` before the leader was first heard), then the uninformed law
-    applies until the leader is back. A command the law returns non-finite is replaced by
-    zero (counted per agent in ``non_finite``, the first of each agent logged).
+    applies until the leader is back. A law that raises or returns the wrong shape raises
+    :class:`~flock_swarm.core.faults.RunFault` (the node reports it and the run fails); so
+    does a non-finite command, unless ``non_finite`` is ``'zero'``: then it is replaced by
+    zero (counted per agent in ``non_finite``, the first of each agent logged). A non-finite
+    command for a state that has blown up (:func:`~flock_swarm.core.faults.state_blew_up`)
+    is zero in both cases: the world tells the divergence.
 
     :ivar answered: the last step answered (``-1`` before the first).
+    :ivar zeroed: the hosted agents whose command of the last answer was replaced by zero.
     :ivar state: the hosted agents' adaptive state the last commands were computed with
         (before it advanced), ``{key: (m, ...)}``; empty for a law without.
     """
 
     def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
                  leader_timeout: float = 1.0, leader_start_timeout: float = 30.0,
-                 now: float | None = None) -> None:
+                 now: float | None = None, non_finite: str = NON_FINITE_FAIL) -> None:
         """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``.
 
         :param log: where the leader's loss and non-finite commands are told (default: the
@@ -152,6 +162,7 @@ class AgentController:
         :param leader_timeout: seconds without the leader state before the uninformed law.
         :param leader_start_timeout: the same before the leader was first heard.
         :param now: the time [s, a monotonic clock] the leader's silence counts from.
+        :param non_finite: :data:`NON_FINITE_FAIL` or :data:`NON_FINITE_ZERO` (see above).
         """
         self.sc = sc
         self.ids = np.asarray(ids, dtype=np.intp)
@@ -179,6 +190,8 @@ class AgentController:
         self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
                                 neighbourhood_of(sc.graph_type, sc.law.all_pairs),
                                 sc.law.coupling_weight) if sc.network.active else None
+        self.non_finite_policy = non_finite
+        self.zeroed: list[int] = []
         self.state = self.swarm.subset(self.ids).state
         shapes = {key: value.shape[1:] for key, value in self.state.items()}
         #: The labels of one agent's state (:func:`flock_swarm.contract.state_labels`).
@@ -278,38 +291,53 @@ class AgentController:
                 k: int = 0) -> np.ndarray:
         """Return ``u`` of the hosted agents for the swarm state ``(q, p)``; advance gains.
 
-        A non-finite row (the law failed: an overflow, a division by zero) is zero.
-
-        :param k: the step the state is of (the law's time ``t = k dt``).
+        :param k: the step the state is of (the law's time ``t = k dt``, and the step a
+            fault names).
+        :raises RunFault: when the law raised, returned the wrong shape, or (unless
+            ``non_finite`` is ``'zero'``) a non-finite command (see the class).
         """
-        law, ids = self.sc.law, self.ids
+        law, ids, dt = self.sc.law, self.ids, self.sc.dt
         edges = interaction_graph(self.sc, self.real, q, self.static)
         if self.reselector is not None:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
-        t, dt, net = k * self.sc.dt, self.sc.dt, self.net
+        t, net = k * dt, self.net
+
+        def alone(row: int) -> np.ndarray:
+            one = ids[row:row + 1]
+            return group_control(law, one, q, p, edges, leader, self.swarm.subset(one), dt, t)
         if net is None:
-            u = group_control(law, ids, q, p, edges, leader, group, dt, t)
+            u = evaluate_law(law, k, ids, self.sc.dim,
+                             lambda: group_control(law, ids, q, p, edges, leader, group, dt, t),
+                             alone)
         else:
             net.send(k, q, p, leader, edges, self.swarm.informed)
-            u = net.control(ids, q, p, group, dt, t)[0]
+            u = evaluate_law(law, k, ids, self.sc.dim,
+                             lambda: net.control(ids, q, p, group, dt, t)[0])
         if group.state:
             self.state = {key: value.copy() for key, value in group.state.items()}
             if net is None:
-                advance_state(law, q[ids], p[ids], leader, group, dt,
-                              lambda: group_sums(law, ids, q, p, edges), t)
+                evaluate_state(law, k, ids, lambda: advance_state(
+                    law, q[ids], p[ids], leader, group, dt,
+                    lambda: group_sums(law, ids, q, p, edges), t))
             else:
-                net.advance_state(ids, q, p, group, dt, t)
+                evaluate_state(law, k, ids, lambda: net.advance_state(ids, q, p, group, dt, t))
             for key, value in group.state.items():
                 self.swarm.state[key][ids] = value
+        self.zeroed = []
         if np.isfinite(u).all():
             return u
-        bad = ~np.isfinite(u).all(axis=1)
+        bad = non_finite_rows(u)
+        blew_up = state_blew_up(q, p, leader)
+        if self.non_finite_policy == NON_FINITE_FAIL and not blew_up:
+            self.non_finite.update(ids[bad].tolist())
+            raise non_finite_fault(law, k, ids[bad])
         for i in ids[bad].tolist():
             if not self.non_finite[i]:
                 self.log.warning(f'agent {i}: the law gave a non-finite command; a zero '
                                  'command is published instead (further ones are counted)')
             self.non_finite[i] += 1
+        self.zeroed = [] if blew_up else ids[bad].tolist()
         return np.where(bad[:, None], 0.0, u)
 
     def state_values(self) -> np.ndarray:

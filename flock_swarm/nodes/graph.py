@@ -66,7 +66,8 @@ def agent_hosts(node: Node, n_agents: int) -> int | None:
 
 
 def check_claims(node: Node, n_agents: int, reported: set[int],
-                 hosted: Iterable[int] = ()) -> None:
+                 hosted: Iterable[int] = (),
+                 claims: dict[int, list[tuple[str, str]]] | None = None) -> None:
     """Log an error for each agent that two nodes publish commands for (a duplicate agent_id).
 
     The world asks about every agent; an agent host about its own (``hosted``), counting
@@ -77,10 +78,12 @@ def check_claims(node: Node, n_agents: int, reported: set[int],
     :param n_agents: the swarm's size.
     :param reported: the agents reported so far (updated).
     :param hosted: the agents ``node`` itself commands (none for the world).
+    :param claims: :func:`command_claims`, when the caller asked the graph already.
     """
     me = (node.get_namespace(), node.get_name())
     mine = {int(i) for i in hosted}
-    claims = command_claims(node, n_agents)
+    if claims is None:
+        claims = command_claims(node, n_agents)
     for i in sorted(mine or claims):
         others = [claimant for claimant in claims.get(i, ()) if claimant != me]
         claimants = ([me] if i in mine else []) + others

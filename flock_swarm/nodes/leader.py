@@ -4,6 +4,11 @@ Lockstep mode: driven by ``/clock``; on tick ``t_k`` the leader advances its mod
 ``k`` (RK4, the same :class:`~flock_swarm.core.leaders.base.VirtualLeader` as ``sim``) and
 publishes its state stamped ``t_k``. Realtime mode: a wall-clock timer of period ``dt``
 advances and publishes.
+
+A model that raises, or returns an acceleration of the wrong shape (or a non-finite one at a
+finite state), is not broadcast: the node reports the fault to the world on ``swarm/faults``
+(:class:`~flock_swarm.nodes.fault_report.FaultReporter`), logs one line and exits with
+status 1, and the world ends the run as ``failed``.
 """
 
 import sys
@@ -16,8 +21,10 @@ from rosgraph_msgs.msg import Clock
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
                                   qos_profile)
+from flock_swarm.core.faults import RunFault, advance_leader, leader_state
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.fault_report import FaultReporter
 from flock_swarm.nodes.graph import agent_hosts, follow_world
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
@@ -60,6 +67,9 @@ class LeaderNode(Node):
         self.odom_pub = self.create_publisher(Odometry, LEADER_ODOM, qos)
         self.accel_pub = self.create_publisher(AccelStamped, LEADER_ACCEL, qos)
         self.odom_encoder, self.accel_encoder = OdometryEncoder('leader'), AccelEncoder()
+        self.reporter = FaultReporter(self)
+        #: The line of the model's fault that ended this node's part of the run, or ``None``.
+        self.failure: str | None = None
         if params['mode'] == 'lockstep':
             self.create_subscription(Clock, CLOCK, self.on_clock, qos_profile(CLOCK_QOS))
             self.retry = wall_timer(self, 0.01, self.flush)
@@ -93,21 +103,50 @@ class LeaderNode(Node):
                 self.params.settle('expect_subscribers', need)
             self.matched = True
             self.retry.cancel()
-        while self.step < self.target:
-            self.model.step(self.scenario.dt)
-            self.step += 1
-        self.target = -1
+        target, self.target = self.target, -1
+        self.guarded(self.answer_tick, target)
+
+    def answer_tick(self, target: int) -> None:
+        """Advance the model to step ``target`` and publish its state."""
+        self.advance_to(target)
         self.publish()
+
+    def advance_to(self, target: int) -> None:
+        """Advance the model to step ``target``."""
+        while self.step < target:
+            advance_leader(self.model, self.scenario.dt, self.step, self.scenario.dim)
+            self.step += 1
 
     def on_timer(self) -> None:
         """Realtime mode: publish the current state, then advance one step."""
+        self.guarded(self.publish_and_advance)
+
+    def publish_and_advance(self) -> None:
+        """Realtime mode: publish the current state, then advance one step."""
         self.publish()
-        self.model.step(self.scenario.dt)
-        self.step += 1
+        self.advance_to(self.step + 1)
+
+    def guarded(self, act, *args) -> None:
+        """Do ``act(*args)`` unless the model failed before; report its fault, and stop, if
+        it fails now."""
+        if self.failure is not None:
+            return
+        try:
+            act(*args)
+        except RunFault as fault:
+            self.failure = self.reporter.report(fault, self.clock.stamp(fault.step)).line
+
+    def close(self) -> None:
+        """Let a fault report reach the world (called on shutdown)."""
+        if self.failure is not None:
+            self.reporter.wait_acknowledged()
 
     def publish(self) -> None:
-        """Publish the state of the current step (serialised by :mod:`flock_swarm.nodes.wire`)."""
-        state = self.model.state
+        """Publish the state of the current step (serialised by :mod:`flock_swarm.nodes.wire`).
+
+        :raises RunFault: when the model's acceleration is not one to broadcast.
+        """
+        state = leader_state(self.model, self.step, self.scenario.dim)
         ns = self.clock.ns(self.step)
         self.odom_pub.publish(self.odom_encoder.encode(ns, state.q.tolist(), state.p.tolist()))
         self.accel_pub.publish(self.accel_encoder.encode(ns, state.a.tolist()))
@@ -115,8 +154,10 @@ class LeaderNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Run the leader node (``ros2 run flock_swarm leader``)."""
-    return run_node('leader', lambda: LeaderNode(), args,
-                    until=lambda node: node.world_finished())
+    built: list[LeaderNode] = []
+    status = run_node('leader', lambda: built.append(LeaderNode()) or built[0], args,
+                      until=lambda node: node.world_finished() or node.failure is not None)
+    return 1 if status == 0 and built and built[0].failure is not None else status
 
 
 if __name__ == '__main__':

@@ -161,7 +161,7 @@ class BagSink:
         readable (``analyze`` says how much it recovered), and no ``metadata.yaml`` claims it
         complete.
         """
-        self.error = f'{exc.strerror or exc} ({self.path})'
+        self.error = self._error(exc)
         bag, self.bag = self.bag, None
         try:
             bag.abandon()
@@ -199,8 +199,15 @@ class BagSink:
             try:
                 bag.close()
             except OSError as exc:
-                self.error = f'{exc.strerror or exc} ({self.path})'
+                self.error = self._error(exc, bag)
                 raise
+
+    def _error(self, exc: OSError, bag=None) -> str:
+        """Return ``cannot write FILE: REASON`` for a failed write of the bag: the file
+        the error names, else the open MCAP file."""
+        bag = bag or self.bag
+        name = exc.filename or (bag.mcap_path if bag is not None else self.path)
+        return f'cannot write {name}: {exc.strerror or exc}'
 
 
 class RecordedNode(Node):

@@ -5,7 +5,9 @@ received for it, the step timeout and the agents that missed it (zero command), 
 leader's buffered states and its loss (:class:`~flock_swarm.nodes.leader_watch.LeaderWatch`),
 the resend policy of a stalled step, the agents' adaptive state of each step (a law's
 ``h_i``, recorded as ``sim`` records it), the integration (the same
-:func:`~flock_swarm.core.dynamics.step_agents` as ``sim``), the run log and the summary. The
+:func:`~flock_swarm.core.dynamics.step_agents` as ``sim``), the faults that end the run (a
+peer that stopped answering or left the ROS graph, a fault a node reported), the run log
+and the summary. The
 node turns messages into its calls and its :class:`Observation` into messages; every time is
 passed in (seconds of a monotonic clock), so the stepper runs as well from a unit test. In
 lockstep, a step's commands are queued as bytes and handed over at once (:class:`CommandInbox`).
@@ -30,6 +32,8 @@ from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
                                   interaction_graph, observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.core.summary import with_failure
+from flock_swarm.core.faults import agents_text
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
@@ -114,6 +118,10 @@ class WorldSettings:
     :ivar staleness: realtime: seconds a held command or the leader state stays valid.
     :ivar marker_every: markers every this many steps.
     :ivar metrics_every: metrics every this many steps.
+    :ivar max_missed_steps: lockstep: an agent that answered before and then misses this
+        many steps in a row ends the run as ``failed`` (0: never, it is zeroed to the end).
+    :ivar peer_timeout: seconds an agent's host or the leader may be gone from the ROS graph
+        (it answered before) before the run ends as ``failed`` (0: never).
     """
 
     lockstep: bool = True
@@ -122,6 +130,8 @@ class WorldSettings:
     staleness: float = 0.5
     marker_every: int = 10
     metrics_every: int = 10
+    max_missed_steps: int = 3
+    peer_timeout: float = 6.0
 
     @classmethod
     def from_parameters(cls, values: dict, lockstep: bool) -> 'WorldSettings':
@@ -151,6 +161,12 @@ SETTING_PARAMS = (
     _setting('staleness', 'realtime: seconds a held command (or the leader state) stays valid; '
              'an older command counts as missing (zero), an older leader state as lost',
              lambda v: v > 0),
+    _setting('max_missed_steps', 'lockstep: an agent that answered before and then misses '
+             'this many steps in a row (each after step_timeout) ends the run as failed; 0: '
+             'never (it gets zero commands to the end)', lambda v: v >= 0),
+    _setting('peer_timeout', 'seconds an agent\'s node or the leader may be gone from the ROS '
+             'graph (it had answered before) before the run ends as failed; 0: never',
+             lambda v: 0 <= v < float('inf')),
 )
 
 
@@ -231,6 +247,16 @@ class WorldStepper:
         self.state_layout = state_slices(shapes)
         self.state_in: set[int] = set()
         self.missed = np.zeros(n, dtype=int)
+        # Agents that have sent a command, and the steps each has missed since its last.
+        self.heard = np.zeros(n, dtype=bool)
+        self.silent_steps = np.zeros(n, dtype=int)
+        # Since when an agent's node (by agent) or the leader has been gone from the graph.
+        self.gone_since: dict[int | str, float] = {}
+        #: Non-finite commands of the law, per agent, as the agent nodes reported them.
+        self.non_finite = np.zeros(n, dtype=int)
+        self.non_finite_at: dict[int, list[int]] = {}
+        #: The line telling why the run failed (status ``failed``), or ``None``.
+        self.failure: str | None = None
         self.leader_missed = 0
         self.last_missing: set[int] = set()
         # Realtime: wall time each step's odometry went out, and how long commands took.
@@ -271,6 +297,7 @@ class WorldStepper:
         that went without it came too late (a repeated command for that step, after the
         world offered it again, is no fault). Realtime: the command is held until the next.
         """
+        self.heard[i] = True
         if not self.lockstep:
             self.held[i] = u
             self.held_at[i] = now
@@ -292,6 +319,7 @@ class WorldStepper:
         if self.started and not self.done and k == self.k:
             self.commands = dict(enumerate(u))
             self.command_rows = u
+            self.heard[:] = True
 
     def agent_state(self, i: int, k: int, values: Sequence[float]) -> None:
         """Take agent ``i``'s (checked) adaptive state of step ``k``: the values of
@@ -421,6 +449,10 @@ class WorldStepper:
             self.log.warning(f'step {k}: no command from agent(s) {missing} within '
                              f'{self.settings.step_timeout:g} s; zero command applied')
         self.last_missing = set(missing)
+        answered = np.ones(n, dtype=bool)
+        answered[missing] = False
+        self.silent_steps[answered] = 0
+        self.silent_steps[missing] += 1
         # An agent without its command is told above; one whose command came without its
         # state is told here.
         silent = [i for i in range(n) if i not in self.state_in and i not in missing] \
@@ -439,6 +471,67 @@ class WorldStepper:
             # How long a step takes now (a timed-out step says nothing about that).
             self.last_step_s = now - self.step_began
         return self.observe(u, missing)
+
+    def silent_agents(self, k: int, hosts: Callable[[int], str] = lambda i: '') -> str | None:
+        """Return the line of a failed run when agents that answered before have missed
+        ``max_missed_steps`` steps in a row up to step ``k`` (lockstep), else ``None``.
+
+        :param k: the step closed last.
+        :param hosts: the node hosting an agent, as the graph last told (``''``: unknown).
+        """
+        m = self.settings.max_missed_steps
+        if not self.lockstep or not m:
+            return None
+        silent = np.flatnonzero(self.heard & (self.silent_steps >= m)).tolist()
+        if not silent:
+            return None
+        nodes = sorted({hosts(i) for i in silent} - {''})
+        return (f'{agents_text(silent)}' + (f' (node {", ".join(nodes)})' if nodes else '')
+                + f' sent no command for {m} steps in a row (steps {k - m + 1}-{k}, '
+                f'{self.settings.step_timeout:g} s each): its node is gone or stalled')
+
+    def graph_gone(self, agents: Sequence[int], leader: bool, now: float,
+                   hosts: Callable[[int], str] = lambda i: '') -> str | None:
+        """Note which peers the ROS graph no longer shows; return the line of a failed run
+        once one has been gone ``peer_timeout`` seconds, else ``None``.
+
+        Only a peer that answered before counts: an agent whose command came, the leader
+        once heard (an agent never seen is zeroed as before, see :meth:`close_step`).
+
+        :param agents: the agents no node publishes commands for now.
+        :param leader: whether no node publishes the leader's odometry now.
+        :param now: the time.
+        :param hosts: the node that hosted an agent, as the graph last told.
+        """
+        timeout = self.settings.peer_timeout
+        gone: set[int | str] = {int(i) for i in agents if self.heard[i]}
+        if leader and self.leader.ever_heard:
+            gone.add('leader')
+        for peer in list(self.gone_since):
+            if peer not in gone:
+                del self.gone_since[peer]
+        for peer in gone:
+            self.gone_since.setdefault(peer, now)
+        if not timeout:
+            return None
+        out = sorted((p for p in gone if now - self.gone_since[p] >= timeout), key=str)
+        if not out:
+            return None
+        names = ['the leader' if p == 'leader' else f'agent {p}' + (
+            f' (node {hosts(p)})' if hosts(p) else '') for p in out]
+        return (f'{", ".join(names)} left the ROS graph (no publisher for '
+                f'{timeout:g} s) at step {self.k}: its node exited or died')
+
+    def fault_reported(self, k: int, agents: Sequence[int], non_finite: bool) -> None:
+        """Count the non-finite commands an agent node reported for step ``k``.
+
+        A report that comes after its step was observed counts at the open step, and one
+        after the end not at all: so ``/swarm/metrics`` (its ``non_finite_this_step``), the
+        time series and the summary count the same (``analyze`` adds them up from the bag).
+        """
+        if non_finite and agents and not self.done:
+            self.non_finite[list(agents)] += 1
+            self.non_finite_at.setdefault(max(k, self.k), []).extend(int(i) for i in agents)
 
     # -- realtime -----------------------------------------------------------------------------
 
@@ -510,21 +603,28 @@ class WorldStepper:
                 net = self.net.recorded(sc.dt)
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
-                                   **self.state, **net)
+                                   non_finite_commands=self.non_finite.copy(), **self.state,
+                                   **net)
         if now is not None:
             self.metrics_now = now
         events = self.leader.events
         event = bool(events) and events[-1][0] == k
         values, problems = None, []
-        if k % st.metrics_every == 0 or missing or last or event:
+        non_finite = sorted(set(self.non_finite_at.pop(k, [])))
+        for old in [s for s in self.non_finite_at if s < k]:
+            del self.non_finite_at[old]
+        if k % st.metrics_every == 0 or missing or last or event or non_finite:
             if not self.metrics_now:
                 self.metrics_now = step_metrics(self.q, self.p, leader, sc.eta_tolerance,
                                                 law.radius, law.strict_radius)
             values = dict(self.metrics_now, step=k, missed_commands=int(self.missed.sum()),
                           missed_this_step=json.dumps(missing),
+                          non_finite_commands=int(self.non_finite.sum()),
+                          non_finite_this_step=json.dumps(non_finite),
                           leader_missed=self.leader_missed,
                           leader='lost' if self.leader.lost else 'ok')
             problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
+                + ([f'{len(non_finite)} non-finite command(s)'] if non_finite else []) \
                 + (['leader lost'] if self.leader.lost else [])
         return Observation(k, self.q, self.p, u, leader, edges, missing,
                            k % st.marker_every == 0 or last, values, problems, last)
@@ -549,12 +649,14 @@ class WorldStepper:
 
     # -- the end ------------------------------------------------------------------------------
 
-    def end(self, status: str) -> bool:
-        """End the run with ``status``; return ``False`` when it had ended already."""
+    def end(self, status: str, failure: str | None = None) -> bool:
+        """End the run with ``status`` (``failure``: the line telling why it failed); return
+        ``False`` when it had ended already."""
         if self.done:
             return False
         self.done = True
         self.status = status
+        self.failure = failure
         return True
 
     def result(self, now: float, rejected: dict, duplicates: list[int],
@@ -573,10 +675,13 @@ class WorldStepper:
         series = log.rec.arrays()
         summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
                                 self.status)
+        if self.failure is not None:
+            summary = with_failure(summary, self.status, self.failure)
         summary.update({
             'mode': 'lockstep' if self.lockstep else 'realtime',
             'missed_commands': int(self.missed.sum()),
             'missed_commands_per_agent': [int(x) for x in self.missed],
+            'non_finite_commands_per_agent': [int(x) for x in self.non_finite],
             'rejected_messages': rejected,
             'leader_events': self.leader.events,
             'duplicate_agent_ids': duplicates,

@@ -8,6 +8,13 @@ agent gets a zero command: counted, logged, published on ``/swarm/metrics`` and 
 It then integrates exactly (the same :func:`step_agents` as ``sim``) to ``t_{k+1}``.
 Realtime mode: a wall-clock timer steps with the latest commands (zero-order hold).
 
+A fault ends the run as ``failed`` within a bounded time, with one line naming the node or
+component, the agent and the step (docs/ros.md, "Faults"): a fault an agent or the leader
+reports on ``swarm/faults`` (its law or model raised, returned the wrong shape or a
+non-finite value) at once; an agent that answered before and then misses
+``max_missed_steps`` steps in a row (lockstep); an agent's node or the leader gone from the
+ROS graph for ``peer_timeout`` seconds.
+
 Every message the world publishes or receives is written to a rosbag2-compatible MCAP bag
 in ``out_dir/bag``, with the scenario, seed and informed set as MCAP metadata; the run's
 ``summary.json`` and ``timeseries.npz`` go to ``out_dir``. The decisions are those of
@@ -22,6 +29,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
@@ -29,12 +37,16 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from flock_swarm.contract import (CLOCK, CLOCK_QOS, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS,
-                                  RUNNING, SCENARIO, SCENARIO_QOS, STATUS, STATUS_QOS,
-                                  cmd_topic, odom_topic, qos_profile, state_topic)
+from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
+                                  LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
+                                  STATUS, STATUS_QOS, cmd_topic, odom_topic, qos_profile,
+                                  state_topic)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.faults import NON_FINITE
+from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.clock import StepClock
+from flock_swarm.nodes.fault_report import FaultReport
 from flock_swarm.nodes.graph import check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry
@@ -45,7 +57,8 @@ from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation
                                        WorldSettings, WorldStepper)
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
                                     decode_state, encode_clock)
-from flock_swarm.outputs import SpooledRecorder, write_outputs
+from flock_swarm.outputs import (SpooledRecorder, json_text, write_error, write_outputs,
+                                 write_text)
 
 #: A law's adaptive state may take any finite value: only a non-finite one is rejected.
 STATE_LIMIT = sys.float_info.max
@@ -138,6 +151,11 @@ class WorldNode(RecordedNode):
         self.stepper = WorldStepper(sc, settings, self.get_logger(), recorder=self.spool)
         self.clock = StepClock(sc.dt)
         self.duplicates: set[int] = set()
+        # The node that published each agent's commands, as the graph last told.
+        self.hosts: dict[int, str] = {}
+        #: The files of the run's outputs written, and why writing one failed (or ``None``).
+        self.written: list[Path] = []
+        self.write_error: str | None = None
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
                                 self.get_logger().warning)
         self.bag = BagSink(self.out / 'bag', sc, self.stepper.real, self.mode,
@@ -183,6 +201,7 @@ class WorldNode(RecordedNode):
                                            self.on_leader_odom)
         self.leader_accel_topic = subscribe(AccelStamped, LEADER_ACCEL, decode_accel,
                                             self.on_leader_accel)
+        self.create_subscription(DiagnosticArray, FAULTS, self.on_fault, qos_profile(FAULTS_QOS))
         # Latched, and recorded at t = 0: the bag keeps the scenario where tools that drop
         # MCAP metadata (rosbags-convert) keep it too (analyze reads it there).
         self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
@@ -279,9 +298,28 @@ class WorldNode(RecordedNode):
                                       a=np.array(lin[:self.scenario.dim]))
             self._maybe_finish()
 
+    def on_fault(self, msg: DiagnosticArray) -> None:
+        """Take the faults a node reports: count non-finite commands, fail the run on a fatal
+        one (:class:`~flock_swarm.nodes.fault_report.FaultReport`)."""
+        for report in FaultReport.from_msg(msg):
+            self.stepper.fault_reported(report.step, report.agents, report.kind == NON_FINITE)
+            if report.fatal:
+                self.fail(report.line)
+
     def check_claims(self) -> None:
-        """Report two nodes publishing commands for the same agent (a duplicate agent_id)."""
-        check_claims(self, self.scenario.n_agents, self.duplicates)
+        """Once a second: report two nodes publishing commands for the same agent (a
+        duplicate agent_id), and another world on the domain; fail the run when a peer that
+        answered before has been gone from the ROS graph for ``peer_timeout`` seconds."""
+        n = self.scenario.n_agents
+        claims = command_claims(self, n)
+        check_claims(self, n, self.duplicates, claims=claims)
+        for i, nodes in claims.items():
+            self.hosts[i] = ', '.join(f'{ns.rstrip("/")}/{name}' for ns, name in nodes)
+        st = self.stepper
+        if st.started and not st.done:
+            leader_gone = self.count_publishers(self.leader_odom_topic) == 0
+            self.fail(st.graph_gone([i for i in range(n) if i not in claims], leader_gone,
+                                    time.monotonic(), lambda i: self.hosts.get(i, '')))
         # After the start (a run in one process starts before discovery could show another
         # world; a realtime world starts at once): said once, the run goes on.
         if (self.stepper.started or not self.lockstep) and not self.other_world_reported:
@@ -419,8 +457,12 @@ class WorldNode(RecordedNode):
             self.finish_step(timed_out=False)
 
     def finish_step(self, timed_out: bool) -> None:
-        """Close the current step: zero commands for absentees, record, integrate, go on."""
-        self.go_on(self.stepper.close_step(timed_out, time.monotonic()))
+        """Close the current step: zero commands for absentees, record, integrate, go on
+        (or fail, when agents have stopped answering: :meth:`WorldStepper.silent_agents`)."""
+        obs = self.stepper.close_step(timed_out, time.monotonic())
+        self.go_on(obs)
+        if not self.done:
+            self.fail(self.stepper.silent_agents(obs.k, lambda i: self.hosts.get(i, '')))
         if not self.done:
             if self.pace and time.monotonic() < self.pace_due():
                 self.paced = True  # the lockstep timer begins it when due
@@ -445,11 +487,23 @@ class WorldNode(RecordedNode):
 
     # -- the end ------------------------------------------------------------------------------
 
-    def finish(self, status: str) -> None:
-        """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent."""
-        if self.stepper.end(status):
+    def finish(self, status: str, failure: str | None = None) -> None:
+        """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent.
+
+        :param status: how the run ended.
+        :param failure: the line telling why it failed (``failed``, ``recording_failed``).
+        """
+        if self.stepper.end(status, failure):
             self.timer.cancel()
             self.write_results()
+
+    def fail(self, line: str | None) -> None:
+        """End the run as ``failed`` with ``line`` (one error line in the log); nothing
+        when ``line`` is ``None`` or the run has ended."""
+        if line is None or self.done:
+            return
+        self.get_logger().error(f'run failed: {line}')
+        self.finish('failed', line)
 
     def recording_failed(self, reason: str) -> None:
         """Stop the run cleanly when the bag cannot be written (status ``recording_failed``).
@@ -458,7 +512,7 @@ class WorldNode(RecordedNode):
         """
         self.get_logger().error(f'recording failed: {reason}; stopping the run, the bag '
                                 'keeps every chunk written before')
-        self.finish('recording_failed')
+        self.finish('recording_failed', f'recording failed: {reason}')
 
     def write_results(self) -> None:
         """Announce the end on ``swarm/status``; write what was recorded so far (also on an
@@ -486,22 +540,40 @@ class WorldNode(RecordedNode):
                                         'complete chunks stay readable')
         self.result = result
         try:
-            write_outputs(result, self.out, self.scenario)
+            self.written = write_outputs(result, self.out, self.scenario)
         except OSError as exc:
-            self.get_logger().error(f'cannot write the run\'s outputs to {self.out}: '
-                                    f'{exc.strerror or exc}; the time series stays in '
-                                    f'{self.spool.spool}')
-            self.spool.close()
+            self.outputs_failed(exc)
         else:
             self.spool.discard()
+
+    def outputs_failed(self, exc: OSError) -> None:
+        """A file of the outputs could not be written: log one line naming it, keep the
+        spooled time series, and still write ``summary.json`` if it was not the one that
+        failed, with status ``recording_failed`` and the line (``failure``; a run that had
+        failed already keeps its own)."""
+        self.spool.close()
+        line = write_error(exc)
+        self.write_error = line
+        self.get_logger().error(f'{line}; the time series stays in {self.spool.spool}')
+        self.written = [path for path in (self.out / 'timeseries.npz',
+                                          self.out / 'scenario.json')
+                        if path.is_file() and str(path) != exc.filename]
+        summary = self.out / 'summary.json'
+        if str(summary) == exc.filename:
+            return
+        before = self.result.summary
+        self.result.summary = with_failure(
+            before, before['status'] if 'failure' in before else 'recording_failed',
+            before.get('failure', line))
+        try:
+            self.written.append(write_text(summary, json_text(self.result.summary)))
+        except OSError as again:
+            self.get_logger().error(write_error(again))
 
     def peer_died(self) -> None:
         """End the run with status ``failed``: a supervisor saw another process of the run
         die (:data:`~flock_swarm.console.FAIL_SIGNAL`); keep what was recorded."""
-        if not self.done:
-            self.get_logger().error(f'another process of the run died (the supervisor said '
-                                    f'so at step {self.k}); ending the run as failed')
-        self.finish('failed')
+        self.fail(f'another process of the run died (the supervisor said so at step {self.k})')
 
     def close(self) -> None:
         """Called on shutdown: keep what was recorded (status ``interrupted``), and let the
@@ -524,9 +596,10 @@ class WorldNode(RecordedNode):
 def main(args: list[str] | None = None) -> int:
     """Run the world node (``ros2 run flock_swarm world``); it exits after the last step.
 
-    The exit status is 2 for invalid configuration, 1 when recording failed or a supervisor
-    reported a dead process (:data:`~flock_swarm.console.FAIL_SIGNAL`: the run ends with
-    status ``failed``), that of the signal after a stop signal
+    The exit status is 2 for invalid configuration, 1 when the run failed (a fault of a law,
+    a leader model or a node, or a supervisor reported a dead process:
+    :data:`~flock_swarm.console.FAIL_SIGNAL`), when recording failed or an output could not
+    be written, that of the signal after a stop signal
     (:data:`~flock_swarm.console.EXIT_SIGNAL`: the run ends ``interrupted``), else 0.
     """
     built: list[WorldNode] = []
@@ -536,7 +609,8 @@ def main(args: list[str] | None = None) -> int:
     if built and built[0].refusal is not None:
         print(f'world: error: {built[0].refusal}', file=sys.stderr)
         return EXIT_USAGE
-    failed = built and (built[0].status == 'recording_failed' or built[0].bag_error)
+    failed = built and (built[0].status in ('recording_failed', 'failed')
+                        or built[0].bag_error or built[0].write_error)
     return 1 if status == 0 and failed else status
 
 
