@@ -27,7 +27,7 @@ from visualization_msgs.msg import MarkerArray
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import Realization, Scenario
-from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
+from flock_swarm.contract import LOCKSTEP_QOS, SCENARIO, qos_profile
 from flock_swarm.nodes.wire import MalformedMessage
 from flock_swarm.outputs import json_text
 
@@ -64,6 +64,11 @@ def provenance(sc: Scenario, real: Realization, mode: str) -> dict[str, str]:
         'mode': mode,
         'flock_swarm_version': __version__,
     }
+
+
+def _is_provenance(topic: str) -> bool:
+    """Whether ``topic`` (absolute, in any namespace) is the run's ``/swarm/scenario``."""
+    return topic == f'/{SCENARIO}' or topic.endswith(f'/{SCENARIO}')
 
 
 def provenance_text(record: dict[str, str]) -> str:
@@ -171,10 +176,14 @@ class BagSink:
 
     @property
     def empty(self) -> bool:
-        """Whether the bag is open and no message was written or queued to it (the run was
-        stopped before it began)."""
-        return (not self.records and self.bag is not None
-                and not any(self.bag.message_counts.values()))
+        """Whether the bag is open and nothing of the run was written or queued to it (the run
+        was stopped before it began): the provenance the world records at its start
+        (``/swarm/scenario``) is no recording of the run."""
+        if self.bag is None:
+            return False
+        ran = [topic for topic, count in self.bag.message_counts.items()
+               if count and not _is_provenance(topic)]
+        return not ran and all(_is_provenance(topic) for topic, _, _ in self.records)
 
     def discard(self) -> None:
         """Remove the bag directory: a run stopped before anything was recorded leaves no
