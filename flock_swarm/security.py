@@ -12,8 +12,8 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (CLOCK, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS, SCENARIO,
-                                  STATUS, cmd_topic, odom_topic, state_topic)
+from flock_swarm.contract import (CLOCK, FAULTS, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
+                                  SCENARIO, STATUS, cmd_topic, odom_topic, state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -38,11 +38,12 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     out = {
         'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO],
                   [*(cmd_topic(i) for i in range(n_agents)),
-                   *(state_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL]),
-        'leader': ([LEADER_ODOM, LEADER_ACCEL], [CLOCK, STATUS]),
+                   *(state_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL,
+                   FAULTS]),
+        'leader': ([LEADER_ODOM, LEADER_ACCEL, FAULTS], [CLOCK, STATUS]),
     }
     for i in range(n_agents):
-        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i)],
+        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i), FAULTS],
                              [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 

@@ -37,7 +37,7 @@ from flock_swarm.core.summary import sim_only_keys
 # The harness imports no rclpy, NumPy or YAML until a run starts (this plugin is loaded by
 # every pytest run of the environment).
 from flock_swarm.nodes.harness import (DOMAIN_SPAN, InProcessSwarm, RUN_TIMEOUT,  # noqa: F401
-                                       SwarmRun, unique_domain)
+                                       SwarmRun, release_domain, unique_domain)
 
 #: The environment variable that limits DDS discovery, and the value the fixtures default to:
 #: a test never talks to, or hears from, another host.
@@ -343,13 +343,19 @@ def ros_domain(monkeypatch) -> int:
     """
     if DISCOVERY_RANGE not in os.environ:
         monkeypatch.setenv(DISCOVERY_RANGE, LOCALHOST)
-    return unique_domain()
+    domain = unique_domain()
+    yield domain
+    # Held only while the test runs: a long test session would otherwise hold every id, and
+    # the processes its tests start would find none free.
+    release_domain(domain)
 
 
 @pytest.fixture
 def other_ros_domain(ros_domain: int) -> int:
     """Return a second domain id for the same test, different from :func:`ros_domain`'s."""
-    return unique_domain()
+    domain = unique_domain()
+    yield domain
+    release_domain(domain)
 
 
 @pytest.fixture

@@ -134,7 +134,7 @@ def test_a_waiting_world_says_who_is_missing(tmp_path, ros_context, capfd):
         world.close()
         world.destroy_node()
     err = capfd.readouterr().err
-    lines = [line for line in err.splitlines() if 'waiting' in line]
+    lines = [line for line in err.splitlines() if '[world]: waiting ' in line]
     assert len(lines) == 1, err
     assert lines[0].endswith(
         's for agents 0-3 (nobody publishes their cmd_accel); 1 subscriber(s) of the odometry '

@@ -115,7 +115,7 @@ def test_invalid_law_parameters(section, key):
     ({'headline': ['eta', 'com_error']}, 'metrics.headline[1]',
      "'com_error' is not a summary key (expected one of: eta, velocity_mismatch_max, "
      'com_position_error, com_velocity_error, min_pair_distance, collisions, '
-     'components_final)'),
+     'components_final, network_delivered, network_age_mean, network_age_max)'),
     ({'headline': ['seed']}, 'metrics.headline[0]',
      "'seed' is a summary key that does not measure the run"),
     ({'headline': [0.5]}, 'metrics.headline[0]', 'expected a summary key'),

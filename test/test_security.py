@@ -39,12 +39,14 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
     # The world also publishes the run's scenario (latched, recorded at t = 0).
+    # A law or leader model failing mid-run is reported on swarm/faults, to the world.
+    faults = {contract.FAULTS}
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
                        | odom | status,
-                       cmds | states | leader),
-             'leader': (leader, {contract.CLOCK} | status)}
+                       cmds | states | leader | faults),
+             'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i)},
+        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i)} | faults,
                                odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}

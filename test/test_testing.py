@@ -15,8 +15,8 @@ from importlib.metadata import entry_points
 import numpy as np
 import pytest
 
-from flock_swarm.testing import (assert_matches_sim, compare_runs, SwarmRun, unique_domain,
-                                 wait_for)
+from flock_swarm.testing import (assert_matches_sim, compare_runs, release_domain, SwarmRun,
+                                 unique_domain, wait_for)
 
 #: A small lockstep run: three agents, one informed, ten steps, every step recorded.
 SMALL = ['n_agents=3', 'informed.count=1', 'duration=0.2', 'record_every=1']
@@ -71,6 +71,8 @@ def test_unique_domains_stay_in_ros_recommended_ranges_and_do_not_repeat_soon():
     # The ROS 2 docs ("The ROS_DOMAIN_ID"): 0-101 are safe on Linux, 215-232 usable too; 0 is
     # everybody's default, 222 scripts/demo's. Ids other processes hold are skipped.
     ids = [unique_domain() for _ in range(30)]
+    for domain in ids:
+        release_domain(domain)
     assert all(1 <= i <= 101 or 223 <= i <= 232 for i in ids)
     assert len(set(ids)) == 30
 
@@ -88,6 +90,9 @@ def test_a_domain_another_process_holds_is_not_handed_out():
     finally:
         child.stdin.close()
         child.wait(timeout=TIMEOUT)
+        # Give them back: the processes later tests start must find free ids.
+        for domain in locals().get('ours', ()):
+            release_domain(domain)
     assert theirs not in ours
     assert 1 <= theirs <= 101 or 223 <= theirs <= 232
 

@@ -56,6 +56,8 @@ DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
 _domains = itertools.count()
 #: The domain ids this process holds, with the open lock file of each (see unique_domain).
 _held: dict[int, Any] = {}
+#: The ids handed out when every id is held elsewhere.
+_fallback = itertools.count()
 
 
 def unique_domain() -> int:
@@ -69,14 +71,27 @@ def unique_domain() -> int:
     one machine (discovery is limited to it) must not meet. When every id is held, the next
     one is shared (111 ids a process before one repeats).
     """
-    domain = 0
     for _ in range(DOMAIN_SPAN):
-        n = (os.getpid() * 37 + next(_domains)) % DOMAIN_SPAN
-        (lo, hi), (second, _) = DOMAIN_RANGES
-        domain = lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+        domain = _domain_at(os.getpid() * 37 + next(_domains))
         if _hold(domain):
             return domain
-    return domain
+    # Every id is held by another process: the next of this process's own sequence (so two
+    # calls still differ).
+    return _domain_at(os.getpid() * 37 + next(_fallback))
+
+
+def release_domain(domain: int) -> None:
+    """Let other processes have ``domain`` again (a test is done with it)."""
+    lock = _held.pop(domain, None)
+    if lock is not None:
+        lock.close()
+
+
+def _domain_at(index: int) -> int:
+    """Return the domain id at position ``index`` (modulo their number) of the ranges."""
+    n = index % DOMAIN_SPAN
+    (lo, hi), (second, _) = DOMAIN_RANGES
+    return lo + n if n <= hi - lo else second + n - (hi - lo + 1)
 
 
 def _hold(domain: int) -> bool:
