@@ -39,11 +39,12 @@ from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
                                   LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
-                                  STATUS, STATUS_QOS, cmd_topic, odom_topic, qos_profile,
-                                  state_topic)
+                                  STATUS, STATUS_QOS, cmd_topic, network_topic, odom_topic,
+                                  qos_profile, state_topic)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
+from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
@@ -194,6 +195,11 @@ class WorldNode(RecordedNode):
                                              lambda msg, i=i: self.on_agent_state(i, msg))
                                    for i in range(sc.n_agents)] \
             if self.stepper.state else []
+        # Realtime with the network model: what each command used, recorded like the state.
+        self.network_topics = [subscribe(JointState, network_topic(i), decode_state,
+                                         lambda msg, i=i: self.on_network_report(i, msg))
+                               for i in range(sc.n_agents)] \
+            if self.stepper.used is not None else []
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
         wall_timer(self, 1.0, self.check_claims)
@@ -274,6 +280,20 @@ class WorldNode(RecordedNode):
         if k is not None:
             self.stepper.agent_state(i, k, values)
             self._maybe_finish()
+
+    def on_network_report(self, i: int, msg: tuple) -> None:
+        """Check agent ``i``'s report of what its command used ``(stamp_ns, frame_id,
+        labels, values)`` and hand it on (realtime with the network model)."""
+        ns, frame, labels, values = msg
+        topic = self.network_topics[i]
+        if labels != USAGE_LABELS:
+            self.guard.reject(topic, 'malformed', f'labels {list(labels)}, not '
+                              f'{list(USAGE_LABELS)}')
+            return
+        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
+                             window=self.stepper.window())
+        if k is not None:
+            self.stepper.network_report(i, k, values)
 
     def on_leader_odom(self, msg: tuple) -> None:
         """Check the leader's position and velocity of its step (``msg``: see
