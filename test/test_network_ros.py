@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from flock_swarm.analysis.bagrun import load_run
+from flock_swarm.analysis.pipeline import analyze
 from flock_swarm.analysis.recompute import recompute
 from flock_swarm.bag import BagReader
 from flock_swarm.core.graphs import disk_graph
@@ -139,7 +140,9 @@ def test_realtime_applies_the_model_on_top_of_the_transport(tmp_path, ros_domain
     # be recounted: the ages are the transport's).
     told = metrics_in_bag(tmp_path / 'run' / 'bag')
     assert told and all(set(STATISTICS) <= set(values) for values in told)
-    analysed, _ = recompute(load_run(tmp_path / 'run' / 'bag'))
+    analysis = analyze(load_run(tmp_path / 'run' / 'bag'), tmp_path / 'analysis', animate=False)
+    analysed = analysis.series
+    assert (tmp_path / 'analysis' / 'network.png').stat().st_size > 10_000
     assert np.nanmin(analysed['network_age_mean']) >= 0.06 + dt - 1e-12
     assert abs(np.nanmean(analysed['network_delivered']) - 0.7) < 0.05
 
