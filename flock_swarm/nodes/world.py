@@ -266,34 +266,38 @@ class WorldNode(RecordedNode):
             self.guard.reject(topic, 'late', f'a command for step {k} at step {self.k}')
         self._maybe_finish()
 
+    def check_labelled(self, topic: str, msg: tuple, expected: tuple[str, ...],
+                       what: str) -> tuple[int, tuple[float, ...]] | None:
+        """Return the step and values of a labelled message ``(stamp_ns, frame_id, labels,
+        values)`` (a ``JointState``) whose labels are ``expected``, or ``None`` (rejected).
+
+        :param what: the labels' owner in the rejection (``"state"``: "not the law's").
+        """
+        ns, frame, labels, values = msg
+        if labels != expected:
+            whose = "the law's " if what == 'state' else ''
+            self.guard.reject(topic, 'malformed', f'{what} labels {list(labels)}, not '
+                              f'{whose}{list(expected)}')
+            return None
+        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
+                             window=self.stepper.window())
+        return None if k is None else (k, values)
+
     def on_agent_state(self, i: int, msg: tuple) -> None:
         """Check agent ``i``'s adaptive state ``(stamp_ns, frame_id, labels, values)`` and
         hand it on (its labels must be the law's)."""
-        ns, frame, labels, values = msg
-        topic, expected = self.agent_state_topics[i], self.stepper.state_labels
-        if labels != expected:
-            self.guard.reject(topic, 'malformed', f'state labels {list(labels)}, not the '
-                              f'law\'s {list(expected)}')
-            return
-        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
-                             window=self.stepper.window())
-        if k is not None:
-            self.stepper.agent_state(i, k, values)
+        checked = self.check_labelled(self.agent_state_topics[i], msg,
+                                      self.stepper.state_labels, 'state')
+        if checked is not None:
+            self.stepper.agent_state(i, *checked)
             self._maybe_finish()
 
     def on_network_report(self, i: int, msg: tuple) -> None:
         """Check agent ``i``'s report of what its command used ``(stamp_ns, frame_id,
         labels, values)`` and hand it on (realtime with the network model)."""
-        ns, frame, labels, values = msg
-        topic = self.network_topics[i]
-        if labels != USAGE_LABELS:
-            self.guard.reject(topic, 'malformed', f'labels {list(labels)}, not '
-                              f'{list(USAGE_LABELS)}')
-            return
-        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
-                             window=self.stepper.window())
-        if k is not None:
-            self.stepper.network_report(i, k, values)
+        checked = self.check_labelled(self.network_topics[i], msg, USAGE_LABELS, 'report')
+        if checked is not None:
+            self.stepper.network_report(i, *checked)
 
     def on_leader_odom(self, msg: tuple) -> None:
         """Check the leader's position and velocity of its step (``msg``: see
