@@ -121,6 +121,8 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     base = [Parameter('scenario', value=scenario)]
     # A lockstep run has no network reports (realtime with a network: section only).
     optional = {absolute(contract.network_topic(i)) for i in range(N_AGENTS)}
+    # Nor velocity commands (a robot plant commanded by velocity only, docs/plants.md).
+    optional |= {absolute(contract.cmd_vel_topic(i)) for i in range(N_AGENTS)}
     if not adaptive:
         optional |= {absolute(contract.state_topic(i)) for i in range(N_AGENTS)}
     nodes = []
