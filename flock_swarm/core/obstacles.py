@@ -1,0 +1,427 @@
+"""Obstacles: the beta-agents of Olfati-Saber 2006 (Section VII, Algorithm 3), and their metrics.
+
+R. Olfati-Saber, "Flocking for Multi-Agent Dynamic Systems: Algorithms and Theory", IEEE TAC
+51(3), 2006, pp. 401-420 (technical report CIT-CDS 2004-005) ([OS06]). An obstacle is a
+sphere (a ball of centre ``y_k`` and radius ``R_k``; a disc in 2-D) or a wall (the
+half-space behind a hyperplane through ``y_k`` with unit normal ``a_k`` pointing to the free
+space; a line in 2-D). For an agent (alpha-agent) ``i`` at ``(q_i, p_i)`` and obstacle ``k``
+the beta-agent ``(qh_ik, ph_ik)`` is the agent's projection on the obstacle's boundary
+([OS06] Section VII-A); the beta term of Algorithm 3 ([OS06] Section VII-B) repels the agent
+from every beta-agent closer than the obstacle sensing range ``r'`` and damps its velocity
+relative to it:
+
+``u_i^beta = c1_beta sum_k phi_beta(||qh_ik - q_i||_s) n_ik + c2_beta sum_k b_ik (ph_ik - p_i)``
+
+with ``n_ik = sigma_eps(qh_ik - q_i)``, ``phi_beta(z) = rho_h(z / d_beta) (sigma_1(z - d_beta)
+- 1)``, ``b_ik = rho_h(||qh_ik - q_i||_s / d_beta)`` and ``d_beta = ||d'||_s``. The term is a
+function of one agent's own state and the obstacle map: :func:`beta_term` gives the same row
+for an agent whether it is evaluated alone (an agent node), with the agents of a container,
+or with the whole swarm (``sim``), so a lockstep ROS run equals ``sim`` bit for bit.
+
+The scenario's ``obstacles:`` section (:func:`parse_obstacles`, ``docs/obstacles.md``) gives
+an :class:`ObstacleSpec`; without it (or with no sphere and no wall) the spec is inactive and
+a run is what it was before obstacles existed.
+"""
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from flock_swarm.core import potentials as pot
+from flock_swarm.core.checks import mapping, number, only, positive, vector
+from flock_swarm.core.errors import ScenarioError
+
+OBSTACLE_KEYS = ('spheres', 'walls', 'd_beta', 'r_beta', 'c1_beta', 'c2_beta', 'h', 'eps')
+#: [OS06] Section VIII: the desired distance to obstacles ``d' = 0.6 d`` (``d`` the law's
+#: desired inter-agent distance) and the obstacle sensing range ``r' = 1.2 d'``.
+D_BETA_OF_D = 0.6
+R_BETA_OF_D_BETA = 1.2
+#: [OS06]'s bump plateau of ``phi_beta`` and ``b_ik`` and its sigma-norm parameter.
+H_BETA = 0.9
+EPS_BETA = 0.1
+#: The default position gain of the beta term (``docs/obstacles.md``: our choice, above the
+#: built-in laws' navigation gains as [OS06]'s ordering of the gains wants it); the velocity
+#: gain defaults to ``2 sqrt(c1_beta)``, the usual tuning of [OS06]'s gain pairs.
+C1_BETA = 10.0
+#: A unit normal's length may differ from 1 by this much (YAML decimals such as 0.7071).
+UNIT_TOLERANCE = 1e-3
+#: The most obstacles of one kind: the map travels in every message of the obstacles topic
+#: and is evaluated for every agent at every step.
+MAX_OBSTACLES = 10_000
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """The obstacle map and the beta term's parameters (the ``obstacles:`` section).
+
+    Tuples, not arrays: the spec is compared and hashed like a law (stacked sweeps).
+
+    :ivar spheres: ``((centre, radius), ...)``, each centre a tuple of ``dim`` numbers.
+    :ivar walls: ``((point, unit normal), ...)``, the normal pointing to the free space.
+    :ivar d_beta: the desired agent-obstacle distance ``d'`` [m] (Euclidean).
+    :ivar r_beta: the obstacle sensing range ``r'`` [m] (Euclidean).
+    :ivar c1_beta: the position gain of the beta term.
+    :ivar c2_beta: its velocity gain.
+    :ivar h: the bump plateau of ``phi_beta`` and ``b_ik``, in ``(0, 1)``.
+    :ivar eps: the sigma-norm parameter of the beta term.
+    """
+
+    spheres: tuple = ()
+    walls: tuple = ()
+    d_beta: float = 0.0
+    r_beta: float = 0.0
+    c1_beta: float = C1_BETA
+    c2_beta: float = 2.0 * np.sqrt(C1_BETA)
+    h: float = H_BETA
+    eps: float = EPS_BETA
+
+    @property
+    def active(self) -> bool:
+        """Return whether there is any obstacle (otherwise a run is as without the section)."""
+        return bool(self.spheres or self.walls)
+
+    @property
+    def count(self) -> int:
+        """Return the number of obstacles: the spheres (ids ``0..S-1``), then the walls."""
+        return len(self.spheres) + len(self.walls)
+
+    @cached_property
+    def centres(self) -> np.ndarray:
+        """Return the spheres' centres ``y_k``, ``(S, dim)``."""
+        centres = np.array([c for c, _ in self.spheres], dtype=float)
+        return centres.reshape(len(self.spheres), -1)
+
+    @cached_property
+    def radii(self) -> np.ndarray:
+        """Return the spheres' radii ``R_k``, ``(S,)``."""
+        return np.array([r for _, r in self.spheres], dtype=float)
+
+    @cached_property
+    def points(self) -> np.ndarray:
+        """Return a point ``y_k`` of each wall, ``(W, dim)``."""
+        return np.array([y for y, _ in self.walls], dtype=float).reshape(len(self.walls), -1)
+
+    @cached_property
+    def normals(self) -> np.ndarray:
+        """Return the walls' unit normals ``a_k`` (normalised), ``(W, dim)``."""
+        a = np.array([n for _, n in self.walls], dtype=float).reshape(len(self.walls), -1)
+        return a / np.sqrt(pot.squared_norm(a))[:, None] if a.size else a
+
+    @cached_property
+    def sigma_d_beta(self) -> float:
+        """Return ``d_beta = ||d'||_sigma`` ([OS06] Section VII-B)."""
+        return float(pot.sigma_of_distance(self.d_beta, self.eps))
+
+    def as_dict(self) -> dict:
+        """Return the map as plain lists (the obstacles topic, ``docs/obstacles.md``)."""
+        return {'spheres': [{'centre': list(c), 'radius': r} for c, r in self.spheres],
+                'walls': [{'point': list(y), 'normal': list(a)} for y, a in self.walls]}
+
+
+def parse_obstacles(value: Any, dim: int, law: Any) -> ObstacleSpec:
+    """Validate the scenario's ``obstacles:`` section.
+
+    :param value: the section (``None``: absent).
+    :param dim: the scenario's dimension.
+    :param law: the scenario's law: it must accept obstacles (``Law.accepts_obstacles``);
+        its field ``d``, when it has one, gives the default ``d_beta = 0.6 d``.
+    :return: the spec (inactive when absent).
+    :raises ScenarioError: naming the first invalid key.
+    """
+    if value is None:
+        return ObstacleSpec()
+    section = mapping(value, 'obstacles')
+    if not getattr(law, 'accepts_obstacles', False):
+        raise ScenarioError('obstacles', f'protocol {law.name} does not accept obstacles '
+                            '(docs/obstacles.md lists the laws that do)')
+    only(section, OBSTACLE_KEYS, 'obstacles.')
+    spheres = tuple(_sphere(raw, f'obstacles.spheres[{k}]', dim)
+                    for k, raw in enumerate(_list(section.get('spheres'), 'obstacles.spheres')))
+    walls = tuple(_wall(raw, f'obstacles.walls[{k}]', dim)
+                  for k, raw in enumerate(_list(section.get('walls'), 'obstacles.walls')))
+    if 'd_beta' in section:
+        d_beta = positive(section['d_beta'], 'obstacles.d_beta')
+    else:
+        d = getattr(law, 'd', None)
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not d > 0:
+            raise ScenarioError('obstacles.d_beta', f'missing (protocol {law.name} has no '
+                                'desired distance d to take 0.6 d from)')
+        d_beta = D_BETA_OF_D * float(d)
+    r_beta = positive(section.get('r_beta', R_BETA_OF_D_BETA * d_beta), 'obstacles.r_beta')
+    c1 = positive(section.get('c1_beta', C1_BETA), 'obstacles.c1_beta')
+    c2 = positive(section.get('c2_beta', 2.0 * np.sqrt(c1)), 'obstacles.c2_beta')
+    h = number(section.get('h', H_BETA), 'obstacles.h')
+    if not 0.0 < h < 1.0:
+        raise ScenarioError('obstacles.h', f'must be in (0, 1), got {section["h"]!r}')
+    eps = positive(section.get('eps', EPS_BETA), 'obstacles.eps')
+    return ObstacleSpec(spheres, walls, d_beta, r_beta, c1, c2, h, eps)
+
+
+def _list(value: Any, key: str) -> list:
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise ScenarioError(key, f'expected a list, got {value!r}'[:200])
+    if len(value) > MAX_OBSTACLES:
+        raise ScenarioError(key, f'at most {MAX_OBSTACLES} entries, got {len(value)}')
+    return value
+
+
+def _sphere(raw: Any, key: str, dim: int) -> tuple:
+    section = mapping(raw, key)
+    only(section, ('centre', 'radius'), key + '.')
+    for name in ('centre', 'radius'):
+        if name not in section:
+            raise ScenarioError(f'{key}.{name}', 'missing')
+    centre = vector(section['centre'], f'{key}.centre', dim)
+    return tuple(centre.tolist()), positive(section['radius'], f'{key}.radius')
+
+
+def _wall(raw: Any, key: str, dim: int) -> tuple:
+    section = mapping(raw, key)
+    only(section, ('point', 'normal'), key + '.')
+    for name in ('point', 'normal'):
+        if name not in section:
+            raise ScenarioError(f'{key}.{name}', 'missing')
+    point = vector(section['point'], f'{key}.point', dim)
+    normal = vector(section['normal'], f'{key}.normal', dim)
+    length = float(np.sqrt(pot.squared_norm(normal)))
+    if abs(length - 1.0) > UNIT_TOLERANCE:
+        raise ScenarioError(f'{key}.normal', f'must be a unit vector, got length {length:.6g}')
+    return tuple(point.tolist()), tuple(normal.tolist())
+
+
+# --------------------------------------------------------------------------------------------
+# Geometry
+
+
+def clearances(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
+    """Return each agent's signed distance to each obstacle's surface (``< 0``: inside).
+
+    Spheres first, then walls: ``||q_i - y_k|| - R_k`` and ``a_k . (q_i - y_k)``.
+
+    :param spec: the obstacles.
+    :param q: positions, ``(m, dim)``.
+    :return: ``(m, count)``.
+    """
+    parts = []
+    if spec.spheres:
+        diff = q[:, None, :] - spec.centres[None, :, :]
+        parts.append(np.sqrt(pot.squared_norm(diff)) - spec.radii)
+    if spec.walls:
+        parts.append(_dot(q[:, None, :] - spec.points[None, :, :], spec.normals))
+    if not parts:
+        return np.zeros((q.shape[0], 0))
+    return np.concatenate(parts, axis=1)
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Return ``u . v`` over the last axis, one component at a time, in order.
+
+    Elementwise operations only (no BLAS, no reduction whose order depends on the array's
+    length): an agent's value is the same in any batch, as lockstep ROS needs.
+    """
+    out = u[..., 0] * v[..., 0]
+    for k in range(1, u.shape[-1]):
+        out = out + u[..., k] * v[..., k]
+    return out
+
+
+def sphere_beta_agents(q: np.ndarray, p: np.ndarray, centre: np.ndarray,
+                       radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the beta-agents ``(qh_ik, ph_ik)`` of agents on spheres ([OS06] Section VII-A).
+
+    ``mu = R_k / ||q_i - y_k||``, ``a_k = (q_i - y_k) / ||q_i - y_k||``, ``P = I - a_k a_k^T``:
+    ``qh_ik = mu q_i + (1 - mu) y_k`` (the closest point of the surface) and
+    ``ph_ik = mu P p_i`` (the velocity's tangential part, scaled to the surface).
+
+    :param q: agent positions, one per pair, ``(E, dim)``.
+    :param p: agent velocities, ``(E, dim)``.
+    :param centre: the spheres' centres, ``(E, dim)``.
+    :param radius: their radii, ``(E,)``.
+    :return: ``(qh, ph)``, each ``(E, dim)``.
+    """
+    diff = q - centre
+    dist = np.sqrt(pot.squared_norm(diff))
+    mu = radius / dist
+    a = pot.rowwise(np.divide, diff, dist)
+    qh = pot.rowwise(np.multiply, q, mu) + pot.rowwise(np.multiply, centre, 1.0 - mu)
+    tangential = p - pot.rowwise(np.multiply, a, _dot(a, p))
+    return qh, pot.rowwise(np.multiply, tangential, mu)
+
+
+def wall_beta_agents(q: np.ndarray, p: np.ndarray, point: np.ndarray,
+                     normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the beta-agents ``(qh_ik, ph_ik)`` of agents on walls ([OS06] Section VII-A).
+
+    ``P_k = I - a_k a_k^T``: ``qh_ik = P_k q_i + (I - P_k) y_k = q_i - a_k a_k^T (q_i - y_k)``
+    (the foot of the perpendicular) and ``ph_ik = P_k p_i`` (the velocity along the wall).
+
+    :param q: agent positions, one per pair, ``(E, dim)``.
+    :param p: agent velocities, ``(E, dim)``.
+    :param point: a point of each wall, ``(E, dim)``.
+    :param normal: the walls' unit normals, ``(E, dim)``.
+    :return: ``(qh, ph)``, each ``(E, dim)``.
+    """
+    qh = q - pot.rowwise(np.multiply, normal, _dot(normal, q - point))
+    ph = p - pot.rowwise(np.multiply, normal, _dot(normal, p))
+    return qh, ph
+
+
+def phi_beta(z: np.ndarray, d_beta: float, h: float) -> np.ndarray:
+    """Return the repulsive action ``phi_beta(z) = rho_h(z / d_beta) (sigma_1(z - d_beta) - 1)``.
+
+    [OS06] Section VII-B: negative below ``d_beta`` (a push away from the obstacle) and zero
+    from ``d_beta`` on.
+
+    :param z: sigma-norm distances to beta-agents, any shape.
+    :param d_beta: ``||d'||_sigma``.
+    :param h: the bump plateau.
+    :return: the actions.
+    """
+    return pot.bump(np.asarray(z, dtype=float) / d_beta, h) * (pot.sigma_1(z - d_beta) - 1.0)
+
+
+def beta_pairs(spec: ObstacleSpec, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (agent, obstacle) pairs within the sensing range, agent-major.
+
+    An obstacle is a beta-neighbour of agent ``i`` when its beta-agent is closer than ``r'``
+    (Euclidean; [OS06] Section VII-B), i.e. when ``|clearance| < r'``.
+
+    :param spec: the obstacles.
+    :param q: positions, ``(m, dim)``.
+    :return: ``(agents, obstacles)``, index arrays sorted by agent then obstacle.
+    """
+    near = np.abs(clearances(spec, q)) < spec.r_beta
+    return np.nonzero(near)
+
+
+def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Return ``u_i^beta`` of [OS06] Algorithm 3 for each agent (zero without obstacles near).
+
+    Vectorised over the (agent, obstacle) pairs within the sensing range
+    (:func:`beta_pairs`); each agent's sum runs over its obstacles in the map's order, so a
+    row depends only on that agent's state: the same whether the agent is evaluated alone,
+    with others, or with the whole swarm.
+
+    :param spec: the obstacles and the term's parameters.
+    :param q: positions, ``(m, dim)``.
+    :param p: velocities, ``(m, dim)``.
+    :return: ``(m, dim)``.
+    """
+    m, dim = q.shape
+    out = np.zeros((m, dim))
+    if not spec.active or m == 0:
+        return out
+    agent, obstacle = beta_pairs(spec, q)
+    if agent.size == 0:
+        return out
+    qi, pi = q[agent], p[agent]
+    n_s = len(spec.spheres)
+    qh, ph = np.empty_like(qi), np.empty_like(pi)
+    on_sphere = obstacle < n_s
+    if on_sphere.any():
+        k = obstacle[on_sphere]
+        qh[on_sphere], ph[on_sphere] = sphere_beta_agents(
+            qi[on_sphere], pi[on_sphere], spec.centres[k], spec.radii[k])
+    if (~on_sphere).any():
+        k = obstacle[~on_sphere] - n_s
+        qh[~on_sphere], ph[~on_sphere] = wall_beta_agents(
+            qi[~on_sphere], pi[~on_sphere], spec.points[k], spec.normals[k])
+    dq = qh - qi
+    sq = pot.squared_norm(dq)
+    root = np.sqrt(1.0 + spec.eps * sq)
+    # ||qh - q||_sigma in the cancellation-free form (pot.sigma_of_distance), from ||dq||^2.
+    z = sq / (root + 1.0)
+    d_b = spec.sigma_d_beta
+    # b_ik = rho_h(||qh_ik - q_i||_sigma / d_beta); phi_beta shares the bump.
+    b = pot.bump(z / d_b, spec.h)
+    action = b * (pot.sigma_1(z - d_b) - 1.0)
+    # phi_beta n_ik = (phi_beta / sqrt(1 + eps ||dq||^2)) dq, n_ik = sigma_eps(qh_ik - q_i).
+    coef = spec.c1_beta * action / root
+    damp = spec.c2_beta * b
+    for col in range(dim):
+        term = dq[:, col] * coef + (ph[:, col] - pi[:, col]) * damp
+        # bincount sums each agent's pairs in order: the row does not depend on the others.
+        out[:, col] = np.bincount(agent, weights=term, minlength=m)
+    return out
+
+
+def inside(spec: ObstacleSpec, q: np.ndarray) -> tuple[int, int] | None:
+    """Return the first ``(agent, obstacle)`` with the agent inside the obstacle, or ``None``."""
+    if not spec.active:
+        return None
+    found = np.argwhere(clearances(spec, q) <= 0.0)
+    return None if found.size == 0 else (int(found[0, 0]), int(found[0, 1]))
+
+
+def check_start(spec: ObstacleSpec, q0: np.ndarray) -> None:
+    """Refuse a run in which an agent starts inside (or on) an obstacle.
+
+    :param spec: the obstacles.
+    :param q0: the initial positions (drawn or given).
+    :raises ScenarioError: naming the obstacle and the agent.
+    """
+    hit = inside(spec, q0)
+    if hit is None:
+        return
+    agent, k = hit
+    n_s = len(spec.spheres)
+    key = f'obstacles.spheres[{k}]' if k < n_s else f'obstacles.walls[{k - n_s}]'
+    where = ', '.join(f'{x:.6g}' for x in q0[agent])
+    raise ScenarioError(key, f'agent {agent} starts inside it (at [{where}]): move the '
+                        'obstacle or the initial positions')
+
+
+# --------------------------------------------------------------------------------------------
+# Metrics
+
+
+class ObstacleMetrics:
+    """Whole-run obstacle metrics, folded in step by step.
+
+    :ivar clearance_min: the smallest agent-obstacle clearance over the run [m] (negative:
+        an agent was inside an obstacle).
+    :ivar penetrations: distinct ``(agent, obstacle)`` pairs with the agent ever inside.
+    :ivar collisions: distinct pairs ever closer than the collision distance.
+    """
+
+    def __init__(self, spec: ObstacleSpec, collision_distance: float) -> None:
+        """Create the metrics of a run with the obstacles ``spec``."""
+        self.spec, self.collision_distance = spec, collision_distance
+        self.clearance_min = float('inf')
+        self.penetrations: set[tuple[int, int]] = set()
+        self.collisions: set[tuple[int, int]] = set()
+
+    def update(self, q: np.ndarray) -> float:
+        """Fold in one instant; return its smallest clearance."""
+        c = clearances(self.spec, q)
+        now = float(c.min()) if c.size else float('inf')
+        self.clearance_min = min(self.clearance_min, now)
+        if now < self.collision_distance:
+            i, k = np.nonzero(c < self.collision_distance)
+            self.collisions.update(zip(i.tolist(), k.tolist()))
+            if now < 0.0:
+                i, k = np.nonzero(c < 0.0)
+                self.penetrations.update(zip(i.tolist(), k.tolist()))
+        return now
+
+
+def with_obstacles(spec: ObstacleSpec, u: np.ndarray, q: np.ndarray,
+                   p: np.ndarray) -> np.ndarray:
+    """Return a law's commands with the beta term added ([OS06] Algorithm 3).
+
+    ``u_i = u_i^alpha + u_i^gamma`` (the law) ``+ u_i^beta``; without obstacles ``u`` itself,
+    unchanged (a run without the section is bit for bit what it was).
+
+    :param spec: the obstacles.
+    :param u: the law's commands of the agents ``q``, ``(m, dim)``.
+    :param q: their positions.
+    :param p: their velocities.
+    :return: the commands.
+    """
+    if not spec.active:
+        return u
+    return u + beta_term(spec, q, p)
