@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from PIL import Image
-
 from flock_swarm.bag import BagReader
 from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.nodes.markers import OBSTACLES_NS
 from flock_swarm.testing import assert_matches_sim
+from test_obstacles import obstacle_pixels
 
 #: A small demo swarm packed within each other's radius between a wall (x = -0.5) and a disc
 #: (centre (4, 9.5), radius 1): the agents near them feel the beta term from the first step.
@@ -64,15 +63,6 @@ def test_a_run_with_obstacles_matches_sim_in_every_layout(tmp_path, ros_domain, 
         assert ours[key] == s[key], key
     assert obstacle_pixels(out / 'trajectories.png') > 100
     assert obstacle_pixels(out / 'snapshots.png') > 100
-
-
-def obstacle_pixels(path):
-    """Return how many pixels of a figure have the obstacles' colour on white."""
-    from flock_swarm.plots import OBSTACLE_ALPHA, OBSTACLE_COLOR
-    want = 255 * (OBSTACLE_ALPHA * np.array(OBSTACLE_COLOR) + (1 - OBSTACLE_ALPHA))
-    with Image.open(path) as image:
-        rgb = np.asarray(image.convert('RGB'), dtype=float)
-    return int((np.abs(rgb - want).max(axis=-1) < 4).sum())
 
 
 @pytest.mark.parametrize('dim', [2, 3])
