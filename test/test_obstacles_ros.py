@@ -10,6 +10,7 @@ from flock_swarm.bag import BagReader
 from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.nodes.markers import OBSTACLES_NS
 from flock_swarm.testing import assert_matches_sim
+from test_network_ros import LAYOUTS as NETWORK_LAYOUTS, RUN_TIMEOUT
 from test_obstacles import obstacle_pixels
 
 #: A small demo swarm packed within each other's radius between a wall (x = -0.5) and a disc
@@ -18,11 +19,9 @@ DEMO = ['n_agents=8', 'informed.count=3', 'duration=0.4', 'record_every=3',
         'initial.position_box=[[0, 8], [0, 8]]',
         'obstacles={walls: [{point: [-0.5, 0], normal: [1, 0]}], '
         'spheres: [{centre: [4, 9.5], radius: 1}]}']
-#: The layouts of a ROS run: keyword arguments of assert_matches_sim.
-LAYOUTS = {'one process': {},
-           'processes, container': {'processes': True, 'container': True}}
-#: Wall-clock bound of one run (a hung run fails instead of blocking the suite).
-RUN_TIMEOUT = 240.0
+#: The layouts of a ROS run (keyword arguments of assert_matches_sim): one process, and the
+#: agents in one container process.
+LAYOUTS = {name: NETWORK_LAYOUTS[name] for name in ('one process', 'processes, container')}
 
 
 @pytest.mark.ros

@@ -182,22 +182,24 @@ def _list(value: Any, key: str) -> list:
     return value
 
 
-def _sphere(raw: Any, key: str, dim: int) -> tuple:
+def _entry(raw: Any, key: str, names: tuple[str, str]) -> dict:
+    """Return one sphere's or wall's mapping, with exactly its two keys."""
     section = mapping(raw, key)
-    only(section, ('centre', 'radius'), key + '.')
-    for name in ('centre', 'radius'):
+    only(section, names, key + '.')
+    for name in names:
         if name not in section:
             raise ScenarioError(f'{key}.{name}', 'missing')
+    return section
+
+
+def _sphere(raw: Any, key: str, dim: int) -> tuple:
+    section = _entry(raw, key, ('centre', 'radius'))
     centre = vector(section['centre'], f'{key}.centre', dim)
     return tuple(centre.tolist()), positive(section['radius'], f'{key}.radius')
 
 
 def _wall(raw: Any, key: str, dim: int) -> tuple:
-    section = mapping(raw, key)
-    only(section, ('point', 'normal'), key + '.')
-    for name in ('point', 'normal'):
-        if name not in section:
-            raise ScenarioError(f'{key}.{name}', 'missing')
+    section = _entry(raw, key, ('point', 'normal'))
     point = vector(section['point'], f'{key}.point', dim)
     normal = vector(section['normal'], f'{key}.normal', dim)
     length = float(np.sqrt(pot.squared_norm(normal)))
