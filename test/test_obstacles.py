@@ -349,3 +349,16 @@ def test_the_docs_figure_script_runs(tmp_path):
     main_of = runpy.run_path(str(script))['main']
     assert main_of(['--out', str(tmp_path)]) == 0
     assert obstacle_pixels(tmp_path / 'obstacles.png') > 1000
+
+
+def test_a_dt_beyond_the_beta_terms_bound_is_refused_in_one_line(capsys, tmp_path):
+    # c2_beta = 50: dt < 2 / 50 = 0.04 s; the scenario's 0.05 s is refused, 0.02 s is not.
+    gains = 'obstacles.c2_beta=50'
+    assert main(['su2009_fig2', '--set', 'obstacles={walls: [{point: [0, -5], normal: [0, 1]}]}',
+                 '--set', gains, '--set', 'dt=0.05', '--quiet', '--out', str(tmp_path)]) == 2
+    line = capsys.readouterr().err.strip()
+    assert line.startswith('sim: error: dt: 0.05 exceeds the stability bound 0.04 of the '
+                           'beta term of the obstacles (c1_beta = 10, c2_beta = 50)')
+    sc, _ = prepare('su2009_fig2', ['obstacles={walls: [{point: [0, -5], normal: [0, 1]}]}',
+                                    gains, 'duration=0.04'])
+    assert sc.obstacles.c2_beta == 50

@@ -32,6 +32,8 @@ import numpy as np
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.checks import mapping, number, only, positive, vector
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.laws.base import StepViolation
+from flock_swarm.core.stability import pd_dt_max
 
 OBSTACLE_KEYS = ('spheres', 'walls', 'd_beta', 'r_beta', 'c1_beta', 'c2_beta', 'h', 'eps')
 #: [OS06] Section VIII: the desired distance to obstacles ``d' = 0.6 d`` (``d`` the law's
@@ -439,6 +441,28 @@ def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray,
         # agent's own pairs only.
         out[:, col] = np.bincount(agent, weights=term[:, col], minlength=m)
     return out
+
+
+def step_bounds(spec: ObstacleSpec, dt: float) -> list[StepViolation]:
+    """Return the violated explicit-step bound of the beta term (empty when ``dt`` is fine).
+
+    Near a surface the term is a PD feedback on the agent's normal coordinate ``x``: the
+    damping ``c2_beta b_ik`` with ``b_ik = 1`` on the bump's plateau, and a stiffness
+    ``c1_beta (1 - sigma_1(-d_beta)) < 2 c1_beta`` (``phi_beta`` at the surface times the
+    slope of ``n_ik``, ``1``); :func:`~flock_swarm.core.stability.pd_dt_max` of the
+    bound ``(2 c1_beta, c2_beta)``.
+
+    :param spec: the obstacles.
+    :param dt: the scenario's step.
+    :return: the violation, or nothing.
+    """
+    if not spec.active:
+        return []
+    bound = pd_dt_max(2.0 * spec.c1_beta, spec.c2_beta)
+    if dt < bound:
+        return []
+    return [StepViolation('beta term of the obstacles', bound,
+                          f'c1_beta = {spec.c1_beta:g}, c2_beta = {spec.c2_beta:g}')]
 
 
 def inside(spec: ObstacleSpec, q: np.ndarray) -> tuple[int, int] | None:

@@ -30,6 +30,7 @@ from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.obstacles import (Geometry, ObstacleMetrics, ObstacleSpec, check_start,
                                         geometry, with_obstacles)
+from flock_swarm.core.obstacles import step_bounds as obstacle_step_bounds
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.errors import PluginError
 from flock_swarm.core.registry import LAW_GROUP, entries
@@ -272,14 +273,15 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
     """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
 
     The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`, given the
-    run's :class:`~flock_swarm.core.laws.base.LawSetup`), then RK4's for the leader model
+    run's :class:`~flock_swarm.core.laws.base.LawSetup`), the beta term's of the obstacles
+    (:func:`~flock_swarm.core.obstacles.step_bounds`), then RK4's for the leader model
     and the intrinsic dynamics (:func:`~flock_swarm.core.stability.model_bounds`).
 
     :param sc: the scenario.
     :param real: its realisation (fixed graphs, informed set).
     :return: the violations.
     """
-    found = list(sc.law.step_bounds(real.setup))
+    found = list(sc.law.step_bounds(real.setup)) + obstacle_step_bounds(sc.obstacles, sc.dt)
     for part, model in (('leader model', sc.leader.model), ('intrinsic dynamics', sc.intrinsic)):
         found += model_bounds(part, model, sc.leader.velocity, sc.dim, sc.dt)
     return found
