@@ -42,11 +42,12 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     twists = {contract.cmd_vel_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
-    # The world also publishes the run's scenario (latched, recorded at t = 0).
+    # The world also publishes the run's scenario (latched, recorded at t = 0), and the
+    # obstacle map of a scenario with obstacles (the same).
     # A law or leader model failing mid-run is reported on swarm/faults, to the world.
     faults = {contract.FAULTS}
-    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
-                       | odom | status,
+    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO,
+                        contract.OBSTACLES} | odom | status,
                        cmds | states | reports | twists | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
@@ -119,8 +120,10 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     context = Context()
     rclpy.init(context=context, domain_id=ros_domain)
     base = [Parameter('scenario', value=scenario)]
-    # A lockstep run has no network reports (realtime with a network: section only).
+    # A lockstep run has no network reports (realtime with a network: section only); the
+    # presets have no obstacles: their world publishes no map.
     optional = {absolute(contract.network_topic(i)) for i in range(N_AGENTS)}
+    optional.add(absolute(contract.OBSTACLES))
     # Nor velocity commands (a robot plant commanded by velocity only, docs/plants.md).
     optional |= {absolute(contract.cmd_vel_topic(i)) for i in range(N_AGENTS)}
     if not adaptive:

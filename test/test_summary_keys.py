@@ -25,10 +25,12 @@ NAMES = [k.name for k in SUMMARY_KEYS]
 #: ``network:`` section).
 RUNS = [(name, []) for name in preset_names()] + [
     ('zhou2012_sec52', ['informed={select: pseudo_leaders}']),
-    ('demo', ['network={delay: 0.04, loss: 0.1}'])]
+    ('demo', ['network={delay: 0.04, loss: 0.1}']),
+    ('demo', ['obstacles={spheres: [{centre: [-20, -20], radius: 1}]}'])]
 #: Keys only a run with their section writes.
 CONDITIONAL = {'pseudo_leader_certificate', 'network_delivered', 'network_age_mean',
-               'network_age_max'}
+               'network_age_max', 'obstacle_clearance_min', 'obstacle_penetrations',
+               'obstacle_collisions'}
 
 
 @pytest.fixture(scope='module')
@@ -79,6 +81,7 @@ def test_every_key_sim_writes_is_in_the_table_in_its_order(summaries):
 
 def test_the_summary_of_the_table_with_every_given_key_is_the_whole_table():
     from flock_swarm.core.metrics import RunMetrics
+    from flock_swarm.core.obstacles import ObstacleMetrics, ObstacleSpec
     from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection
     facts = summary.RunFacts(3, 0.1, 0.2, 0.3, 'x', 4, 'law',
                              PseudoLeaderSelection((0,), -1.0, 0.5, True, 1), {'h': 'gain_h'})
@@ -89,7 +92,9 @@ def test_the_summary_of_the_table_with_every_given_key_is_the_whole_table():
                                         'components')},
               **{f'network_{m}': np.ones(2) for m in ('delivered', 'age_mean', 'age_max')}}
     given = {k.name: k.name for k in SUMMARY_KEYS if k.value is None and k.kind != 'law state'}
-    out = summary.summary_of(summary.SummaryInputs(facts, series, RunMetrics(0.3), 1,
+    run_metrics = RunMetrics(0.3)
+    run_metrics.obstacles = ObstacleMetrics(ObstacleSpec(spheres=(((0.0, 0.0), 1.0),)), 0.3)
+    out = summary.summary_of(summary.SummaryInputs(facts, series, run_metrics, 1,
                                                    'completed'), **given)
     # The law's own state key stands where the table's law-state row is.
     assert list(out) == [('gain_h' if n == 'adaptive_gain_final' else n) for n in NAMES]
@@ -103,7 +108,8 @@ def test_the_sweep_metrics_and_the_comparisons_come_from_the_table():
     assert spec.SUMMARY_METRICS == summary.sweep_metrics() == (
         'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
         'min_pair_distance', 'collisions', 'components_final', 'network_delivered',
-        'network_age_mean', 'network_age_max', 'n_agents', 't_final', 'steps',
+        'network_age_mean', 'network_age_max', 'obstacle_clearance_min',
+        'obstacle_penetrations', 'obstacle_collisions', 'n_agents', 't_final', 'steps',
         'pseudo_leader_reselections')
     assert spec.TIMED_METRICS == summary.timed_series() == {
         'eta': 'metric_eta', 'velocity_mismatch_max': 'metric_velocity_mismatch_max',
@@ -111,7 +117,8 @@ def test_the_sweep_metrics_and_the_comparisons_come_from_the_table():
         'com_velocity_error': 'metric_com_velocity_error',
         'min_pair_distance': 'metric_min_pair_distance',
         'components_final': 'metric_components', 'network_delivered': 'network_delivered',
-        'network_age_mean': 'network_age_mean', 'network_age_max': 'network_age_max'}
+        'network_age_mean': 'network_age_mean', 'network_age_max': 'network_age_max',
+        'obstacle_clearance_min': 'obstacle_clearance'}
     assert spec.DEFAULT_METRICS == summary.default_metrics() == (
         'eta', 'velocity_mismatch_max', 'collisions', 'components_final')
     assert set(testing.SIM_ONLY) == set(summary.sim_only_keys()) == {
@@ -119,7 +126,8 @@ def test_the_sweep_metrics_and_the_comparisons_come_from_the_table():
     assert summary.compared_metrics() == (
         'eta', 'velocity_mismatch_max', 'com_position_error', 'com_velocity_error',
         'min_pair_distance', 'collisions', 'components_final', 'network_delivered',
-        'network_age_mean', 'network_age_max')
+        'network_age_mean', 'network_age_max', 'obstacle_clearance_min',
+        'obstacle_penetrations', 'obstacle_collisions')
 
 
 def speed_final(inputs):

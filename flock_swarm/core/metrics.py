@@ -5,6 +5,7 @@
 """
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -75,6 +76,9 @@ class RunMetrics:
     collision_distance: float
     min_pair_distance: float = float('inf')
     collision_pairs: set = field(default_factory=set)
+    #: The agent-obstacle metrics (:class:`flock_swarm.core.obstacles.ObstacleMetrics`) of a
+    #: run with obstacles, ``None`` without.
+    obstacles: Any = None
     #: Keys ``i n + j`` of the pairs close at the previous call of :meth:`add_collisions`.
     _recent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64),
                                 repr=False, compare=False)

@@ -28,6 +28,9 @@ from flock_swarm.core.laws.base import (AgentData, Law, StepViolation, advance_s
                                         swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
+from flock_swarm.core.obstacles import (Geometry, ObstacleMetrics, ObstacleSpec, check_start,
+                                        geometry, with_obstacles)
+from flock_swarm.core.obstacles import step_bounds as obstacle_step_bounds
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.errors import PluginError
 from flock_swarm.core.registry import LAW_GROUP, entries
@@ -83,7 +86,8 @@ class RunLog:
     """
 
     def __init__(self, eta_tolerance: float, collision_distance: float, radius: float,
-                 strict: bool, record_every: int, recorder: Recorder | None = None) -> None:
+                 strict: bool, record_every: int, recorder: Recorder | None = None,
+                 obstacles: ObstacleSpec | None = None) -> None:
         """Create the log.
 
         :param eta_tolerance: velocity tolerance of ``eta``.
@@ -93,10 +97,16 @@ class RunLog:
         :param record_every: subsampling of the time series.
         :param recorder: where the recorded instants go (default: a :class:`Recorder`
             in memory).
+        :param obstacles: the run's obstacles (``None`` or inactive: a run without; the
+            agent-obstacle metrics are then neither measured nor recorded).
         """
         self.eta_tolerance = eta_tolerance
         self.radius, self.strict, self.every = radius, strict, record_every
         self.metrics = RunMetrics(collision_distance)
+        if obstacles is not None and obstacles.active:
+            self.metrics.obstacles = ObstacleMetrics(obstacles, collision_distance)
+        #: The smallest agent-obstacle clearance of the last instant folded in.
+        self.clearance = float('inf')
         self.rec = Recorder() if recorder is None else recorder
         self.latest: dict = {}
 
@@ -104,7 +114,7 @@ class RunLog:
     def for_scenario(cls, sc: Scenario, recorder: Recorder | None = None) -> 'RunLog':
         """Return the log of a scenario's run (``recorder`` as in :class:`RunLog`)."""
         return cls(sc.eta_tolerance, sc.collision_distance, sc.law.radius,
-                   sc.law.strict_radius, sc.record_every, recorder)
+                   sc.law.strict_radius, sc.record_every, recorder, sc.obstacles)
 
     def observe(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
                 leader: LeaderState, informed: np.ndarray, edges: EdgeList,
@@ -115,7 +125,17 @@ class RunLog:
         :param extra: further per-step arrays to record (e.g. adaptive gains ``h``).
         """
         self.metrics.update_from_edges(q, edges, edges_radius)
+        self.fold_obstacles(q)
         return self.record(k, t, q, p, u, leader, informed, last, **extra)
+
+    def fold_obstacles(self, q: np.ndarray, geo: Geometry | None = None) -> None:
+        """Fold one step's agent-obstacle clearances into the whole-run metrics (every step).
+
+        Part of :meth:`observe`; a stack of runs (:func:`simulate_stack`) calls it for each,
+        with the step's :class:`~flock_swarm.core.obstacles.Geometry` it computed already.
+        """
+        if self.metrics.obstacles is not None:
+            self.clearance = self.metrics.obstacles.update(q, geo)
 
     def record(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
                leader: LeaderState, informed: np.ndarray, last: bool,
@@ -129,6 +149,14 @@ class RunLog:
             return None
         now = step_metrics(q, p, leader, self.eta_tolerance, self.radius, self.strict)
         self.metrics.update(q, now['min_pair_distance'])
+        found = self.metrics.obstacles
+        if found is not None:
+            # The instant's smallest clearance (folded in by fold_obstacles this step), and
+            # the counts so far (/swarm/metrics shows them live).
+            extra = {**extra, 'obstacle_clearance': self.clearance}
+            now = dict(now, obstacle_clearance=self.clearance,
+                       obstacle_penetrations=len(found.penetrations),
+                       obstacle_collisions=len(found.collisions))
         self.rec.add(t=t, q=q, p=p, u=u, leader_q=leader.q, leader_p=leader.p,
                      leader_a=leader.a, informed=informed, **extra,
                      **{f'metric_{name}': now[name] for name in STEP_METRICS})
@@ -247,7 +275,9 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
     :param sc: the scenario.
     :param real: its realisation.
     :raises PluginError: naming the entry point and what went wrong.
+    :raises ScenarioError: for an agent that starts inside an obstacle.
     """
+    check_start(sc.obstacles, real.q0)
     try:
         leader = leader_state(VirtualLeader(sc.leader.model, sc.leader.position,
                                             sc.leader.velocity), 0, sc.dim)
@@ -259,6 +289,7 @@ def check_law_output(sc: Scenario, real: Realization) -> None:
         with np.errstate(all='ignore'):
             edges = interaction_graph(sc, real, real.q0, static_graph(sc, real))
             u = swarm_control(sc.law, real.q0, real.p0, edges, leader, real.agents, sc.dt)
+            u = with_obstacles(sc.obstacles, u, real.q0, real.p0)
     except PluginError as exc:
         raise PluginError('protocol.name', f'{label}: {unnamed(sc.law, exc.reason)}') from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported
@@ -274,14 +305,15 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
     """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
 
     The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`, given the
-    run's :class:`~flock_swarm.core.laws.base.LawSetup`), then RK4's for the leader model
+    run's :class:`~flock_swarm.core.laws.base.LawSetup`), the beta term's of the obstacles
+    (:func:`~flock_swarm.core.obstacles.step_bounds`), then RK4's for the leader model
     and the intrinsic dynamics (:func:`~flock_swarm.core.stability.model_bounds`).
 
     :param sc: the scenario.
     :param real: its realisation (fixed graphs, informed set).
     :return: the violations.
     """
-    found = list(sc.law.step_bounds(real.setup))
+    found = list(sc.law.step_bounds(real.setup)) + obstacle_step_bounds(sc.obstacles, sc.dt)
     for part, model in (('leader model', sc.leader.model), ('intrinsic dynamics', sc.intrinsic)):
         found += model_bounds(part, model, sc.leader.velocity, sc.dim, sc.dt)
     return found
@@ -402,6 +434,7 @@ def stack_mismatch(scenarios: list[Scenario]) -> str | None:
                 and np.array_equal(sc.leader.position, first.leader.position)
                 and np.array_equal(sc.leader.velocity, first.leader.velocity),
                 'observers': bool(sc.observers) == bool(first.observers),
+                'obstacles': sc.obstacles == first.obstacles,
                 'plant': sc.plant == first.plant}
         differ = [key for key, ok in same.items() if not ok]
         if differ:
@@ -441,6 +474,9 @@ class _Stack:
             else None
         self._disk = static is None and not sc.law.all_pairs
         self.graph = self._new_graph()
+        #: ``(q, its Geometry)``: the obstacle geometry of the positions ``q`` (the same
+        #: array object: a step replaces ``q``, never writes into it).
+        self.geometry: tuple[np.ndarray, Geometry] | None = None
         #: The messages between the agents (``network:``), ``None`` without the section.
         self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
                                 neighbourhood_of(sc.graph_type, sc.law.all_pairs),
@@ -508,12 +544,27 @@ class _Stack:
 
         t = step * dt
 
+        obstacles, geo = self.scenarios[0].obstacles, self.obstacle_geometry()
+
         def alone(row: int) -> np.ndarray:
             one = np.array([row])
-            return group_control(law, one, q, p, edges, leader, agents.subset(one), dt, t)
+            return with_obstacles(obstacles, group_control(law, one, q, p, edges, leader,
+                                                           agents.subset(one), dt, t),
+                                  q[one], p[one])
         return evaluate_law(law, step, np.arange(q.shape[0]) % self.size, q.shape[1],
-                            lambda: swarm_control(law, q, p, edges, leader, agents, dt, t),
+                            lambda: with_obstacles(obstacles, swarm_control(
+                                law, q, p, edges, leader, agents, dt, t), q, p, geo),
                             alone)
+
+    def obstacle_geometry(self) -> Geometry | None:
+        """Return the agents' geometry relative to the obstacles at the current positions,
+        computed once a step for the beta term and the metrics (``None``: no obstacles)."""
+        spec = self.scenarios[0].obstacles
+        if not spec.active:
+            return None
+        if self.geometry is None or self.geometry[0] is not self.q:
+            self.geometry = (self.q, geometry(spec, self.q))
+        return self.geometry[1]
 
     def end_non_finite(self, u: np.ndarray, leader: LeaderState, law: Law,
                        step: int) -> np.ndarray | None:
@@ -589,8 +640,9 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             else:
                 stack.net.send(step, stack.q, stack.p, state, edges, stack.agents.informed)
                 u = evaluate_law(law, step, np.arange(n_rows) % stack.size, sc.dim,
-                                 lambda: stack.net.control(None, stack.q, stack.p, stack.agents,
-                                                           dt, step * dt)[0])
+                                 lambda: with_obstacles(sc.obstacles, stack.net.control(
+                                     None, stack.q, stack.p, stack.agents, dt, step * dt)[0],
+                                     stack.q, stack.p, stack.obstacle_geometry()))
             u = stack.end_non_finite(u, state, law, step)
             if u is None:
                 return
@@ -601,6 +653,10 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             logs = [stack.logs[g] for g in stack.active]
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)
+            if sc.obstacles.active:
+                geo = stack.obstacle_geometry()
+                for b, log in enumerate(logs):
+                    log.fold_obstacles(q[b * m:(b + 1) * m], geo.part(b * m, (b + 1) * m))
             if step % every == 0 or step == steps:
                 net_stats = {} if stack.net is None else stack.net.recorded(dt)
                 for b, log in enumerate(logs):

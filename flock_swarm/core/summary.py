@@ -170,6 +170,19 @@ def _network(series: str, reduce: str) -> Callable[[SummaryInputs], Any]:
     return value
 
 
+def _obstacles(name: str) -> Callable[[SummaryInputs], Any]:
+    """Return the value function of a whole-run obstacle metric (absent without obstacles;
+    null when no instant was measured)."""
+    def value(x: SummaryInputs) -> Any:
+        found = getattr(x.run, 'obstacles', None)
+        if found is None:
+            return ABSENT
+        if name == 'clearance_min':
+            return found.clearance_min if found.clearance_min != float('inf') else None
+        return len(getattr(found, name))
+    return value
+
+
 _K = SummaryKey
 #: Every key of ``summary.json``, in the order it is written.
 SUMMARY_KEYS: tuple[SummaryKey, ...] = (
@@ -237,6 +250,16 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
        'neighbour state the law used over the whole run', _network('network_age_max', 'max'),
        sweep=True, series='network_age_max', writers=(SIM, WORLD, ANALYZE)),
+    _K('obstacle_clearance_min', WHOLE_RUN, 'with an `obstacles:` section: the smallest '
+       'distance [m] from an agent to an obstacle\'s surface over the whole run (negative: an '
+       'agent was inside)', _obstacles('clearance_min'), sweep=True,
+       series='obstacle_clearance'),
+    _K('obstacle_penetrations', WHOLE_RUN, 'with an `obstacles:` section: distinct '
+       '(agent, obstacle) pairs with the agent ever inside the obstacle',
+       _obstacles('penetrations'), sweep=True),
+    _K('obstacle_collisions', WHOLE_RUN, 'with an `obstacles:` section: distinct (agent, '
+       'obstacle) pairs ever closer than `collision_distance`', _obstacles('collisions'),
+       sweep=True),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),

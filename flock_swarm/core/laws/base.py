@@ -174,7 +174,9 @@ class Law:
     - :meth:`pseudo_leader_gains`: lets scenarios choose the informed agents by the
       certificate of [Zhou12] Theorem 1 (``informed.select: pseudo_leaders``);
     - :attr:`uses_observers`: lets scenarios give pinned observer groups (``observers:``,
-      read in :meth:`agent_data` from ``setup.observers``).
+      read in :meth:`agent_data` from ``setup.observers``);
+    - :attr:`accepts_obstacles`: lets scenarios give obstacles (``obstacles:``), whose
+      beta term the core adds to the law's control.
 
     The last three are what the core itself needs from a law beyond evaluating it: how the
     edges are weighted and which scenario sections (pseudo-leader selection, observers)
@@ -201,6 +203,11 @@ class Law:
     eta_tolerance: ClassVar[float] = 0.1
     #: Summary keys for the final value of adaptive state: ``{state key: summary key}``.
     state_summary: ClassVar[dict[str, str]] = {}
+    #: Whether the scenario's ``obstacles:`` section may be used with the law: the beta term
+    #: of Olfati-Saber 2006 Algorithm 3 (:func:`flock_swarm.core.obstacles.beta_term`) is
+    #: then added to ``combine``'s output (docs/obstacles.md). A law with a float field
+    #: ``d`` (its desired inter-agent distance) gets the default ``d_beta = 0.6 d``.
+    accepts_obstacles: ClassVar[bool] = False
 
     @property
     def radius(self) -> float:

@@ -53,6 +53,9 @@ class SuParams(Law):
     partial: ClassVar[bool] = False
     #: Whether the leader's acceleration ``f_gamma`` is fed forward.
     feedforward: ClassVar[bool] = False
+    #: [Su09]'s protocols are Olfati-Saber's alpha + gamma terms (Algorithm 2); Algorithm 3
+    #: adds the beta term of obstacles to the same alpha-agents (docs/obstacles.md).
+    accepts_obstacles: ClassVar[bool] = True
 
     @property
     def radius(self) -> float:
