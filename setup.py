@@ -9,7 +9,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed']},
+    # The robot models of the physics-engine world (flock_swarm/engine/*.xml, MJCF).
+    package_data={package_name: ['py.typed', 'engine/*.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

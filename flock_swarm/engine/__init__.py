@@ -1,0 +1,5 @@
+"""A physics engine as the world: N differential-drive robots in MuJoCo, driven by ``cmd_vel``.
+
+ROS-free (the world node's ``backend: mujoco`` and the bridge's tests run it): see
+:mod:`flock_swarm.engine.mujoco_world` and docs/robots.md.
+"""
