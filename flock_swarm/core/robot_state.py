@@ -1,0 +1,105 @@
+"""A real robot's measured state, as the plant models hold it (no ROS).
+
+The robot agent (:mod:`flock_swarm.nodes.robot_agent`) hears each robot's pose and velocity
+from the robot's own topics: ``nav_msgs/Odometry`` (REP 105: the pose in the header's frame,
+the twist in the ``child_frame_id``'s, the robot's body frame) or a motion-capture
+``geometry_msgs/PoseStamped`` (a pose only: the velocity is estimated by
+:class:`PoseDifferentiator`). :func:`world_velocity` rotates a body twist into the world frame
+and :func:`plant_state` builds the state row a plant model takes (the ``velocity_lag`` plant's
+``[q, v]``, the ``unicycle``'s ``[x, y, qz, qw, v, omega]``), so the law sees exactly the point
+``sim`` would (for the unicycle, the point ``ell`` ahead of the axle).
+"""
+
+import math
+
+import numpy as np
+
+
+def yaw_of(orientation: np.ndarray) -> float:
+    """Return the yaw (rad) of a unit quaternion ``(x, y, z, w)`` (ROS order), ZYX convention."""
+    x, y, z, w = (float(c) for c in orientation)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def rotate(orientation: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """Return ``vector`` (3,) rotated by the unit quaternion ``(x, y, z, w)``."""
+    x, y, z, w = (float(c) for c in orientation)
+    u = np.array([x, y, z])
+    v = np.asarray(vector, dtype=float)
+    # v' = v + 2 w (u x v) + 2 u x (u x v), the rotation of a vector by a unit quaternion.
+    uv = np.cross(u, v)
+    return v + 2.0 * w * uv + 2.0 * np.cross(u, uv)
+
+
+def world_velocity(orientation: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+    """Return the world-frame velocity of an ``Odometry`` twist (given in the body frame)."""
+    return rotate(orientation, body_linear)
+
+
+def plant_state(model: str, dim: int, position: np.ndarray, orientation: np.ndarray,
+                velocity: np.ndarray, yaw_rate: float) -> np.ndarray:
+    """Return one robot's state row for plant ``model``.
+
+    :param model: ``'velocity_lag'`` (``[q, v]``, ``dim`` each) or ``'unicycle'``
+        (``[x, y, qz, qw, v, omega]``: the heading as a yaw-only quaternion, ``v`` the
+        velocity's component along the heading).
+    :param dim: the scenario's dimension.
+    :param position: the position (3,) in the world frame.
+    :param orientation: the orientation ``(x, y, z, w)``.
+    :param velocity: the world-frame velocity (3,).
+    :param yaw_rate: the yaw rate (rad/s).
+    :return: the state row.
+    """
+    if model == 'unicycle':
+        yaw = yaw_of(orientation)
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([position[0], position[1], math.sin(0.5 * yaw), math.cos(0.5 * yaw),
+                         c * velocity[0] + s * velocity[1], yaw_rate])
+    return np.concatenate([np.asarray(position[:dim], dtype=float),
+                           np.asarray(velocity[:dim], dtype=float)])
+
+
+class PoseDifferentiator:
+    """The velocity of a pose-only source (motion capture), by smoothed backward differences.
+
+    Each new pose at time ``t`` gives the raw estimate ``(position - last) / (t - t_last)``
+    (the yaw rate from the wrapped yaw difference), blended into the estimate by an
+    exponential filter of time constant ``tau``: ``est += alpha (raw - est)``,
+    ``alpha = h / (tau + h)`` with ``h = t - t_last`` (a first-order low-pass filter discretised
+    by backward Euler, so that a motion-capture system's millimetre jitter at 100-300 Hz is
+    not amplified into metres per second). ``tau = 0`` takes the raw difference. The first
+    pose gives zero velocity; a pose not later than the previous one is ignored.
+
+    :param tau: the filter's time constant (s, >= 0).
+    """
+
+    def __init__(self, tau: float = 0.05) -> None:
+        self.tau = tau
+        self.t: float | None = None
+        self.position = np.zeros(3)
+        self.yaw = 0.0
+        self.velocity = np.zeros(3)
+        self.yaw_rate = 0.0
+
+    def update(self, t: float, position: np.ndarray, orientation: np.ndarray) -> bool:
+        """Take the pose measured at ``t``; return whether it was used.
+
+        :param t: the measurement time (s).
+        :param position: the position (3,).
+        :param orientation: the orientation ``(x, y, z, w)``.
+        """
+        position = np.asarray(position, dtype=float)
+        yaw = yaw_of(orientation)
+        if self.t is None:
+            self.t, self.position, self.yaw = t, position, yaw
+            return True
+        h = t - self.t
+        if h <= 0.0:
+            return False
+        raw = (position - self.position) / h
+        turn = math.remainder(yaw - self.yaw, 2.0 * math.pi)
+        alpha = h / (self.tau + h)
+        self.velocity = self.velocity + alpha * (raw - self.velocity)
+        self.yaw_rate += alpha * (turn / h - self.yaw_rate)
+        self.t, self.position, self.yaw = t, position, yaw
+        return True
