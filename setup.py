@@ -42,6 +42,10 @@ setup(
             'analyze = flock_swarm.cli.analyze:main',
             'sweep = flock_swarm.cli.sweep:main',
             'foxglove_server = flock_swarm.nodes.foxglove_server:main',
+            # A flocking agent on a real robot, behind the safety layer (docs/robots.md).
+            'robot_agent = flock_swarm.nodes.robot_agent:main',
+            # Simulated robots: the physics engine behind each robot's cmd_vel and odom.
+            'engine_robots = flock_swarm.nodes.engine_robots:main',
         ],
         # The built-in laws and leader models, registered exactly as a user's package
         # registers its own (docs/extending.md): one registry, one code path.

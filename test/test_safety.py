@@ -36,8 +36,8 @@ def test_yaw_rate_is_clipped():
 
 def test_acceleration_limits_the_change_per_second():
     layer = SafetyLayer(SafetyLimits(max_accel=0.5))
-    first = layer.filter(0.0, np.array([1.0, 0.0, 0.0]), 0.0, **FRESH | {'own_stamp': 0.0,
-                                                                          'leader_stamp': 0.0})
+    first = layer.filter(0.0, np.array([1.0, 0.0, 0.0]), 0.0,
+                         **FRESH | {'own_stamp': 0.0, 'leader_stamp': 0.0})
     # The first command has no previous one: it passes (the robot's state is what it is).
     np.testing.assert_array_equal(first.linear, [1.0, 0.0, 0.0])
     second = layer.filter(0.1, np.array([1.0, 1.0, 0.0]), 0.0,
