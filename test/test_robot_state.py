@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from flock_swarm.core.robot_state import PoseDifferentiator, plant_state, rotate, world_velocity
+from flock_swarm.core.robot_state import from_command, PoseDifferentiator, plant_state, rotate
+from flock_swarm.core.robot_state import world_velocity
 from flock_swarm.core.robot_state import yaw_of
 
 
@@ -58,3 +59,12 @@ def test_the_differentiator_smooths_jitter_and_ignores_old_poses():
             errors_smooth.append(abs(smooth.velocity[0] - 0.1))
     assert np.mean(errors_smooth) < 0.3 * np.mean(errors_raw)
     assert not smooth.update(0.5, [0.0, 0.0, 0.0], yaw_q(0.0))
+
+
+def test_from_command_replaces_the_velocity_columns():
+    x = np.array([[1.0, 2.0, 0.1, 0.99, 0.3, 0.7]])
+    np.testing.assert_array_equal(from_command('unicycle', x, np.array([[0.05, -0.2]])),
+                                  [[1.0, 2.0, 0.1, 0.99, 0.05, -0.2]])
+    x = np.array([[1.0, 2.0, 0.3, 0.4]])
+    np.testing.assert_array_equal(from_command('velocity_lag', x, np.array([[0.0, 0.1]])),
+                                  [[1.0, 2.0, 0.0, 0.1]])

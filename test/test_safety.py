@@ -36,19 +36,20 @@ def test_yaw_rate_is_clipped():
 
 def test_acceleration_limits_the_change_per_second():
     layer = SafetyLayer(SafetyLimits(max_accel=0.5))
-    first = layer.filter(0.0, np.array([1.0, 0.0, 0.0]), 0.0,
-                         **FRESH | {'own_stamp': 0.0, 'leader_stamp': 0.0})
-    # The first command has no previous one: it passes (the robot's state is what it is).
-    np.testing.assert_array_equal(first.linear, [1.0, 0.0, 0.0])
-    second = layer.filter(0.1, np.array([1.0, 1.0, 0.0]), 0.0,
-                          **FRESH | {'own_stamp': 0.1, 'leader_stamp': 0.1})
-    np.testing.assert_allclose(second.linear, [1.0, 0.05, 0.0], rtol=1e-12)
-    assert second.saturated
+    fresh = FRESH | {'own_stamp': 0.0, 'leader_stamp': 0.0}
+    # The first command starts from rest: no time has passed, so it is zero.
+    first = layer.filter(0.0, np.array([1.0, 0.0, 0.0]), 0.0, **fresh)
+    np.testing.assert_array_equal(first.linear, [0.0, 0.0, 0.0])
+    assert first.saturated and first.stop == ''
+    second = layer.filter(0.1, np.array([1.0, 0.0, 0.0]), 0.0, **fresh)
+    np.testing.assert_allclose(second.linear, [0.05, 0.0, 0.0], rtol=1e-12)
+    # The change is shortened along its direction.
+    third = layer.filter(0.2, np.array([0.05, 1.0, 0.0]), 0.0, **fresh)
+    np.testing.assert_allclose(third.linear, [0.05, 0.05, 0.0], rtol=1e-12)
     # A stop resets the ramp: the next command starts again from zero.
-    layer.filter(0.2, np.array([1.0, 1.0, 0.0]), 0.0, **FRESH | {'estop': True})
-    third = layer.filter(0.4, np.array([1.0, 0.0, 0.0]), 0.0,
-                         **FRESH | {'own_stamp': 0.4, 'leader_stamp': 0.4})
-    np.testing.assert_allclose(third.linear, [0.1, 0.0, 0.0], rtol=1e-12)
+    layer.filter(0.3, np.array([1.0, 1.0, 0.0]), 0.0, **FRESH | {'estop': True})
+    fourth = layer.filter(0.5, np.array([1.0, 0.0, 0.0]), 0.0, **fresh)
+    np.testing.assert_allclose(fourth.linear, [0.1, 0.0, 0.0], rtol=1e-12)
 
 
 def test_emergency_stop_zeroes_the_command():

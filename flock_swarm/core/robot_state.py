@@ -59,6 +59,29 @@ def plant_state(model: str, dim: int, position: np.ndarray, orientation: np.ndar
                            np.asarray(velocity[:dim], dtype=float)])
 
 
+def from_command(model: str, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+    """Return state rows ``x`` with their velocities replaced by the last command sent.
+
+    A plant's ``command`` integrates the law's acceleration from the velocity in the state
+    (``v_sp = p + u T``): a deadbeat velocity loop, exact in ``sim``, which oscillates when the
+    measured velocity arrives late (a real robot's odometry: 50-150 ms). Integrating from the
+    last command sent instead (``v_sp = v_sp_prev + u T``, the robot's own velocity controller
+    closing the loop) is what the robot agent does by default (``integrate_from``).
+
+    :param model: ``'velocity_lag'`` or ``'unicycle'``.
+    :param x: state rows ``(n, S)`` (:func:`plant_state`).
+    :param cmd: the commands sent, as the plant's commands ``(n, C)`` (``v_sp``, or
+        ``(v, omega)``).
+    :return: the rows with the velocity columns replaced.
+    """
+    out = np.array(x, dtype=float)
+    if model == 'unicycle':
+        out[:, 4:6] = cmd[:, :2]
+    else:
+        out[:, out.shape[1] // 2:] = cmd
+    return out
+
+
 class PoseDifferentiator:
     """The velocity of a pose-only source (motion capture), by smoothed backward differences.
 

@@ -13,8 +13,8 @@ of :meth:`SafetyLayer.filter` per command, in this order (the first rule that fi
 4. **non-finite command** (a law's NaN or inf): zero;
 5. otherwise the command is **saturated**: the acceleration first (the change of the linear
    command from the last one sent, at most ``max_accel`` times the time since it, the vector
-   shortened along its direction), then the speed (the linear vector shortened to
-   ``max_speed``), and the yaw rate clipped to ``max_yaw_rate``.
+   shortened along its direction; the first command starts from rest), then the speed (the
+   linear vector shortened to ``max_speed``), and the yaw rate clipped to ``max_yaw_rate``.
 
 A stop is sent at once, not ramped: the zero command hands braking to the robot's own
 controller, and the acceleration limit restarts from zero afterwards.
@@ -133,8 +133,9 @@ class SafetyLayer:
             return Verdict(np.zeros(3), 0.0, stop, False)
         lim = self.limits
         out = np.asarray(linear, dtype=float).copy()
-        if lim.max_accel is not None and self._last_time is not None:
-            elapsed = max(now - self._last_time, 0.0)
+        if lim.max_accel is not None:
+            # The first command ramps from rest, as after a stop.
+            elapsed = 0.0 if self._last_time is None else max(now - self._last_time, 0.0)
             out = self._last_linear + _shorten(out - self._last_linear, lim.max_accel * elapsed)
         if lim.max_speed is not None:
             out = _shorten(out, lim.max_speed)

@@ -21,7 +21,9 @@ counted), so its state goes stale and the robot stops. Output: ``geometry_msgs/T
 The command: the scenario's law at the point the plant says (``plant.model``: ``unicycle``,
 the point ``ell`` ahead of the axle, or ``velocity_lag``), over the neighbours whose state is
 fresh and within ``r`` (the r-disk graph), turned into a velocity by the plant's own
-``command`` and ``twist`` (the same code ``sim`` runs), then filtered by the safety layer.
+``command`` and ``twist`` (the same code ``sim`` runs; integrated from the last command sent,
+``integrate_from:=command``, because odometry arrives late: see
+:func:`~flock_swarm.core.robot_state.from_command`), then filtered by the safety layer.
 docs/robots.md maps the topics of TurtleBot3, Husky, Jackal, PX4 (MAVROS) and motion capture.
 """
 
@@ -42,7 +44,8 @@ from flock_swarm.contract import FRAME, LEADER_ACCEL, LEADER_ODOM
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import local_control
 from flock_swarm.core.leaders.base import LeaderState
-from flock_swarm.core.robot_state import PoseDifferentiator, plant_state, world_velocity
+from flock_swarm.core.robot_state import (PoseDifferentiator, from_command, plant_state,
+                                          world_velocity)
 from flock_swarm.core.safety import SafetyLayer, SafetyLimits
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
@@ -91,10 +94,14 @@ ROBOT_PARAMS = tuple(
     Param('world_frame', FRAME, 'the frame every pose must be in (header.frame_id); a message '
           'in another is refused'),
     _choice('twist_frame', 'plant', ('plant', 'body', 'world'), "cmd_vel's frame: the "
-            "plant's default (unicycle: body, velocity_lag: world), body or world"),
+            "scenario's plant.frame (unicycle: body by default, velocity_lag: world), body "
+            'or world'),
     _choice('stale_clock', 'received', ('received', 'stamp'), "a state's age: since it was "
             "received (this node's steady clock; robust to clocks out of sync) or since its "
             "header stamp (this node's ROS clock; counts transport latency too)"),
+    _choice('integrate_from', 'command', ('command', 'measured'), "the velocity the law's "
+            'acceleration is integrated from: the last command sent (robust to odometry '
+            "latency) or the measured one (sim's conversion exactly)"),
     Param('pose_filter_tau', 0.05, 'odom_type pose: time constant of the velocity estimate '
           '(s, 0: raw differences)', lambda v: math.isfinite(v) and v >= 0,
           'must be >= 0, got {value!r}'),
@@ -153,7 +160,7 @@ class RobotAgentNode(Node):
         init_node(super().__init__, name or 'robot_agent', kwargs)
         params = self.params = NodeParameters(self, ROBOT_PARAMS)
         sc = self.scenario = params.load_scenario()
-        plant = self.plant = sc.plant
+        plant = self.plant = sc.plant.model
         if plant.name not in VELOCITY_PLANTS:
             raise ScenarioError('plant.model', 'the robot agent drives velocity-commanded '
                                 f'robots ({" or ".join(VELOCITY_PLANTS)}), got {plant.name!r}')
@@ -167,7 +174,7 @@ class RobotAgentNode(Node):
             max_yaw_rate=params['max_yaw_rate'], stale_after=params['stale_after'],
             fence_min=fence_min, fence_max=fence_max))
         frame = params['twist_frame']
-        self.twist_frame = plant.frames[0] if frame == 'plant' else frame
+        self.twist_frame = sc.plant.frame if frame == 'plant' else frame
         if self.twist_frame not in plant.frames:
             raise ScenarioError('twist_frame', f'the {plant.name} plant takes '
                                 f'{" or ".join(plant.frames)} frame commands, got {frame!r}')
@@ -189,6 +196,9 @@ class RobotAgentNode(Node):
         self.refused: dict[str, int] = {}
         self.last_stop = ''
         self.commands = 0
+        self.from_sent = params['integrate_from'] == 'command'
+        #: The last command sent, as the plant's command row (zero before the first).
+        self.sent = np.zeros((1, len(plant.command_names(sc.dim))))
         self.differentiators = [PoseDifferentiator(params['pose_filter_tau']) for _ in range(n)]
         sensor = qos_profile_sensor_data
         pose = params['odom_type'] == 'pose'
@@ -301,7 +311,8 @@ class RobotAgentNode(Node):
             leader = LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel)
         u = local_control(sc.law, q_self, p_self, q_nb, p_nb, np.ones(len(q_nb)), leader,
                           self.agent, sc.dt)
-        cmd = plant.command(x_self, u[None], self.period)
+        x_cmd = from_command(plant.name, x_self, self.sent) if self.from_sent else x_self
+        cmd = plant.command(x_cmd, u[None], self.period)
         linear, angular = plant.twist(x_self, cmd, self.twist_frame)
         return linear[0], float(angular[0, 2])
 
@@ -321,6 +332,10 @@ class RobotAgentNode(Node):
             self.get_logger().warning(f'safety: stop ({verdict.stop})' if verdict.stop
                                       else 'safety: moving')
             self.last_stop = verdict.stop
+        if self.states[i] is not None:
+            self.sent = self.plant.from_twist(self.states[i][None], verdict.linear[None],
+                                              np.array([[0.0, 0.0, verdict.yaw_rate]]),
+                                              self.twist_frame)
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.linear.z = (float(v) for v in verdict.linear)
         msg.angular.z = verdict.yaw_rate
