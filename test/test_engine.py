@@ -99,3 +99,31 @@ def test_yaw_of_a_quaternion():
     angles = np.array([-3.0, -1.0, 0.0, 0.5, 3.0])
     quat = np.stack([np.cos(angles / 2), 0 * angles, 0 * angles, np.sin(angles / 2)], axis=-1)
     np.testing.assert_allclose(yaw_of(quat), angles, atol=1e-12)
+
+
+def test_the_backend_starts_at_the_plant_state_and_steps_like_the_unicycle():
+    from flock_swarm.core.plants.models import Unicycle
+    from flock_swarm.engine.backend import EngineBackend
+    plant = Unicycle(ell=0.1, max_speed=0.22, max_yaw_rate=2.84)
+    x0 = plant.initial_state(np.array([[0.0, 0.0], [1.0, 1.0]]),
+                             np.array([[0.1, 0.0], [0.0, 0.1]]))
+    backend = EngineBackend('unicycle', x0)
+    np.testing.assert_allclose(backend.state()[:, :4], x0[:, :4], atol=1e-6)
+    x_plant, x_engine = x0, x0
+    cmd = np.array([[0.15, 0.3], [0.1, -0.2]])
+    for _ in range(100):
+        x_plant = plant.step(x_plant, cmd, 0.02)
+        x_engine = backend.step(x_engine, cmd, 0.02)
+    # Two seconds of the same commands: the engine's robots end within a few centimetres of
+    # the exact kinematics (wheel servo lag, soft contacts), at the commanded speeds.
+    np.testing.assert_allclose(x_engine[:, :2], x_plant[:, :2], atol=0.03)
+    np.testing.assert_allclose(x_engine[:, 4:], cmd, atol=0.01)
+    assert backend.contacts_run == set()
+
+
+def test_the_backend_needs_differential_drive_robots():
+    from flock_swarm.core.errors import ScenarioError
+    from flock_swarm.engine.backend import EngineBackend
+    with pytest.raises(ScenarioError, match="backend: mujoco drives differential-drive robots: "
+                                            "it needs plant.model unicycle, got 'velocity_lag'"):
+        EngineBackend('velocity_lag', np.zeros((2, 4)))
