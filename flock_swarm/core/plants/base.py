@@ -59,6 +59,9 @@ class Plant:
     commands: ClassVar[tuple[str, ...]] = ('accel',)
     #: The ``Twist`` frames it takes (:data:`FRAMES`), the default first.
     frames: ClassVar[tuple[str, ...]] = ('world',)
+    #: Whether its odometry carries a heading (orientation and yaw rate) besides the
+    #: position and the linear velocity.
+    oriented: ClassVar[bool] = False
 
     @classmethod
     def param_keys(cls) -> tuple[str, ...]:
@@ -152,6 +155,33 @@ class Plant:
         :param frame: ``body`` or ``world``.
         """
         raise ValueError(f'the {self.name} plant takes no velocity command')
+
+    def odometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Return the state as ``nav_msgs/Odometry`` fields, each row one agent.
+
+        The default, for a plant whose state is ``(q, p)`` like the double integrator's:
+        the position, the identity orientation, the velocity in the world frame, no turn.
+
+        :param x: the states ``(n, S)``.
+        :return: ``(position (n, 3), orientation (n, 4) as x, y, z, w, linear (n, 3),
+            angular (n, 3))``.
+        """
+        q, p = self.law_state(x)
+        orientation = np.zeros((x.shape[0], 4))
+        orientation[:, 3] = 1.0
+        return pad3(q), orientation, pad3(p), np.zeros((x.shape[0], 3))
+
+    def from_odometry(self, position: np.ndarray, orientation: np.ndarray, linear: np.ndarray,
+                      angular: np.ndarray, dim: int) -> np.ndarray:
+        """Return the states of odometry fields: the inverse of :meth:`odometry`, exact.
+
+        :param position: ``(n, 3)``.
+        :param orientation: ``(n, 4)``, x, y, z, w.
+        :param linear: ``(n, 3)``.
+        :param angular: ``(n, 3)``.
+        :param dim: the scenario's dimension.
+        """
+        return np.concatenate([position[:, :dim], linear[:, :dim]], axis=1).astype(float)
 
     def recorded(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Return the arrays of the state the time series records beside ``q`` and ``p``.

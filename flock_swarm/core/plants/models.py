@@ -158,6 +158,7 @@ class Unicycle(Plant):
     dims: ClassVar[tuple[int, ...]] = (2,)
     commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
     frames: ClassVar[tuple[str, ...]] = ('body', 'world')
+    oriented: ClassVar[bool] = True
 
     #: Distance of the steered point ahead of the axle [m].
     ell: float = 0.1
@@ -267,6 +268,26 @@ class Unicycle(Plant):
             c, s = self._cos_sin(x)
             v = c * linear[:, 0] + s * linear[:, 1]
         return np.column_stack([v, angular[:, 2]]).astype(float)
+
+    def odometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Return the axle's position, the heading as orientation, and the body-frame twist
+        ``(v, 0, 0)``, ``(0, 0, omega)`` (REP 105: an odometry's twist is in its child frame).
+        """
+        n = x.shape[0]
+        orientation = np.zeros((n, 4))
+        orientation[:, 2:] = x[:, 2:4]
+        angular = np.zeros((n, 3))
+        angular[:, 2] = x[:, 5]
+        return pad3(x[:, :2]), orientation, pad3(x[:, 4:5]), angular
+
+    def from_odometry(self, position: np.ndarray, orientation: np.ndarray, linear: np.ndarray,
+                      angular: np.ndarray, dim: int) -> np.ndarray:
+        """Return the states of odometry fields (:meth:`odometry`'s inverse, exact).
+
+        A yaw-only orientation is assumed (a ground robot); its ``z``, ``w`` are the heading.
+        """
+        return np.column_stack([position[:, 0], position[:, 1], orientation[:, 2],
+                                orientation[:, 3], linear[:, 0], angular[:, 2]]).astype(float)
 
     def recorded(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Return the state and the heading ``theta`` (``heading``, ``(n,)``)."""

@@ -54,3 +54,18 @@ def parse_plant(value: Any, dim: int, plant_class) -> PlantSpec:
                      model.commands)
     frame = choice(section.get('frame', model.frames[0]), 'plant.frame', model.frames)
     return PlantSpec(instance, command, frame)
+
+
+def command_interface(sc, override: str) -> str:
+    """Return a node's command interface: its parameter ``override`` if set, else the
+    scenario's ``plant.command``.
+
+    :param sc: the scenario (a :class:`~flock_swarm.core.scenario.Scenario`).
+    :param override: the node's ``command`` parameter (``''``: the scenario's).
+    :raises ScenarioError: naming ``command`` when the plant does not take it.
+    """
+    command = override or sc.plant.command
+    if command not in sc.plant.model.commands:
+        raise ScenarioError('command', f'the {sc.plant.model.name} plant takes '
+                            f'{" or ".join(sc.plant.model.commands)} commands, got {command!r}')
+    return command
