@@ -27,10 +27,11 @@ def test_a_body_twist_is_rotated_into_the_world():
 
 
 def test_plant_states():
+    from flock_swarm.core.plants.models import Unicycle, VelocityLag
     pos, vel = np.array([1.0, 2.0, 0.0]), np.array([0.0, 0.3, 0.0])
-    np.testing.assert_allclose(plant_state('velocity_lag', 2, pos, yaw_q(0.4), vel, 0.7),
+    np.testing.assert_allclose(plant_state(VelocityLag(), 2, pos, yaw_q(0.4), vel, 0.7),
                                [1.0, 2.0, 0.0, 0.3])
-    x = plant_state('unicycle', 2, pos, yaw_q(math.pi / 2), vel, 0.7)
+    x = plant_state(Unicycle(), 2, pos, yaw_q(math.pi / 2), vel, 0.7)
     np.testing.assert_allclose(x, [1.0, 2.0, math.sin(math.pi / 4), math.cos(math.pi / 4),
                                    0.3, 0.7], atol=1e-12)
 

@@ -6,13 +6,16 @@ the twist in the ``child_frame_id``'s, the robot's body frame) or a motion-captu
 ``geometry_msgs/PoseStamped`` (a pose only: the velocity is estimated by
 :class:`PoseDifferentiator`). :func:`world_velocity` rotates a body twist into the world frame
 and :func:`plant_state` builds the state row a plant model takes (the ``velocity_lag`` plant's
-``[q, v]``, the ``unicycle``'s ``[x, y, qz, qw, v, omega]``), so the law sees exactly the point
-``sim`` would (for the unicycle, the point ``ell`` ahead of the axle).
+``[q, v]``, the ``unicycle``'s ``[x, y, qz, qw, v, omega]``) with the plant's own
+``from_odometry``, so the law sees exactly the point ``sim`` would (for the unicycle, the point
+``ell`` ahead of the axle).
 """
 
 import math
 
 import numpy as np
+
+from flock_swarm.core.plants.base import Plant
 
 
 def yaw_of(orientation: np.ndarray) -> float:
@@ -36,13 +39,16 @@ def world_velocity(orientation: np.ndarray, body_linear: np.ndarray) -> np.ndarr
     return rotate(orientation, body_linear)
 
 
-def plant_state(model: str, dim: int, position: np.ndarray, orientation: np.ndarray,
+def plant_state(plant: Plant, dim: int, position: np.ndarray, orientation: np.ndarray,
                 velocity: np.ndarray, yaw_rate: float) -> np.ndarray:
-    """Return one robot's state row for plant ``model``.
+    """Return one robot's state row for ``plant``, through the plant's own
+    :meth:`~flock_swarm.core.plants.base.Plant.from_odometry` (the world's odometry
+    convention: a heading plant's twist in the body frame, another's velocity in the world).
 
-    :param model: ``'velocity_lag'`` (``[q, v]``, ``dim`` each) or ``'unicycle'``
-        (``[x, y, qz, qw, v, omega]``: the heading as a yaw-only quaternion, ``v`` the
-        velocity's component along the heading).
+    A real robot's orientation is reduced to its yaw first (a ground robot's odometry may
+    carry small roll and pitch), so the unicycle's heading is a yaw-only quaternion.
+
+    :param plant: the scenario's plant model (``velocity_lag`` or ``unicycle``).
     :param dim: the scenario's dimension.
     :param position: the position (3,) in the world frame.
     :param orientation: the orientation ``(x, y, z, w)``.
@@ -50,13 +56,14 @@ def plant_state(model: str, dim: int, position: np.ndarray, orientation: np.ndar
     :param yaw_rate: the yaw rate (rad/s).
     :return: the state row.
     """
-    if model == 'unicycle':
-        yaw = yaw_of(orientation)
-        c, s = math.cos(yaw), math.sin(yaw)
-        return np.array([position[0], position[1], math.sin(0.5 * yaw), math.cos(0.5 * yaw),
-                         c * velocity[0] + s * velocity[1], yaw_rate])
-    return np.concatenate([np.asarray(position[:dim], dtype=float),
-                           np.asarray(velocity[:dim], dtype=float)])
+    yaw = yaw_of(orientation)
+    c, s = math.cos(yaw), math.sin(yaw)
+    heading = np.array([[0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)]])
+    v = np.asarray(velocity, dtype=float)
+    linear = np.array([c * v[0] + s * v[1], c * v[1] - s * v[0], v[2]]) \
+        if 'body' in plant.frames else v
+    return plant.from_odometry(np.asarray(position, dtype=float)[None], heading, linear[None],
+                               np.array([[0.0, 0.0, yaw_rate]]), dim)[0]
 
 
 def from_command(model: str, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:

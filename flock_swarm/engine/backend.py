@@ -14,9 +14,6 @@ import numpy as np
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.engine.mujoco_world import EngineWorld
 
-#: The world's backends: the plant's own kinematics, or the physics engine.
-BACKENDS = ('plant', 'mujoco')
-
 
 class EngineBackend:
     """N differential-drive robots in the engine, started at a unicycle plant's state.
@@ -34,7 +31,7 @@ class EngineBackend:
                                 f'plant.model unicycle, got {plant_name!r}')
         x0 = np.asarray(x0, dtype=float)
         yaw = 2.0 * np.arctan2(x0[:, 2], x0[:, 3])
-        self.world = EngineWorld(x0[:, :2], yaw, model=model)
+        self.world = EngineWorld(x0[:, :2], yaw, model=model, speeds=x0[:, 4])
 
     @property
     def contacts_step(self) -> set[tuple[int, int]]:

@@ -86,10 +86,13 @@ class EngineWorld:
     :param model: the robot model (a key of :data:`MODELS`).
     :param timestep: the engine's step (s); each :meth:`step` runs ``round(period /
         timestep)`` of them.
+    :param speeds: initial forward speed of each robot (N, m/s; default: at rest), its wheels
+        rolling with it.
     """
 
     def __init__(self, positions: np.ndarray, headings: np.ndarray,
-                 model: str = 'turtlebot3_burger', timestep: float = 0.002) -> None:
+                 model: str = 'turtlebot3_burger', timestep: float = 0.002,
+                 speeds: np.ndarray | None = None) -> None:
         positions = np.asarray(positions, dtype=float)
         headings = np.asarray(headings, dtype=float)
         if (positions.ndim != 2 or positions.shape[1] != 2
@@ -131,6 +134,12 @@ class EngineWorld:
         for i, b in enumerate(self._body):
             robot_of_body[m.body_rootid == b] = i
         self._robot_of_geom = robot_of_body[m.geom_bodyid]
+        if speeds is not None:
+            speeds = np.asarray(speeds, dtype=float)
+            self.data.qvel[self._qvel] = speeds * np.cos(headings)
+            self.data.qvel[self._qvel + 1] = speeds * np.sin(headings)
+            wheels = [m.jnt_dofadr[m.actuator_trnid[a, 0]] for a in self._actuators.ravel()]
+            self.data.qvel[wheels] = np.repeat(speeds / self.kinematics.wheel_radius, 2)
         mujoco.mj_forward(m, self.data)
         self.contacts_step: set[tuple[int, int]] = set()
         self.contacts_run: set[tuple[int, int]] = set()

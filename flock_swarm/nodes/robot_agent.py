@@ -260,7 +260,7 @@ class RobotAgentNode(Node):
             if not est.update(stamp, position, orientation):
                 return
             velocity, yaw_rate = est.velocity, est.yaw_rate
-        self.states[j] = plant_state(self.plant.name, self.scenario.dim, position,
+        self.states[j] = plant_state(self.plant, self.scenario.dim, position,
                                      orientation, velocity, yaw_rate)
         self.positions[j] = position
         self.stamps[j] = at
