@@ -90,10 +90,19 @@ def test_the_engine_counts_robots_that_touch(fleet, tmp_path, ros_domain):
     assert np.linalg.norm(q[:, 0] - q[:, 1], axis=-1)[-1] > 0.153
 
 
-def test_a_plant_the_engine_has_no_robot_for_is_one_line(tmp_path, ros_domain):
-    from flock_swarm.core.errors import ScenarioError
-    with pytest.raises(ScenarioError, match='backend: mujoco drives differential-drive '
-                                            'robots: it needs plant.model unicycle'):
-        run_swarm('demo', tmp_path / 'di', ['duration=0.1', 'n_agents=2',
-                                             'informed.count=1'],
-                  domain_id=ros_domain, world_params={'backend': 'mujoco'}, timeout=60.0)
+@pytest.mark.parametrize('params, line', [
+    (['backend:=mujoco'], 'world: error: backend: mujoco drives differential-drive robots: '
+                          "it needs plant.model unicycle, got 'double_integrator'"),
+    (['backend:=bullet'], "world: error: backend: invalid value 'bullet'")])
+def test_a_backend_the_world_cannot_run_is_one_line(params, line, tmp_path, ros_domain):
+    import os
+    import subprocess
+
+    from flock_swarm.nodes.harness import executable
+    args = ['--ros-args', '-p', 'scenario:=demo', '-p', f'out_dir:={tmp_path}']
+    for p in params:
+        args += ['-p', p]
+    res = subprocess.run(executable('world') + args, capture_output=True, text=True,
+                         env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)), timeout=60)
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines() == [line]
