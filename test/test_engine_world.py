@@ -106,3 +106,17 @@ def test_a_backend_the_world_cannot_run_is_one_line(params, line, tmp_path, ros_
                          env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)), timeout=60)
     assert res.returncode == 2
     assert res.stderr.strip().splitlines() == [line]
+
+
+def test_swarm_flies_a_scenario_against_the_engine(fleet, tmp_path, ros_domain):
+    """``swarm FILE --backend mujoco`` (docs/robots.md): the world node runs the engine."""
+    import os
+    import subprocess
+    import sys
+    out = tmp_path / 'cli'
+    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', str(fleet), '--backend', 'mujoco', '--set', 'duration=1.0',
+                          '--out', str(out), '--no-plots', '--domain-id', str(ros_domain)],
+                         capture_output=True, text=True, env=dict(os.environ), timeout=180)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['robot_contacts'] == 0
