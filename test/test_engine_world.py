@@ -114,8 +114,9 @@ def test_swarm_flies_a_scenario_against_the_engine(fleet, tmp_path, ros_domain):
     import subprocess
     import sys
     out = tmp_path / 'cli'
-    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', str(fleet), '--backend', 'mujoco', '--set', 'duration=1.0',
-                          '--out', str(out), '--no-plots', '--domain-id', str(ros_domain)],
+    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', str(fleet),
+                          '--backend', 'mujoco', '--set', 'duration=1.0', '--out', str(out),
+                          '--no-plots', '--domain-id', str(ros_domain)],
                          capture_output=True, text=True, env=dict(os.environ), timeout=180)
     assert res.returncode == 0, res.stderr
     summary = json.loads((out / 'summary.json').read_text())
