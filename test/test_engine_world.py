@@ -10,7 +10,7 @@ import yaml
 from mcap.reader import make_reader
 
 from flock_swarm.testing import run_swarm
-from test_robots_ros import FLEET
+from test_robots_ros import FLEET, FLEET_FILE
 
 pytestmark = pytest.mark.ros
 
@@ -108,13 +108,14 @@ def test_a_backend_the_world_cannot_run_is_one_line(params, line, tmp_path, ros_
     assert res.stderr.strip().splitlines() == [line]
 
 
-def test_swarm_flies_a_scenario_against_the_engine(fleet, tmp_path, ros_domain):
-    """``swarm FILE --backend mujoco`` (docs/robots.md): the world node runs the engine."""
+def test_swarm_flies_a_scenario_against_the_engine(tmp_path, ros_domain):
+    """``swarm examples/robots/tb3_fleet.yaml --backend mujoco`` (docs/robots.md): the world
+    node runs the engine."""
     import os
     import subprocess
     import sys
     out = tmp_path / 'cli'
-    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', str(fleet),
+    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', str(FLEET_FILE),
                           '--backend', 'mujoco', '--set', 'duration=1.0', '--out', str(out),
                           '--no-plots', '--domain-id', str(ros_domain)],
                          capture_output=True, text=True, env=dict(os.environ), timeout=180)

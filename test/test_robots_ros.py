@@ -10,6 +10,7 @@ import re
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,23 +23,9 @@ from flock_swarm.testing import spin_until
 pytestmark = pytest.mark.ros
 
 #: Six TurtleBot3 Burgers behind a leader circling at 0.1 m/s on a 1 m radius, Su 2009
-#: protocol (10) at the robots' scale (docs/robots.md shows the same file).
-FLEET = {
-    'name': 'tb3_fleet', 'description': 'six TurtleBot3 Burgers behind a circling leader',
-    'reference': 'Su, Wang, Lin 2009, eq. (10), at the TurtleBot3 Burger scale',
-    'dim': 2, 'n_agents': 6, 'dt': 0.05, 'duration': 60.0, 'seed': 3, 'record_every': 1,
-    'protocol': {'name': 'su_informed', 'r': 1.2, 'd': 1.0, 'eps': 0.1, 'h': 0.9, 'a': 2.0,
-                 'b': 2.0, 'c1': 0.3, 'c2': 1.0},
-    'graph': {'type': 'disk'}, 'informed': {'select': 'random', 'count': 6},
-    'initial': {'positions': [[-0.9, -0.45], [0.0, -0.45], [0.9, -0.45], [-0.9, 0.45],
-                              [0.0, 0.45], [0.9, 0.45]],
-                'velocities': [[0.05, 0.0]] * 6},
-    'leader': {'model': 'linear', 'position': [0.0, 0.0], 'velocity': [0.1, 0.0],
-               'A': [[0.0, -0.1], [0.1, 0.0]]},
-    'plant': {'model': 'unicycle', 'ell': 0.1, 'max_speed': 0.22, 'max_yaw_rate': 2.84,
-              'max_accel': 0.5},
-    'metrics': {'eta_tolerance': 0.05, 'collision_distance': 0.25},
-}
+#: protocol (10) at the robots' scale (docs/robots.md shows the file).
+FLEET_FILE = Path(__file__).resolve().parents[1] / 'examples' / 'robots' / 'tb3_fleet.yaml'
+FLEET = yaml.safe_load(FLEET_FILE.read_text())
 
 
 @pytest.fixture
