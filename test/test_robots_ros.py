@@ -328,3 +328,43 @@ def test_the_profiles_make_the_launch_parameters():
         '/{robot}/mavros/setpoint_velocity/cmd_vel_unstamped'
     with pytest.raises(ValueError, match=r"unknown robot profile 'roomba'"):
         robot_agent_parameters({**defaults, 'profile': 'roomba'})
+
+
+def test_motion_capture_poses_give_the_robot_its_estimated_velocity(fleet, ros_context):
+    """``odom_type:=pose``: PoseStamped of a robot driving at 0.1 m/s along its heading (the
+    y axis) give the robot agent the state of a unicycle at 0.1 m/s, heading pi/2."""
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.qos import qos_profile_sensor_data
+
+    from flock_swarm.nodes.spin import make_executor
+    executor = make_executor(ros_context)
+    node = rclpy.create_node('mocap', context=ros_context)
+    executor.add_node(node)
+    pub = node.create_publisher(PoseStamped, '/vrpn_mocap/agent_0/pose',
+                                qos_profile_sensor_data)
+    agent = robot_agents(ros_context, fleet, 1, executor, odom_type='pose',
+                         odom_topic='/vrpn_mocap/{robot}/pose', pose_filter_tau=0.0)[0]
+    try:
+        k = 0
+
+        def sent_until_estimated():
+            nonlocal k
+            msg = PoseStamped()
+            msg.header.frame_id = 'world'
+            ns = k * 10_000_000
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+            msg.pose.position.y = 0.1 * ns * 1e-9
+            msg.pose.orientation.z = msg.pose.orientation.w = math.sqrt(0.5)
+            pub.publish(msg)
+            k += 1
+            x = agent.states[0]
+            return x is not None and abs(x[4] - 0.1) < 1e-6
+        spin_until(executor, sent_until_estimated, 30, 'the estimated velocity')
+        x = agent.states[0]
+        assert 2 * math.atan2(x[2], x[3]) == pytest.approx(math.pi / 2)
+        assert x[5] == pytest.approx(0.0, abs=1e-9)
+    finally:
+        for n in (agent, node):
+            executor.remove_node(n)
+            n.destroy_node()
