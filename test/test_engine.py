@@ -127,3 +127,26 @@ def test_the_backend_needs_differential_drive_robots():
     with pytest.raises(ScenarioError, match="backend: mujoco drives differential-drive robots: "
                                             "it needs plant.model unicycle, got 'velocity_lag'"):
         EngineBackend('velocity_lag', np.zeros((2, 4)))
+
+
+def test_sim_flies_the_fleet_against_the_engine(tmp_path):
+    """``sim FILE --backend mujoco``: the engine integrates; a plant it has no robot for is
+    one line with exit status 2."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+    fleet = Path(__file__).resolve().parents[1] / 'examples' / 'robots' / 'tb3_fleet.yaml'
+    sim = [sys.executable, '-m', 'flock_swarm.cli.sim']
+    res = subprocess.run(sim + [str(fleet), '--backend', 'mujoco', '--set', 'duration=2',
+                                '--out', str(tmp_path / 'mj'), '--quiet'],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads((tmp_path / 'mj' / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['collisions'] == 0
+    res = subprocess.run(sim + ['demo', '--backend', 'mujoco', '--out', str(tmp_path / 'di')],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2
+    assert res.stderr.splitlines() == [
+        "sim: error: backend: mujoco drives differential-drive robots: it needs plant.model "
+        "unicycle, got 'double_integrator'"]

@@ -42,11 +42,21 @@ def check_recording(out) -> None:
 
 
 def test_six_engine_robots_follow_a_circling_leader_in_lockstep(fleet, tmp_path, ros_domain):
-    """The agent nodes as they are (sim's conversion), the world stepping the engine."""
+    """The agent nodes as they are (sim's conversion), the world stepping the engine: the run
+    equals ``sim --backend mujoco`` bit for bit (the engine is deterministic)."""
+    from functools import partial
+
+    from flock_swarm.core.run import simulate
+    from flock_swarm.engine.backend import EngineBackend
+    from flock_swarm.outputs import json_text
+    from flock_swarm.testing import compare_runs, SIM_ONLY
     out = tmp_path / 'lockstep'
     run = run_swarm(fleet, out, ['duration=10.0'], domain_id=ros_domain,
                     world_params={'backend': 'mujoco'}, timeout=120.0)
     flocked(run, 0.02)
+    ref = simulate(run.scenario, integrator=partial(EngineBackend, 'unicycle'))
+    want = {k: v for k, v in json.loads(json_text(ref.summary)).items() if k not in SIM_ONLY}
+    assert compare_runs(want, ref.series, run.summary, run.timeseries(), 0.0) == []
     series = run.timeseries()
     # The series hold the engine's robots as the plant state, heading included.
     assert series['plant_state'].shape[1:] == (6, 6) and 'heading' in series

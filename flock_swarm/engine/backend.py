@@ -15,6 +15,14 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.engine.mujoco_world import EngineWorld
 
 
+def check_plant(plant_name: str) -> None:
+    """Raise :class:`ScenarioError` (key ``backend``) unless the engine has robots of the
+    scenario's plant: the differential-drive ``unicycle``."""
+    if plant_name != 'unicycle':
+        raise ScenarioError('backend', 'mujoco drives differential-drive robots: it needs '
+                            f'plant.model unicycle, got {plant_name!r}')
+
+
 class EngineBackend:
     """N differential-drive robots in the engine, started at a unicycle plant's state.
 
@@ -26,9 +34,7 @@ class EngineBackend:
 
     def __init__(self, plant_name: str, x0: np.ndarray, model: str = 'turtlebot3_burger'
                  ) -> None:
-        if plant_name != 'unicycle':
-            raise ScenarioError('backend', 'mujoco drives differential-drive robots: it needs '
-                                f'plant.model unicycle, got {plant_name!r}')
+        check_plant(plant_name)
         x0 = np.asarray(x0, dtype=float)
         yaw = 2.0 * np.arctan2(x0[:, 2], x0[:, 3])
         self.world = EngineWorld(x0[:, :2], yaw, model=model, speeds=x0[:, 4])
