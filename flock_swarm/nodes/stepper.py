@@ -30,13 +30,13 @@ from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.plants.base import COMMANDS
-from flock_swarm.engine import BACKENDS
 from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
                                   interaction_graph, observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.summary import with_failure
 from flock_swarm.core.faults import agents_text
+from flock_swarm.engine import BACKENDS
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
