@@ -9,7 +9,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed']},
+    # The robot models of the physics-engine world (flock_swarm/engine/*.xml, MJCF).
+    package_data={package_name: ['py.typed', 'engine/*.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -41,6 +42,10 @@ setup(
             'analyze = flock_swarm.cli.analyze:main',
             'sweep = flock_swarm.cli.sweep:main',
             'foxglove_server = flock_swarm.nodes.foxglove_server:main',
+            # A flocking agent on a real robot, behind the safety layer (docs/robots.md).
+            'robot_agent = flock_swarm.nodes.robot_agent:main',
+            # Simulated robots: the physics engine behind each robot's cmd_vel and odom.
+            'engine_robots = flock_swarm.nodes.engine_robots:main',
         ],
         # The built-in laws, leader models and plants, registered exactly as a user's package
         # registers its own (docs/extending.md): one registry, one code path.

@@ -21,7 +21,8 @@ from conftest import BUILD_TIMEOUT, copy_sources, run_installed, subprocess_env
 pytestmark = pytest.mark.ros
 
 PACKAGE = 'flock_swarm'
-EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm', 'sweep', 'foxglove_server')
+EXECUTABLES = ('leader', 'agent', 'world', 'sim', 'swarm', 'sweep', 'foxglove_server',
+               'robot_agent', 'engine_robots')
 #: The world run: demo with 3 agents for 0.06 s at dt = 0.02 s, i.e. steps 0..3, each closed
 #: by the step timeout (no agent or leader runs), starting at once.
 N_AGENTS = 3

@@ -9,6 +9,7 @@ A thin command over :mod:`flock_swarm.core.run` (the run) and :mod:`flock_swarm.
 import argparse
 import signal
 import sys
+from functools import partial
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
@@ -18,6 +19,7 @@ from flock_swarm.core import registry
 from flock_swarm.core.faults import RunFault
 from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
+from flock_swarm.engine import BACKENDS
 from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
 #: Exit status when the state stopped being finite.
@@ -38,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO)')
     parser.add_argument('--plots', action='store_true', help='also write PNG figures')
     parser.add_argument('--quiet', action='store_true', help='no progress output')
+    parser.add_argument('--backend', choices=BACKENDS, default='plant',
+                        help="what integrates the agents: 'plant' (the scenario's plant "
+                        "model) or 'mujoco' (the physics engine, as the world's backend: "
+                        'plant.model unicycle; docs/robots.md)')
     parser.add_argument('--allow-unstable', action='store_true',
                         help='run even when dt violates a stability bound')
     return parser
@@ -106,6 +112,16 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
     except ScenarioError as exc:
         print(f'sim: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
+    integrator = None
+    if args.backend == 'mujoco':
+        # Imported here: MuJoCo loads only for a run that uses it.
+        from flock_swarm.engine.backend import EngineBackend, check_plant
+        try:
+            check_plant(sc.plant.model.name)
+        except ScenarioError as exc:
+            print(f'sim: error: {exc}', file=sys.stderr)
+            return EXIT_USAGE
+        integrator = partial(EngineBackend, sc.plant.model.name)
     out = args.out if args.out is not None else Path('out') / sc.name
     try:
         ensure_writable(out)
@@ -117,7 +133,7 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
         say(f'[sim] {sc.name}: {sc.n_agents} agents, {sc.law.name}, {sc.steps} steps '
             f'of {sc.dt:g} s, seed {sc.seed}')
     try:
-        result = simulate(sc, progress=say)
+        result = simulate(sc, progress=say, integrator=integrator)
     except RunFault as fault:
         # The fault came before the first recorded instant: nothing to write.
         print(f'sim: error: {fault}', file=sys.stderr)

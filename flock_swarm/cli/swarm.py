@@ -19,6 +19,7 @@ from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, One
                                  StopSignals, out_dir, signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
+from flock_swarm.engine import BACKENDS
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
                                        run_processes)
@@ -64,6 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--pace', type=float, default=0.0, metavar='FACTOR',
                         help='lockstep: at most FACTOR simulated seconds per wall second '
                         '(1: real time, to watch a run; default 0: as fast as it goes)')
+    parser.add_argument('--backend', choices=BACKENDS, default='plant',
+                        help="what the world integrates the agents with: 'plant' (the "
+                        "scenario's plant model, as sim) or 'mujoco' (the physics engine; "
+                        'plant.model unicycle; docs/robots.md)')
     parser.add_argument('--wait-for-viewer', action='store_true',
                         help='with --foxglove: start the run once a viewer has subscribed')
     parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
@@ -151,6 +156,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
         world_params['pace'] = args.pace
     if args.no_record:
         world_params['record'] = False
+    if args.backend != 'plant':
+        world_params['backend'] = args.backend
     if live is not None:
         # Every channel is advertised before the address is announced: a client connecting
         # on the announcement gets them all at once, not while the nodes are being built

@@ -320,21 +320,27 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
 
 
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
-             progress_every: float = 2.0) -> SimResult:
+             progress_every: float = 2.0, integrator: Callable | None = None) -> SimResult:
     """Run a scenario to its end and return the summary and the recorded time series.
 
     :param sc: the validated scenario.
     :param progress: called with a one-line status roughly every ``progress_every`` seconds.
     :param progress_every: wall-clock seconds between progress lines.
+    :param integrator: ``None`` (the plant steps itself), or a factory called with the
+        plant's initial state, returning what integrates the agents instead: an object with
+        ``state()`` (the state rows it starts from) and the plant's ``step(x, cmd, dt)``
+        (the physics engine, :class:`flock_swarm.engine.backend.EngineBackend`: ``sim
+        --backend mujoco``, as the world's ``backend``).
     :return: the result; ``summary['status']`` is ``completed``, ``interrupted``,
         ``diverged`` (the state stopped being finite) or ``failed`` (a fault of the law or
         the leader model: ``summary['failure']`` tells it in one line).
     """
-    return simulate_stack([sc], progress, progress_every)[0]
+    return simulate_stack([sc], progress, progress_every, integrator)[0]
 
 
 def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | None = None,
-                   progress_every: float = 2.0) -> list[SimResult]:
+                   progress_every: float = 2.0,
+                   integrator: Callable | None = None) -> list[SimResult]:
     """Run independent realisations side by side in one vectorised state; return each result.
 
     A Monte Carlo sweep pays the per-step cost of Python once for the whole stack instead of
@@ -351,6 +357,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     :param progress: called with a one-line status (of the first realisation still running)
         roughly every ``progress_every`` seconds.
     :param progress_every: wall-clock seconds between progress lines.
+    :param integrator: :func:`simulate`'s (a single realisation only: it holds one swarm).
     :return: one result per scenario, in order; ``summary['wall_time_s']`` is the stack's
         wall time divided among its realisations.
     :raises ValueError: when the scenarios cannot share a stack.
@@ -363,7 +370,10 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     reals = [realize(s) for s in scenarios]
     leader = VirtualLeader(sc.leader.model, sc.leader.position, sc.leader.velocity)
     intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
-    stack = _Stack(scenarios, reals, static_graph(sc, reals[0]) if len(reals) == 1 else None)
+    if integrator is not None and len(scenarios) != 1:
+        raise ValueError('an integrator runs one realisation, not a stack')
+    stack = _Stack(scenarios, reals, static_graph(sc, reals[0]) if len(reals) == 1 else None,
+                   integrator)
     started = time.monotonic()
     # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
     with np.errstate(over='ignore', invalid='ignore'):
@@ -450,7 +460,7 @@ class _Stack:
     """
 
     def __init__(self, scenarios: list[Scenario], reals: list[Realization],
-                 static: EdgeList | None) -> None:
+                 static: EdgeList | None, integrator: Callable | None = None) -> None:
         """Stack the initial states, per-agent data and logs of the realisations."""
         sc = scenarios[0]
         self.scenarios, self.reals, self.static = scenarios, reals, static
@@ -468,6 +478,12 @@ class _Stack:
         self.x: np.ndarray | None = None
         if self.plant is not None:
             self.x = self.plant.initial_state(self.q, self.p)
+            self.q, self.p = self.plant.law_state(self.x)
+        #: What steps the plant instead of its own ``step`` (``simulate``'s integrator).
+        self.integrator = None
+        if integrator is not None:
+            self.integrator = integrator(self.x)
+            self.x = self.integrator.state()
             self.q, self.p = self.plant.law_state(self.x)
         self.agents = stack_agents([r.agents for r in reals])
         self.reselector = Reselector(sc.law) if sc.informed.reselect and static is None \
@@ -607,7 +623,8 @@ class _Stack:
         if self.plant is None:
             self.q, self.p = step_agents(self.q, self.p, u, dt, intrinsic)
             return
-        self.x = self.plant.step(self.x, self.plant.command(self.x, u, dt), dt)
+        step = self.plant.step if self.integrator is None else self.integrator.step
+        self.x = step(self.x, self.plant.command(self.x, u, dt), dt)
         self.q, self.p = self.plant.law_state(self.x)
 
 

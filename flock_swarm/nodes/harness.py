@@ -274,8 +274,9 @@ class InProcessSwarm:
                     out_dir=str(self.out), step_timeout=step_timeout, **(world_params or {}))))
             self.leader = self.add_leader()
             hosted = range(self.scenario.n_agents) if agents is None else agents
+            # No agent hosted (``agents=[]``): the test brings its own, robot agents say.
             self.agents = self.add_agents([int(i) for i in hosted], 'agents',
-                                          **(agent_params or {}))
+                                          **(agent_params or {})) if len(hosted) else None
             if live is not None:
                 self.serve(live)
         except BaseException:

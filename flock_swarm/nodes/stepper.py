@@ -36,6 +36,7 @@ from flock_swarm.core.run import (LinkObserver, Recorder, RunLog, SimResult, bui
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.summary import with_failure
 from flock_swarm.core.faults import agents_text
+from flock_swarm.engine import BACKENDS
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
@@ -126,6 +127,8 @@ class WorldSettings:
         (it answered before) before the run ends as ``failed`` (0: never).
     :ivar command: the command interface the world applies: ``''`` (the scenario's
         ``plant.command``), ``accel`` or ``cmd_vel``.
+    :ivar backend: what integrates the agents: ``plant`` (the plant model, as ``sim``) or
+        ``mujoco`` (the physics engine, :mod:`flock_swarm.engine.backend`).
     """
 
     lockstep: bool = True
@@ -137,6 +140,7 @@ class WorldSettings:
     max_missed_steps: int = 3
     peer_timeout: float = 6.0
     command: str = ''
+    backend: str = 'plant'
 
     @classmethod
     def from_parameters(cls, values: dict, lockstep: bool) -> 'WorldSettings':
@@ -175,6 +179,9 @@ SETTING_PARAMS = (
     _setting('command', "the agents' command interface the world applies: '' (the scenario's "
              'plant.command), accel (cmd_accel) or cmd_vel (Twist on cmd_vel)',
              lambda v: v in ('', *COMMANDS)),
+    _setting('backend', "what integrates the agents: 'plant' (the scenario's plant model, "
+             "as sim) or 'mujoco' (the physics engine: differential-drive robots that touch, "
+             'plant.model unicycle; docs/robots.md)', lambda v: v in BACKENDS),
 )
 
 
@@ -240,6 +247,16 @@ class WorldStepper:
         if self.plant is not None:
             self.x = self.plant.initial_state(self.q, self.p)
             self.q, self.p = self.plant.law_state(self.x)
+        #: The physics engine integrating the robots instead of the plant (``backend``).
+        self.engine = None
+        if settings.backend == 'mujoco':
+            # Imported here: MuJoCo loads only for a world that uses it.
+            from flock_swarm.engine.backend import EngineBackend
+            self.engine = EngineBackend('double_integrator' if self.plant is None
+                                        else self.plant.name, self.x)
+            self.x = self.engine.state()
+            self.q, self.p = self.plant.law_state(self.x)
+            self.contacts_told: set[tuple[int, int]] = set()
         #: Whether the world applies the agents' velocity commands (``cmd_vel``).
         self.velocity = command_interface(sc, settings.command) == 'cmd_vel'
         # The open step's velocity commands by agent, (linear, angular) rows of 3 (lockstep);
@@ -683,6 +700,9 @@ class WorldStepper:
             if counts is not None:
                 # Of the steps since the previous message (docs/network.md).
                 values.update(self.net_metrics.take(sc.dt))
+            if self.engine is not None:
+                values.update(robot_contacts=len(self.engine.contacts_run),
+                              robot_contacts_this_step=len(self.engine.contacts_step))
             problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
                 + ([f'{len(non_finite)} non-finite command(s)'] if non_finite else []) \
                 + (['leader lost'] if self.leader.lost else [])
@@ -713,10 +733,21 @@ class WorldStepper:
         if self.plant is None:
             self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
         else:
-            self.x = self.plant.step(self.x, self.plant_command(u), self.scenario.dt)
+            step = self.plant.step if self.engine is None else self.engine.step
+            self.x = step(self.x, self.plant_command(u), self.scenario.dt)
             self.q, self.p = self.plant.law_state(self.x)
+            if self.engine is not None:
+                self._note_contacts()
         self.k += 1
         return bool(np.isfinite(self.q).all() and np.isfinite(self.p).all())
+
+    def _note_contacts(self) -> None:
+        """Log the robot pairs that touched in the engine for the first time."""
+        new = self.engine.contacts_run - self.contacts_told
+        if new:
+            self.log.warning(f'step {self.k}: robots in contact in the physics engine: '
+                             f'{sorted(new)}')
+            self.contacts_told |= new
 
     def progress_line(self, now: float, every: float = 2.0) -> str | None:
         """Return a one-line status when ``every`` seconds have passed since the last."""
@@ -774,6 +805,8 @@ class WorldStepper:
             'wall_time_s': round(now - self.t_wall0, 3),
             'bag': bag,
         })
+        if self.engine is not None:
+            summary['robot_contacts'] = len(self.engine.contacts_run)
         return SimResult(summary, series)
 
 
