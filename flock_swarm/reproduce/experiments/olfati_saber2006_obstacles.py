@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from flock_swarm import plots
 from flock_swarm.core.graphs import components, disk_graph
 from flock_swarm.core.scenario import Scenario
+from flock_swarm.presets import load
 from flock_swarm.reproduce.common import FIG_SIZE, fmt, plural, pyplot, save_figure
 from flock_swarm.reproduce.experiment import Experiment, FractionClaim
 
@@ -32,6 +32,16 @@ ROWS = (
     ('max ‖p_i - p_gamma‖ at t_final [m/s]', 'velocity_mismatch_max', '-> 0'),
     ('closest approach of two agents [m]', 'min_pair_distance', '> 0'),
 )
+
+#: Where the numbers of both presets come from (the claims end with it).
+SOURCES = (
+    ' Sources: the report\'s text past its abstract was not retrievable with our search '
+    'tool; Section VIII\'s parameters are those of our notes '
+    '(`shared/papers/olfati_saber_2006_obstacles_notes.md`, marked there "to verify in the '
+    'report") and the obstacle matrices and snapshot times those of an independent '
+    'reproduction of the paper\'s figures (GitHub AIMSLab-IIITAllahabad/alpha-lattice-'
+    'flocking, `demo_squeezing.py`, `demo_algorithm3_obstacles.py`). Check them against '
+    'the report before relying on a number.')
 
 #: The distributions over seeds (what, metric, the paper's value).
 COLUMNS = (
@@ -135,28 +145,46 @@ def obstacle_claim(what: str) -> FractionClaim:
         't_final)', squeezed_and_rejoined, 'safe passage, one velocity-matched flock after')
 
 
-def discuss_obstacles(m: dict, manoeuvre: str) -> str:
-    """Return the discussion of one run of an obstacle experiment (from its numbers)."""
+def discuss_obstacles(m: dict, manoeuvre: str, sc: Scenario) -> str:
+    """Return the discussion of one run of an obstacle experiment (from its numbers).
+
+    :param m: the run's numbers.
+    :param manoeuvre: the manoeuvre in words ('squeezing through the gap').
+    :param sc: the preset (its gains).
+    """
     safe = m['penetrations'] == 0 and m['clearance_min'] > 0
+    d_beta = sc.obstacles.d_beta
     text = (f'The run ({m["n_agents"]} agents) {"keeps" if safe else "does not keep"} every '
-            f'agent outside the obstacles: smallest clearance {fmt(m["clearance_min"])} m, '
-            f'{plural(m["penetrations"], "penetration")}. ')
+            f'agent outside the obstacles: smallest clearance {fmt(m["clearance_min"])} m '
+            f'(d\' = {fmt(d_beta)} m), {plural(m["penetrations"], "penetration")}. ')
     passed = m['agents_passed'] == m['n_agents']
     when = f' (all by t = {fmt(m["passage_time"])} s)' if passed else ''
     text += (f'{m["agents_passed"]} of {m["n_agents"]} agents are past the obstacles at '
              f't = {fmt(m["t_final"])} s{when}. ')
     text += (f'While {manoeuvre} the agents form up to '
              f'{plural(m["components_max_passing"], "r-disk component")}; at t_final they '
-             f'form {plural(m["components_final"], "component")}')
+             f'form {plural(m["components_final"], "component")} (the largest of '
+             f'{m["largest_component_final"]} agents)')
     if m['rejoin_time'] is not None:
         text += f', one for good {fmt(m["rejoin_time"])} s after the last agent passed'
-    text += (f', with max ‖p_i - p_gamma‖ = {fmt(m["velocity_mismatch_max"])} m/s. ')
-    text += ('The paper shows one realisation as snapshots and gives no number to compare '
-             'against; the gains it leaves open and the initial box are ours (preset header). '
-             'With the bounded gamma term an agent far behind its flock catches up at only '
-             'about c1_gamma / c2_gamma m/s relative to the leader, so stragglers that the '
-             'obstacles held back take long to rejoin: the run length decides the verdict '
-             'as much as the law does.')
+    text += (f', the last agent {fmt(m["trailing_distance"])} m behind the leader, and max '
+             f'‖p_i - p_gamma‖ = {fmt(m["velocity_mismatch_max"])} m/s. ')
+    law = sc.law
+    if law.navigation == 'bounded' and m['components_final'] > 1:
+        text += ('Why the flock does not reassemble within the run: the gamma term of '
+                 'Algorithm 3 is bounded (-c1 sigma_1(q_i - q_gamma)), so an agent the '
+                 'obstacles held back and cut off from the flock is pulled with at most c1 '
+                 'and, against the damping -c2 (p_i - p_gamma), gains only c1 / c2 = '
+                 f'{fmt(law.c1 / law.c2)} m/s on the leader: a lag of 100 m takes '
+                 f'{fmt(100.0 * law.c2 / law.c1)} s to make up. ')
+    text += (f'Closest approach of two agents: {fmt(m["min_pair_distance"])} m '
+             f'({m["collisions"]} pairs closer than the preset\'s collision distance): '
+             'pressed together in the gap, neighbours can meet, since with a = b the pair '
+             'gradient phi_alpha n_ij vanishes as two agents coincide (as in Su 2009 Fig. 2). '
+             'The paper shows one realisation as snapshots and gives no number to compare '
+             'against; the gains it leaves open, the leader\'s speed, the initial box and the '
+             'run length are ours (preset header), and the variants below test the two that '
+             'matter here.')
     return text
 
 
@@ -164,11 +192,15 @@ def figure_obstacles(sc: Scenario, summary: dict, series: dict, m: dict, path: P
                      title: str) -> Path:
     """Draw snapshots of the flock with the obstacles (left) and, over time, the components
     and the smallest clearance (right)."""
+    from matplotlib.patches import Circle
     plt = pyplot()
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=FIG_SIZE, gridspec_kw={'width_ratios': [1.6, 1]})
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=FIG_SIZE,
+                                   gridspec_kw={'width_ratios': [1.6, 1]})
     q, t = series['q'], series['t']
     discs = spheres(sc)
-    plots.draw_obstacles(ax1, sc.obstacles)
+    for centre, radius in discs:
+        ax1.add_patch(Circle(centre[:2], radius, facecolor='0.35', edgecolor='k', lw=0.5,
+                             zorder=3))
     picks = np.unique(np.linspace(0, len(t) - 1, 4).round().astype(int))
     colours = plt.cm.viridis(np.linspace(0.0, 0.85, len(picks)))
     for k, colour in zip(picks, colours):
@@ -213,8 +245,8 @@ class ObstacleExperiment(Experiment):
         return m
 
     def discuss(self, m: dict) -> str:
-        """Return :func:`discuss_obstacles`."""
-        return discuss_obstacles(m, self.manoeuvre)
+        """Return :func:`discuss_obstacles` (with the preset's gains)."""
+        return discuss_obstacles(m, self.manoeuvre, load(self.scenario))
 
     def figure(self, sc: Scenario, summary: dict, series: dict, m: dict, path: Path) -> Path:
         """Return :func:`figure_obstacles`."""

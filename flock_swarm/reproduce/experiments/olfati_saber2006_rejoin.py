@@ -2,7 +2,8 @@
 behind them (Algorithm 3)."""
 
 from flock_swarm.reproduce.experiment import SetUp
-from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (ObstacleExperiment,
+from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (SOURCES,
+                                                                          ObstacleExperiment,
                                                                           obstacle_claim)
 
 
@@ -16,7 +17,7 @@ class Rejoin(ObstacleExperiment):
         'd = 7, r = 1.2 d, d\' = 0.6 d, r\' = 1.2 d\'; six obstacles of radii 10, 4, 2, 5, '
         '5, 3): the flock performs a "**split/rejoin maneuver**": it splits to pass around '
         'the obstacles and rejoins into one flock behind them, no agent colliding with an '
-        'obstacle. The paper shows it as snapshots and gives no number.')
+        'obstacle. The paper shows it as snapshots and gives no number.' + SOURCES)
     order = 220.0
     quick = ('n_agents=20', 'duration=2')
     manoeuvre = 'passing the obstacles'

@@ -2,7 +2,8 @@
 the gap between two obstacles (Algorithm 3)."""
 
 from flock_swarm.reproduce.experiment import SetUp
-from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (ObstacleExperiment,
+from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (SOURCES,
+                                                                          ObstacleExperiment,
                                                                           obstacle_claim)
 
 
@@ -18,7 +19,7 @@ class Squeeze(ObstacleExperiment):
         'passes through the narrow gap between the obstacles and reassembles behind them, '
         'no agent colliding with an obstacle (Algorithm 3\'s beta-agents keep every agent '
         'at least about d\' from the obstacles). The paper shows it as snapshots and gives '
-        'no number.')
+        'no number.' + SOURCES)
     order = 210.0
     quick = ('n_agents=20', 'duration=2')
     manoeuvre = 'squeezing through the gap'
