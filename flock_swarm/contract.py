@@ -42,6 +42,13 @@ STATUS = 'swarm/status'
 #: it to a late joiner.
 SCENARIO = 'swarm/scenario'
 SCENARIO_TYPE = STATUS_TYPE
+#: The obstacle map of a scenario with ``obstacles:`` (docs/obstacles.md): one marker per
+#: obstacle (:data:`MARKERS_TYPE`: RViz and Foxglove draw it as it is, where a custom type
+#: would need a plugin), published once by the world, latched, and recorded at t = 0 beside
+#: ``/swarm/scenario`` (which holds the exact map ``analyze`` reads); not published without
+#: obstacles.
+OBSTACLES = 'swarm/obstacles'
+OBSTACLES_TYPE = MARKERS_TYPE
 #: Faults the leader and the agent nodes report to the world (not recorded in the bag:
 #: ``summary.json`` tells them); type :data:`METRICS_TYPE`, QoS :data:`FAULTS_QOS`.
 FAULTS = 'swarm/faults'
@@ -133,6 +140,9 @@ TELEMETRY_QOS = QosSpec(depth=5)
 STATUS_QOS = QosSpec(depth=1, latched=True)
 #: /swarm/scenario: latched (transient local), published once before the run.
 SCENARIO_QOS = QosSpec(depth=1, latched=True)
+#: /swarm/obstacles: latched (transient local), published once before the run, so a viewer
+#: started later still gets the map.
+OBSTACLES_QOS = QosSpec(depth=1, latched=True)
 #: /swarm/faults: reliable, and latched (transient local) so that a world that matches a
 #: failed node late still learns its fault; the depth covers a run of non-finite commands
 #: reported step after step.

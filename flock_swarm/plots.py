@@ -6,7 +6,8 @@ needs (interaction radius, informed ids...), never a bag, so the same figures co
 ``sim``, from the ROS world's own recording and from ``analyze``. The dimension is the last
 axis of ``q``: 3-D runs get 3-D axes. Figures follow Su, Wang, Lin 2009 (Figs. 2, 5, 6):
 neighbour relations as solid lines, velocities as arrows, the virtual leader as a hexagram,
-informed agents circled.
+informed agents circled. A scenario's obstacles (``obstacles:``) are drawn by
+:func:`draw_obstacles` in every figure of positions (trajectories, snapshots, animation).
 """
 
 from pathlib import Path
@@ -16,14 +17,17 @@ from typing import Callable, Sequence
 import numpy as np
 
 from flock_swarm.core.graphs import disk_graph
+from flock_swarm.core.obstacles import ObstacleSpec
 
 
-def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str) -> list[Path]:
+def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str,
+                    obstacles: ObstacleSpec | None = None) -> list[Path]:
     """Write ``trajectories.png`` and ``metrics.png`` for a recorded run.
 
     :param series: the arrays of ``timeseries.npz``.
     :param out: the output directory.
     :param title: figure title (the scenario name).
+    :param obstacles: the scenario's obstacles (``None``: none), drawn with the paths.
     :return: the written paths.
     """
     import matplotlib
@@ -39,6 +43,13 @@ def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str) -> lis
     ax.scatter(q[-1, :, 0], q[-1, :, 1], s=10, c=np.where(informed, 'tab:red', 'tab:blue'),
                zorder=3, label='agents at t_final (red: informed)')
     ax.plot(lq[-1, 0], lq[-1, 1], 'k*', ms=14)
+    if obstacles is not None and obstacles.active:
+        # Around the paths (the view they set), never widening it to the walls' extent.
+        ax.autoscale_view()
+        xlim, ylim = ax.get_xlim(), ax.get_ylim()
+        draw_obstacles(ax, obstacles)
+        ax.set_xlim(xlim)
+        ax.set_ylim(ylim)
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
     ax.set_aspect('equal', adjustable='datalim')
@@ -96,6 +107,71 @@ LOG_SCALE_SPAN = 100.0
 ANIMATION_MAX_FRAMES = 150
 ANIMATION_DPI = 70
 ANIMATION_FPS = 15
+#: Colour and opacity of the obstacles (as on ``/swarm/markers``).
+OBSTACLE_COLOR = (0.55, 0.45, 0.35)
+OBSTACLE_ALPHA = 0.45
+
+
+def draw_obstacles(ax, obstacles: ObstacleSpec | None, center: np.ndarray | None = None,
+                   half: float | None = None) -> list:
+    """Draw a scenario's obstacles onto ``ax`` (2-D or 3-D): spheres (discs in 2-D) and walls.
+
+    A wall is the half-space behind its surface: in 2-D a shaded half-plane, in 3-D a square
+    of its plane; both are drawn large enough to cross the view (``center``, ``half``, by
+    default the axes' current limits), and nothing is drawn for ``None`` or an empty map. The
+    axes' limits are the caller's to set.
+
+    :param ax: a 2-D axes, or a 3-D one.
+    :param obstacles: the obstacles.
+    :param center: centre of the view.
+    :param half: half-width of the view.
+    :return: the artists drawn.
+    """
+    if obstacles is None or not obstacles.active:
+        return []
+    three = hasattr(ax, 'get_zlim')
+    if center is None or half is None:
+        limits = [ax.get_xlim(), ax.get_ylim()] + ([ax.get_zlim()] if three else [])
+        center = np.array([(lo + hi) / 2 for lo, hi in limits])
+        half = max((hi - lo) / 2 for lo, hi in limits)
+    artists = []
+    style = {'color': OBSTACLE_COLOR, 'alpha': OBSTACLE_ALPHA}
+    if three:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+        u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(0, np.pi, 12))
+        ball = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)])
+        for (c, r) in obstacles.spheres:
+            x, y, z = (np.asarray(c)[:, None, None] + r * ball)
+            artists.append(ax.plot_surface(x, y, z, linewidth=0, **style))
+        for point, normal in zip(obstacles.points, obstacles.normals):
+            # Two directions in the plane, and its point closest to the view's centre.
+            e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(normal, e1)
+            foot = center - normal * np.dot(center - point, normal)
+            side = half
+            corners = [foot + side * (a * e1 + b * e2)
+                       for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+            artists.append(ax.add_collection3d(Poly3DCollection([corners], **style)))
+        return artists
+    from matplotlib.patches import Circle, Polygon
+    # A 3-D map on 2-D axes (the x-y projection of plot_timeseries): spheres by their
+    # outline, walls standing on the plane (normal without z) by their trace; other walls
+    # cover the whole projection and are left out.
+    for (c, r) in obstacles.spheres:
+        artists.append(ax.add_patch(Circle(c[:2], r, zorder=0.5, lw=0, **style)))
+    for point, normal in zip(obstacles.points, obstacles.normals):
+        if normal.shape[0] == 3 and abs(normal[2]) > 1e-12:
+            continue
+        point, normal, center = point[:2], normal[:2], center[:2]
+        along = np.array([-normal[1], normal[0]])
+        # Far enough to cross the view whatever the wall's point (its foot near the centre).
+        foot = center - normal * np.dot(center - point, normal)
+        reach = 4.0 * half
+        corners = [foot + reach * along, foot - reach * along,
+                   foot - reach * along - reach * normal, foot + reach * along - reach * normal]
+        artists.append(ax.add_patch(Polygon(corners, closed=True, zorder=0.5, lw=0, **style)))
+    return artists
 
 
 def pyplot():
@@ -220,7 +296,7 @@ def _line_handles(mask: np.ndarray) -> list:
 def draw_flock(ax, q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed: np.ndarray,
                radius: float, *, strict: bool = True, center: np.ndarray | None = None,
                half: float | None = None, arrow_scale: float | None = None,
-               size: float = 18.0) -> list:
+               size: float = 18.0, obstacles: ObstacleSpec | None = None) -> list:
     """Draw one instant of the flock as in Su 2009 Figs. 2, 5, 6 onto ``ax`` (2-D or 3-D).
 
     Neighbour relations (``||q_i - q_j|| < r``) are solid lines, velocities arrows, the
@@ -238,6 +314,7 @@ def draw_flock(ax, q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed:
     :param arrow_scale: metres of arrow per m/s (default: the longest arrow is
         :data:`ARROW_FRACTION` of the view).
     :param size: marker area of an agent [pt^2].
+    :param obstacles: the scenario's obstacles (:func:`draw_obstacles`; ``None``: none).
     :return: the artists drawn (an animation removes them before the next frame).
     """
     dim = q.shape[1]
@@ -249,7 +326,7 @@ def draw_flock(ax, q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed:
     segments = np.stack([q[edges.i], q[edges.j]], axis=1)
     colors = _colors(informed)
     arrows = p * arrow_scale
-    artists = []
+    artists = draw_obstacles(ax, obstacles, center, half)
     if dim == 3:
         from mpl_toolkits.mplot3d.art3d import Line3DCollection
         artists.append(ax.add_collection3d(
@@ -293,7 +370,8 @@ def save_figure(fig, path: Path, dpi: int = FIGURE_DPI) -> Path:
 
 def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = '',
                       informed: Sequence[int] | np.ndarray | None = None,
-                      filename: str = 'trajectories.png') -> Path:
+                      filename: str = 'trajectories.png',
+                      obstacles: ObstacleSpec | None = None) -> Path:
     """Draw every agent's path and the leader's (Su 2009 Figs. 5-6 (c)); 3-D runs in 3-D.
 
     Paths start at a small open circle and end at a dot; informed agents are red and circled
@@ -304,6 +382,7 @@ def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = 
     :param title: the run's name, for the title.
     :param informed: informed ids or mask (default: from the series).
     :param filename: the file name in ``out``.
+    :param obstacles: the scenario's obstacles (``None``: none).
     :return: the written path.
     """
     plt = pyplot()
@@ -333,6 +412,7 @@ def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = 
         ax.plot(lq[:, 0], lq[:, 1], ls='--', color=LEADER_COLOR, lw=1.2)
         ax.plot(lq[-1, 0], lq[-1, 1], ls='none', marker=HEXAGRAM, ms=13, color=LEADER_COLOR)
     center, half = _bounds(np.vstack([q.reshape(-1, dim), lq]), None)
+    draw_obstacles(ax, obstacles, center, half)
     _set_limits(ax, center, half)
     from matplotlib.lines import Line2D
     handles = _line_handles(mask)
@@ -353,7 +433,8 @@ def plot_trajectories(series: dict[str, np.ndarray], out: Path, *, title: str = 
 def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
                    times: Sequence[float] | None = None, strict: bool = True, title: str = '',
                    informed: Sequence[int] | np.ndarray | None = None,
-                   filename: str = 'snapshots.png') -> Path:
+                   filename: str = 'snapshots.png',
+                   obstacles: ObstacleSpec | None = None) -> Path:
     """Draw the flock at chosen instants, one panel each (Su 2009 Fig. 2 (a)-(e), 5-6 (a)-(b)).
 
     :param series: the time series (``t``, ``q``, ``p``, ``leader_q``).
@@ -364,6 +445,7 @@ def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
     :param title: the run's name, for the title.
     :param informed: informed ids or mask (default: from the series).
     :param filename: the file name in ``out``.
+    :param obstacles: the scenario's obstacles (``None``: none).
     :return: the written path.
     """
     plt = pyplot()
@@ -375,7 +457,7 @@ def plot_snapshots(series: dict[str, np.ndarray], out: Path, *, radius: float,
     fig = plt.figure(figsize=(4.3 * cols, 4.7 if dim == 3 else 4.5))
     for n, k in enumerate(chosen):
         ax = _new_axes(fig, dim, 1, cols, n + 1)
-        draw_flock(ax, q[k], p[k], lq[k], mask, radius, strict=strict)
+        draw_flock(ax, q[k], p[k], lq[k], mask, radius, strict=strict, obstacles=obstacles)
         ax.set_title(f't = {t[k]:.4g} s', fontsize=10)
         if dim == 2:
             ax.tick_params(labelsize=8)
@@ -547,7 +629,7 @@ def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
                   informed: Sequence[int] | np.ndarray | None = None,
                   max_frames: int = ANIMATION_MAX_FRAMES, dpi: int = ANIMATION_DPI,
                   fps: int = ANIMATION_FPS, filename: str = 'flock.gif',
-                  mp4: bool = True) -> list[Path]:
+                  mp4: bool = True, obstacles: ObstacleSpec | None = None) -> list[Path]:
     """Animate the flock (:func:`draw_flock` per frame) into a GIF, and an MP4 with ffmpeg.
 
     At most ``max_frames`` evenly spaced recorded instants are drawn. The view follows the
@@ -566,6 +648,7 @@ def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
     :param fps: frames per second.
     :param filename: the GIF's file name in ``out`` (the MP4 has the same stem).
     :param mp4: also write an MP4 when ffmpeg is on ``PATH`` (skipped silently otherwise).
+    :param obstacles: the scenario's obstacles (``None``: none), drawn in every frame.
     :return: the written paths (GIF first).
     """
     plt = pyplot()
@@ -600,7 +683,7 @@ def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
             artist.remove()
         center = _bounds(np.vstack([q[k], lq[k][None]]), radius)[0]
         drawn[:] = draw_flock(ax, q[k], p[k], lq[k], mask, radius, strict=strict,
-                              center=center, half=half, size=14.0)
+                              center=center, half=half, size=14.0, obstacles=obstacles)
         box = f', view {2 * half:.3g} m wide' if dim == 3 else ''
         ax.set_title(f'{title}  t = {t[k]:.2f} s{box}'.strip(), fontsize=10)
 
@@ -621,7 +704,8 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
                   informed: Sequence[int] | np.ndarray | None = None,
                   eta_tolerance: float | None = None, collision_distance: float | None = None,
                   snapshots: Sequence[float] | None = None, animate: bool = True,
-                  progress: Callable[[Path], None] | None = None) -> list[Path]:
+                  progress: Callable[[Path], None] | None = None,
+                  obstacles: ObstacleSpec | None = None) -> list[Path]:
     """Write every figure of ``analyze`` for one run (and ``flock.gif`` unless told not to).
 
     Files: ``trajectories.png``, ``snapshots.png``, ``velocity_mismatch.png``,
@@ -639,13 +723,15 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
     :param snapshots: snapshot times [s] (default first, middle, last).
     :param animate: write the animation.
     :param progress: called with each path once written.
+    :param obstacles: the scenario's obstacles (``None``: none), drawn in the trajectories,
+        the snapshots and the animation.
     :return: the written paths.
     """
     mask = informed_mask(series, informed)
     jobs: list[Callable[[], Path | list[Path]]] = [
-        lambda: plot_trajectories(series, out, title=title, informed=mask),
+        lambda: plot_trajectories(series, out, title=title, informed=mask, obstacles=obstacles),
         lambda: plot_snapshots(series, out, radius=radius, times=snapshots, strict=strict,
-                               title=title, informed=mask),
+                               title=title, informed=mask, obstacles=obstacles),
         lambda: plot_velocity_mismatch(series, out, title=title, informed=mask),
         lambda: plot_com_error(series, out, title=title),
         lambda: plot_min_distance(series, out, title=title,
@@ -655,7 +741,7 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
     ]
     if animate:
         jobs.append(lambda: animate_flock(series, out, radius=radius, strict=strict,
-                                          title=title, informed=mask))
+                                          title=title, informed=mask, obstacles=obstacles))
     written: list[Path] = []
     for job in jobs:
         result = job()

@@ -13,7 +13,8 @@ import sys
 from xml.sax.saxutils import escape
 
 from flock_swarm.contract import (CLOCK, FAULTS, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
-                                  SCENARIO, STATUS, cmd_topic, odom_topic, state_topic)
+                                  OBSTACLES, SCENARIO, STATUS, cmd_topic, odom_topic,
+                                  state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -36,7 +37,7 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     """
     odom = [odom_topic(i) for i in range(n_agents)]
     out = {
-        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO],
+        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO, OBSTACLES],
                   [*(cmd_topic(i) for i in range(n_agents)),
                    *(state_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL,
                    FAULTS]),

@@ -306,3 +306,36 @@ def test_stacked_runs_with_obstacles_equal_their_own_runs():
 def test_spec_is_hashable_and_compares_by_value():
     a, b = mixed_spec(2), mixed_spec(2)
     assert a == b and hash(a) == hash(b) and a != ObstacleSpec()
+
+
+def obstacle_pixels(path):
+    """Return how many pixels of a figure have the obstacles' colour on white."""
+    from PIL import Image
+
+    from flock_swarm.plots import OBSTACLE_ALPHA, OBSTACLE_COLOR
+    want = 255 * (OBSTACLE_ALPHA * np.array(OBSTACLE_COLOR) + (1 - OBSTACLE_ALPHA))
+    with Image.open(path) as image:
+        rgb = np.asarray(image.convert('RGB'), dtype=float)
+    return int((np.abs(rgb - want).max(axis=-1) < 4).sum())
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_every_figure_of_positions_draws_the_obstacles(tmp_path, dim):
+    from flock_swarm.plots import (animate_flock, plot_snapshots, plot_timeseries,
+                                   plot_trajectories)
+    sc, _ = prepare(head_on(5.0, dim, duration=4.0, spheres=[
+        {'centre': [8.0, 0.0] + [0.0] * (dim - 2), 'radius': 2.0}]))
+    series = simulate(sc).series
+    spec = sc.obstacles
+    paths = [plot_trajectories(series, tmp_path, obstacles=spec),
+             plot_snapshots(series, tmp_path, radius=sc.law.radius, times=[4.0],
+                            obstacles=spec),
+             *plot_timeseries(series, tmp_path, sc.name, spec)[:1]]
+    assert [p.name for p in paths] == ['trajectories.png', 'snapshots.png', 'trajectories.png']
+    for path in paths:
+        assert obstacle_pixels(path) > 100, path.name
+    frames = animate_flock(series, tmp_path, radius=sc.law.radius, max_frames=2, mp4=False,
+                           obstacles=spec)
+    assert frames[0].stat().st_size > 1000
+    # Without the map, nothing of its colour.
+    assert obstacle_pixels(plot_trajectories(series, tmp_path, filename='bare.png')) == 0

@@ -54,6 +54,15 @@ class Damped(Law):
 
 
 @dataclass(frozen=True)
+class DampedAvoiding(Damped):
+    """Damped, taking obstacles (the beta term of Olfati-Saber 2006 is added to it)."""
+
+    name: ClassVar[str] = 'damped_avoiding'
+    accepts_obstacles: ClassVar[bool] = True
+    d: float = 3.0
+
+
+@dataclass(frozen=True)
 class NoCombine(Law):
     name: ClassVar[str] = 'no_combine'
     r: float = 4.0
@@ -314,6 +323,26 @@ def test_a_plugin_law_and_leader_run_in_sim_and_are_listed(tmp_path):
     series = np.load(tmp_path / 'out' / 'timeseries.npz')
     # The circle leader keeps its speed: |p| = 1 all along (RK4, 40 steps of 0.05 s).
     np.testing.assert_allclose(np.linalg.norm(series['leader_p'], axis=1), 1.0, rtol=1e-6)
+
+
+def test_a_plugin_law_opts_in_to_obstacles(tmp_path):
+    """A law with ``accepts_obstacles = True`` flies with the scenario's obstacles (its field
+    ``d`` gives d_beta = 0.6 d); one without is refused in one line."""
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('damped', 'Damped'), ('damped_avoiding', 'DampedAvoiding')])
+    walls = {'walls': [{'point': [0, -1], 'normal': [0, 1]}]}
+    path = scenario(tmp_path, {'name': 'damped_avoiding', 'k': 2.0})
+    data = path.read_text() + f'obstacles: {json.dumps(walls)}\n'
+    path.write_text(data)
+    proc = sim(site, path, out=tmp_path / 'out')
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    assert summary['obstacle_penetrations'] == 0
+    # The wall is within r' = 1.2 * 0.6 * 3 m of the agents at the start: the term acted.
+    assert 1.0 <= summary['obstacle_clearance_min'] < 2.16
+    path.write_text(data.replace("damped_avoiding", "damped"))
+    assert_one_line_error(sim(site, path), 'obstacles: protocol damped does not accept '
+                          'obstacles')
 
 
 @pytest.mark.parametrize('entry, fragments', [

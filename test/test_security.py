@@ -38,11 +38,12 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     states = {contract.state_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
-    # The world also publishes the run's scenario (latched, recorded at t = 0).
+    # The world also publishes the run's scenario (latched, recorded at t = 0), and the
+    # obstacle map of a scenario with obstacles (the same).
     # A law or leader model failing mid-run is reported on swarm/faults, to the world.
     faults = {contract.FAULTS}
-    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
-                       | odom | status,
+    nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO,
+                        contract.OBSTACLES} | odom | status,
                        cmds | states | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
@@ -114,8 +115,9 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     context = Context()
     rclpy.init(context=context, domain_id=ros_domain)
     base = [Parameter('scenario', value=scenario)]
-    optional = set() if adaptive else {absolute(contract.state_topic(i))
-                                       for i in range(N_AGENTS)}
+    # The presets have no obstacles: their world publishes no map.
+    optional = {absolute(contract.OBSTACLES)} | (set() if adaptive else {
+        absolute(contract.state_topic(i)) for i in range(N_AGENTS)})
     nodes = []
     try:
         nodes.append(WorldNode(context=context, parameter_overrides=base + [

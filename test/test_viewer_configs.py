@@ -7,7 +7,8 @@ from pathlib import Path
 import yaml
 
 from flock_swarm.core.metrics import STEP_METRICS
-from flock_swarm.contract import FRAME, MARKERS, METRICS
+from flock_swarm.contract import FRAME, MARKERS, METRICS, OBSTACLES, OBSTACLES_QOS
+from flock_swarm.nodes.markers import OBSTACLES_NS
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 
@@ -16,13 +17,23 @@ def test_rviz_shows_the_markers_in_the_world_frame():
     rviz = yaml.safe_load((CONFIG / 'swarm.rviz').read_text())
     manager = rviz['Visualization Manager']
     assert manager['Global Options']['Fixed Frame'] == FRAME
-    displays = {d['Class']: d for d in manager['Displays']}
-    markers = displays['rviz_default_plugins/MarkerArray']
+    displays = {d['Name']: d for d in manager['Displays']}
+    markers = displays['Swarm']
+    assert markers['Class'] == 'rviz_default_plugins/MarkerArray'
     assert markers['Topic']['Value'] == '/' + MARKERS
     # The world publishes markers reliable (TELEMETRY_QOS): the display must subscribe reliable.
     assert markers['Topic']['Reliability Policy'] == 'Reliable'
-    assert set(markers['Namespaces']) == {'agents', 'velocities', 'neighbours', 'leader'}
-    assert 'rviz_default_plugins/Grid' in displays
+    assert set(markers['Namespaces']) == {'agents', 'velocities', 'neighbours', 'leader',
+                                          OBSTACLES_NS}
+    # The obstacles come from their latched topic, once (not twice, from the markers too).
+    assert markers['Namespaces'][OBSTACLES_NS] is False
+    obstacles = displays['Obstacles']
+    assert obstacles['Class'] == 'rviz_default_plugins/MarkerArray' and obstacles['Enabled']
+    assert obstacles['Topic']['Value'] == '/' + OBSTACLES
+    assert OBSTACLES_QOS.latched and OBSTACLES_QOS.reliable
+    assert obstacles['Topic']['Durability Policy'] == 'Transient Local'
+    assert obstacles['Topic']['Reliability Policy'] == 'Reliable'
+    assert displays['Grid']['Class'] == 'rviz_default_plugins/Grid'
 
 
 def test_foxglove_layout_panels_use_published_topics_and_keys():
@@ -30,6 +41,8 @@ def test_foxglove_layout_panels_use_published_topics_and_keys():
     panels = layout['configById']
     three_d = next(v for k, v in panels.items() if k.startswith('3D!'))
     assert three_d['topics']['/' + MARKERS]['visible'] is True
+    # A live view serves the markers (obstacles included), not the latched map: shown once.
+    assert three_d['topics']['/' + OBSTACLES]['visible'] is False
     keys = set()
     for name, panel in panels.items():
         for path in panel.get('paths', []):

@@ -94,7 +94,8 @@ def analyze(run: RunData, out: Path, *, snapshots: Sequence[float] | None = None
     plot_analysis(series, out, radius=run.radius, strict=run.strict_radius, title=run.name,
                   informed=run.informed, eta_tolerance=run.eta_tolerance,
                   collision_distance=run.collision_distance, snapshots=snapshots,
-                  animate=animate, progress=wrote)
+                  animate=animate, progress=wrote,
+                  obstacles=run.scenario.obstacles if run.scenario is not None else None)
     files.append(write_text(out / 'summary.json', json_text(summary)))
     return Analysis(summary, series, files, verification)
 

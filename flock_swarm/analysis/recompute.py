@@ -33,11 +33,13 @@ def recompute(run: RunData, record_every: int | None = None,
     :param progress: called with a line every few seconds.
     :return: the series (the arrays of ``timeseries.npz``) and the whole-run metrics.
     """
+    sc = run.scenario
+    # The obstacles come with the bag's scenario (the world records it at t = 0).
     log = RunLog(run.eta_tolerance, run.collision_distance, run.radius, run.strict_radius,
-                 record_every or run.record_every)
+                 record_every or run.record_every,
+                 obstacles=sc.obstacles if sc is not None else None)
     last = len(run.steps) - 1
     tick = Ticker(progress)
-    sc = run.scenario
     real = realize(sc) if sc is not None else None
     static = static_graph(sc, real) if sc is not None else None
     # The non-finite commands counted so far, per agent, recorded as the world records them.

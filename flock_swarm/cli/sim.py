@@ -136,7 +136,7 @@ def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSign
         written = write_outputs(result, out, sc)
         if args.plots and result.series:
             from flock_swarm.plots import plot_timeseries
-            for path in plot_timeseries(result.series, out, sc.name):
+            for path in plot_timeseries(result.series, out, sc.name, sc.obstacles):
                 if say:
                     say(f'[sim] wrote {path}')
     except OSError as exc:

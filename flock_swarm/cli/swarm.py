@@ -204,7 +204,7 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
             from flock_swarm.plots import plot_timeseries
             try:
                 with np.load(written[0]) as data:
-                    written += plot_timeseries(dict(data), out, sc.name)
+                    written += plot_timeseries(dict(data), out, sc.name, sc.obstacles)
             except OSError as exc:
                 print(f'swarm: error: {write_error(exc)}', file=sys.stderr)
                 status = EXIT_FAILURE

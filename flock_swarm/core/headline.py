@@ -76,6 +76,11 @@ READINGS: dict[str, Reading] = {
                                  'min_pair_distance'),
     'collisions': Reading('collisions', 'd', '', 'collisions', 'd'),
     'components_final': Reading('components', 'd', '', 'components', 'g', 'components'),
+    # Published live (/swarm/metrics) by a run with obstacles only.
+    'obstacle_clearance_min': Reading('obstacle clearance', '.3g', ' m', 'clearance', '.3g',
+                                      'obstacle_clearance'),
+    'obstacle_penetrations': Reading('penetrations', 'd', '', 'penetrations', 'd'),
+    'obstacle_collisions': Reading('obstacle collisions', 'd', '', 'obstacle collisions', 'd'),
     'missed_commands': Reading('missed commands', 'd'),
 }
 

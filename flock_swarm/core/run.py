@@ -147,9 +147,14 @@ class RunLog:
             return None
         now = step_metrics(q, p, leader, self.eta_tolerance, self.radius, self.strict)
         self.metrics.update(q, now['min_pair_distance'])
-        if self.metrics.obstacles is not None:
-            # The instant's smallest clearance (folded in by fold_obstacles this step).
+        found = self.metrics.obstacles
+        if found is not None:
+            # The instant's smallest clearance (folded in by fold_obstacles this step), and
+            # the counts so far (/swarm/metrics shows them live).
             extra = {**extra, 'obstacle_clearance': self.clearance}
+            now = dict(now, obstacle_clearance=self.clearance,
+                       obstacle_penetrations=len(found.penetrations),
+                       obstacle_collisions=len(found.collisions))
         self.rec.add(t=t, q=q, p=p, u=u, leader_q=leader.q, leader_p=leader.p,
                      leader_a=leader.a, informed=informed, **extra,
                      **{f'metric_{name}': now[name] for name in STEP_METRICS})

@@ -26,6 +26,7 @@ from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fa
                                      non_finite_rows, state_blew_up)
 from flock_swarm.core.laws.base import advance_state, group_control, group_sums
 from flock_swarm.core.network import NetworkState, neighbourhood_of
+from flock_swarm.core.obstacles import with_obstacles
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -302,18 +303,25 @@ class AgentController:
             self.reselector.update(self.swarm, edges)
         group = self.swarm.subset(ids)
         t, net = k * dt, self.net
+        # The obstacle map is the scenario's; each agent uses the obstacles within its sensing
+        # range r' only (core.obstacles.beta_term), from its own state.
+        obstacles = self.sc.obstacles
 
         def alone(row: int) -> np.ndarray:
             one = ids[row:row + 1]
-            return group_control(law, one, q, p, edges, leader, self.swarm.subset(one), dt, t)
+            return with_obstacles(obstacles, group_control(law, one, q, p, edges, leader,
+                                                           self.swarm.subset(one), dt, t),
+                                  q[one], p[one])
         if net is None:
             u = evaluate_law(law, k, ids, self.sc.dim,
-                             lambda: group_control(law, ids, q, p, edges, leader, group, dt, t),
+                             lambda: with_obstacles(obstacles, group_control(
+                                 law, ids, q, p, edges, leader, group, dt, t), q[ids], p[ids]),
                              alone)
         else:
             net.send(k, q, p, leader, edges, self.swarm.informed)
             u = evaluate_law(law, k, ids, self.sc.dim,
-                             lambda: net.control(ids, q, p, group, dt, t)[0])
+                             lambda: with_obstacles(obstacles, net.control(
+                                 ids, q, p, group, dt, t)[0], q[ids], p[ids]))
         if group.state:
             self.state = {key: value.copy() for key, value in group.state.items()}
             if net is None:

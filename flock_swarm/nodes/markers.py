@@ -2,7 +2,9 @@
 
 :func:`swarm_markers` builds the markers as rclpy messages; :func:`swarm_markers_cdr`
 writes the same message serialised (tested equal), at a fraction of the cost, and is what
-the world publishes, with the metrics, through :class:`Telemetry`.
+the world publishes, with the metrics, through :class:`Telemetry`. The obstacles of a
+scenario (:func:`obstacle_shapes`) are drawn in both, and alone, once and latched, on
+``/swarm/obstacles`` (:func:`obstacle_markers`).
 """
 
 import json
@@ -16,6 +18,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from flock_swarm.core.graphs import EdgeList
 from flock_swarm.core.headline import Headline, lead_with
+from flock_swarm.core.obstacles import ObstacleSpec
 from flock_swarm.contract import FRAME, MARKERS, METRICS, TELEMETRY_QOS, qos_profile
 from flock_swarm.nodes.wire import CdrWriter
 
@@ -26,6 +29,16 @@ LEADER = ColorRGBA(r=0.1, g=0.1, b=0.1, a=1.0)
 OK, WARN = 0, 1
 EDGE = ColorRGBA(r=0.5, g=0.5, b=0.5, a=0.6)
 VELOCITY = ColorRGBA(r=0.1, g=0.7, b=0.3, a=0.9)
+OBSTACLE = ColorRGBA(r=0.55, g=0.45, b=0.35, a=0.6)
+#: The namespace of the obstacles' markers (one marker per obstacle, id = its index in the
+#: map: spheres, then walls).
+OBSTACLES_NS = 'obstacles'
+#: How a wall (a half-space) is drawn: a slab this thick [m] behind its surface, this long
+#: [m] along it (the viewers draw no infinite planes).
+WALL_THICKNESS = 0.2
+WALL_EXTENT = 500.0
+#: The height [m] of the flat cylinder that draws a 2-D sphere (a disc) in the plane z = 0.
+DISC_HEIGHT = 0.05
 
 
 def _point(x: np.ndarray) -> Point:
@@ -48,8 +61,64 @@ def _marker(mid: int, ns: str, kind: int, stamp: Time, frame: str, scale: float,
     return m
 
 
+def _quaternion_x_to(a: np.ndarray) -> tuple[float, float, float, float]:
+    """Return the unit quaternion ``(x, y, z, w)`` of the shortest rotation of x onto ``a``."""
+    ax, ay, az = (float(v) for v in a)
+    w = 1.0 + ax
+    if w < 1e-12:
+        return 0.0, 0.0, 1.0, 0.0  # a = -x: half a turn about z
+    # The axis is x cross a = (0, -a_z, a_y); with w = 1 + cos, the half angle comes out.
+    norm = np.sqrt(w * w + ay * ay + az * az)
+    return 0.0, -az / norm, ay / norm, w / norm
+
+
+def obstacle_shapes(spec: ObstacleSpec, dim: int) -> list[tuple]:
+    """Return how each obstacle is drawn: ``(kind, position, orientation, scale)``.
+
+    A sphere is a ``SPHERE`` (3-D) or a flat ``CYLINDER`` in the plane (2-D, a disc); a wall
+    a ``CUBE``, a slab :data:`WALL_THICKNESS` thick behind its surface, :data:`WALL_EXTENT`
+    long. Positions in 3-D (2-D: ``z = 0``); orientations ``(x, y, z, w)``.
+
+    :param spec: the obstacles.
+    :param dim: the scenario's dimension.
+    :return: one tuple per obstacle, spheres then walls.
+    """
+    out = []
+    for centre, radius in spec.spheres:
+        pos = _points(np.array([centre]))[0]
+        scale = (2 * radius,) * 3 if dim == 3 else (2 * radius, 2 * radius, DISC_HEIGHT)
+        out.append((Marker.SPHERE if dim == 3 else Marker.CYLINDER, pos,
+                    (0.0, 0.0, 0.0, 1.0), scale))
+    for point, normal in spec.walls:
+        a = _points(np.array([normal]))[0]
+        pos = _points(np.array([point]))[0] - 0.5 * WALL_THICKNESS * a
+        height = WALL_EXTENT if dim == 3 else DISC_HEIGHT
+        out.append((Marker.CUBE, pos, _quaternion_x_to(a),
+                    (WALL_THICKNESS, WALL_EXTENT, height)))
+    return out
+
+
+def _obstacle_marker(k: int, shape: tuple, stamp: Time, frame: str) -> Marker:
+    kind, pos, orientation, scale = shape
+    m = _marker(k, OBSTACLES_NS, kind, stamp, frame, 1.0, OBSTACLE)
+    m.pose.position = Point(x=float(pos[0]), y=float(pos[1]), z=float(pos[2]))
+    (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+     m.pose.orientation.w) = orientation
+    m.scale.x, m.scale.y, m.scale.z = (float(v) for v in scale)
+    return m
+
+
+def obstacle_markers(spec: ObstacleSpec, dim: int, stamp: Time, frame: str) -> MarkerArray:
+    """Return the obstacles alone (``/swarm/obstacles``, latched; :func:`obstacle_shapes`)."""
+    out = MarkerArray()
+    out.markers = [_obstacle_marker(k, shape, stamp, frame)
+                   for k, shape in enumerate(obstacle_shapes(spec, dim))]
+    return out
+
+
 def swarm_markers(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed: np.ndarray,
-                  edges: EdgeList, stamp: Time, frame: str, size: float) -> MarkerArray:
+                  edges: EdgeList, stamp: Time, frame: str, size: float,
+                  obstacles: ObstacleSpec | None = None) -> MarkerArray:
     """Return agents (sphere list, informed highlighted), velocities, edges and the leader.
 
     :param q: positions ``(n, dim)``.
@@ -60,6 +129,7 @@ def swarm_markers(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed: 
     :param stamp: the simulation-time stamp.
     :param frame: the fixed frame.
     :param size: agent diameter [m].
+    :param obstacles: the scenario's obstacles, drawn after the swarm (``None``: none).
     :return: the marker array.
     """
     agents = _marker(0, 'agents', Marker.SPHERE_LIST, stamp, frame, size, UNINFORMED)
@@ -73,6 +143,8 @@ def swarm_markers(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray, informed: 
     lead.pose.position = _point(leader_q)
     out = MarkerArray()
     out.markers = [agents, vel, links, lead]
+    if obstacles is not None and obstacles.active:
+        out.markers += obstacle_markers(obstacles, q.shape[1], stamp, frame).markers
     return out
 
 
@@ -88,17 +160,18 @@ def _points(x: np.ndarray) -> np.ndarray:
 
 
 def _write_marker(w: CdrWriter, mid: int, ns: str, kind: int, stamp_ns: int, frame: str,
-                  scale: float, color: ColorRGBA, points: np.ndarray | None = None,
-                  colors: np.ndarray | None = None,
-                  position: np.ndarray | None = None) -> None:
+                  scale: float | tuple, color: ColorRGBA, points: np.ndarray | None = None,
+                  colors: np.ndarray | None = None, position: np.ndarray | None = None,
+                  orientation: tuple = (0.0, 0.0, 0.0, 1.0)) -> None:
     """Write one ``visualization_msgs/Marker`` as :func:`_marker` builds it (Jazzy layout)."""
     w.time(stamp_ns)
     w.string(frame)
     w.string(ns)
     w.pack('iii', mid, kind, Marker.ADD, size=4)
     pos = (0.0, 0.0, 0.0) if position is None else tuple(_points(position[None])[0])
-    w.pack('7d', *pos, 0.0, 0.0, 0.0, 1.0, size=8)                 # pose
-    w.pack('3d', scale, scale, scale, size=8)                       # scale
+    w.pack('7d', *pos, *orientation, size=8)                        # pose
+    scales = tuple(scale) if isinstance(scale, tuple) else (scale,) * 3
+    w.pack('3d', *scales, size=8)                                   # scale
     w.pack('4f', *_rgba(color).tolist(), size=4)                    # color
     w.pack('iI?', 0, 0, False, size=4)                              # lifetime, frame_locked
     w.sequence(np.zeros((0, 3)) if points is None else points, 8)   # points
@@ -118,10 +191,12 @@ def _write_marker(w: CdrWriter, mid: int, ns: str, kind: int, stamp_ns: int, fra
 
 def swarm_markers_cdr(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray,
                       informed: np.ndarray, edges: EdgeList, stamp_ns: int, frame: str,
-                      size: float) -> bytes:
+                      size: float, obstacles: ObstacleSpec | None = None) -> bytes:
     """Return :func:`swarm_markers`'s message serialised (``stamp_ns``: its stamp [ns])."""
+    shapes = obstacle_shapes(obstacles, q.shape[1]) \
+        if obstacles is not None and obstacles.active else []
     w = CdrWriter()
-    w.pack('I', 4, size=4)
+    w.pack('I', 4 + len(shapes), size=4)
     colors = np.where(np.asarray(informed, dtype=bool)[:, None], _rgba(INFORMED)[None],
                       _rgba(UNINFORMED)[None]).astype('<f4')
     _write_marker(w, 0, 'agents', Marker.SPHERE_LIST, stamp_ns, frame, size, UNINFORMED,
@@ -134,6 +209,9 @@ def swarm_markers_cdr(q: np.ndarray, p: np.ndarray, leader_q: np.ndarray,
                   links)
     _write_marker(w, 3, 'leader', Marker.SPHERE, stamp_ns, frame, 2.0 * size, LEADER,
                   position=np.asarray(leader_q, dtype=float))
+    for k, (kind, pos, orientation, scale) in enumerate(shapes):
+        _write_marker(w, k, OBSTACLES_NS, kind, stamp_ns, frame, tuple(float(v) for v in scale),
+                      OBSTACLE, position=pos, orientation=orientation)
     return w.getvalue()
 
 
@@ -162,7 +240,8 @@ class Telemetry:
     recorded (the world is a :class:`~flock_swarm.nodes.recording.RecordedNode`)."""
 
     def __init__(self, node, radius: float, informed: np.ndarray,
-                 headline: Headline = Headline()) -> None:
+                 headline: Headline = Headline(),
+                 obstacles: ObstacleSpec | None = None) -> None:
         """Create the two publishers on ``node``.
 
         :param node: the world node (its ``clock`` stamps the messages).
@@ -170,9 +249,10 @@ class Telemetry:
         :param informed: which agents are informed (their colour).
         :param headline: the scenario's headline: the metrics' first values (a viewer's
             diagnostics panel lists them first).
+        :param obstacles: the scenario's obstacles, drawn with the swarm.
         """
         self.node, self.radius, self.informed = node, radius, informed
-        self.headline = headline
+        self.headline, self.obstacles = headline, obstacles
         qos = qos_profile(TELEMETRY_QOS)
         self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, qos)
         self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, qos)
@@ -188,7 +268,7 @@ class Telemetry:
         if obs.markers:
             node.publish_recorded(self.marker_pub, swarm_markers_cdr(
                 obs.q, obs.p, obs.leader.q, self.informed, obs.edges, t_ns, FRAME,
-                0.1 * self.radius), t_ns)
+                0.1 * self.radius, self.obstacles), t_ns)
         if obs.metrics is not None:
             values = lead_with(dict(obs.metrics, rejected_messages=json.dumps(rejected)),
                                self.headline)

@@ -27,7 +27,7 @@ from visualization_msgs.msg import MarkerArray
 from flock_swarm import __version__
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import Realization, Scenario
-from flock_swarm.contract import LOCKSTEP_QOS, SCENARIO, qos_profile
+from flock_swarm.contract import LOCKSTEP_QOS, OBSTACLES, SCENARIO, qos_profile
 from flock_swarm.nodes.wire import MalformedMessage
 from flock_swarm.outputs import json_text
 
@@ -67,8 +67,10 @@ def provenance(sc: Scenario, real: Realization, mode: str) -> dict[str, str]:
 
 
 def _is_provenance(topic: str) -> bool:
-    """Whether ``topic`` (absolute, in any namespace) is the run's ``/swarm/scenario``."""
-    return topic == f'/{SCENARIO}' or topic.endswith(f'/{SCENARIO}')
+    """Whether ``topic`` (absolute, in any namespace) is the run's ``/swarm/scenario`` or its
+    ``/swarm/obstacles``: what the world records at its start, before the run."""
+    return any(topic == f'/{name}' or topic.endswith(f'/{name}')
+               for name in (SCENARIO, OBSTACLES))
 
 
 def provenance_text(record: dict[str, str]) -> str:

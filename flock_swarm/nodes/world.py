@@ -36,11 +36,12 @@ from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
-from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
-                                  LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
-                                  STATUS, STATUS_QOS, cmd_topic, odom_topic, qos_profile,
-                                  state_topic)
+from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, FRAME, LEADER_ACCEL,
+                                  LEADER_ODOM, LOCKSTEP_QOS, OBSTACLES, OBSTACLES_QOS, RUNNING,
+                                  SCENARIO, SCENARIO_QOS, STATUS, STATUS_QOS, cmd_topic,
+                                  odom_topic, qos_profile, state_topic)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
@@ -49,7 +50,7 @@ from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
 from flock_swarm.nodes.graph import check_claims, command_claims
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
-from flock_swarm.nodes.markers import Telemetry
+from flock_swarm.nodes.markers import Telemetry, obstacle_markers
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.recording import BagSink, RecordedNode, provenance, provenance_text
 from flock_swarm.nodes.spin import run_node, wall_timer
@@ -180,7 +181,7 @@ class WorldNode(RecordedNode):
         # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
         self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed,
-                                   sc.headline)
+                                   sc.headline, sc.obstacles)
         subscribe = self.recorded_subscription
         self.cmd_handlers = [lambda msg, i=i: self.on_command(i, msg)
                              for i in range(sc.n_agents)]
@@ -207,6 +208,12 @@ class WorldNode(RecordedNode):
         self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
         self.publish_recorded(self.scenario_pub, String(data=provenance_text(
             provenance(sc, self.stepper.real, self.mode))), 0)
+        if sc.obstacles.active:
+            # The map for viewers, latched and recorded at t = 0 (docs/obstacles.md).
+            self.obstacles_pub = self.recorded_publisher(MarkerArray, OBSTACLES,
+                                                         qos_profile(OBSTACLES_QOS))
+            self.publish_recorded(self.obstacles_pub, obstacle_markers(
+                sc.obstacles, sc.dim, self.clock.stamp(0), FRAME), 0)
         for sink in self.sinks:
             sink.flush()
         self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \
