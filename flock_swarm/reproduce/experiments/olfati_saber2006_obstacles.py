@@ -15,7 +15,7 @@ from flock_swarm.core.graphs import components, disk_graph
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.presets import load
 from flock_swarm.reproduce.common import FIG_SIZE, fmt, plural, pyplot, save_figure
-from flock_swarm.reproduce.experiment import Experiment, FractionClaim
+from flock_swarm.reproduce.experiment import Experiment, FractionClaim, SetUp
 
 #: The rows every obstacle experiment shows (what, metric, the paper's value).
 ROWS = (
@@ -198,6 +198,8 @@ def figure_obstacles(sc: Scenario, summary: dict, series: dict, m: dict, path: P
                                    gridspec_kw={'width_ratios': [1.6, 1]})
     q, t = series['q'], series['t']
     discs = spheres(sc)
+    # The discs drawn here, not by plots.draw_obstacles: on a map of spheres only it fails
+    # (ObstacleSpec.points reshapes an empty array), reported to the obstacles branch.
     for centre, radius in discs:
         ax1.add_patch(Circle(centre[:2], radius, facecolor='0.35', edgecolor='k', lw=0.5,
                              zorder=3))
@@ -226,10 +228,22 @@ def figure_obstacles(sc: Scenario, summary: dict, series: dict, m: dict, path: P
     return save_figure(fig, path)
 
 
+def obstacle_setups(key: str) -> tuple[SetUp, ...]:
+    """Return the set-ups of an obstacle experiment: the preset, run for 300 s, and with the
+    linear navigational feedback (``config/sweeps/reproduce_<key>*.yaml``).
+
+    :param key: the experiment's key (its preset).
+    """
+    return (SetUp(f'reproduce_{key}', '100 s (the preset)'),
+            SetUp(f'reproduce_{key}_300s', '300 s'),
+            SetUp(f'reproduce_{key}_linear', 'linear navigation (Su 2009 eq. (7)), 100 s'))
+
+
 class ObstacleExperiment(Experiment):
     """An obstacle experiment of [OS06] Section VIII (set the class attributes)."""
 
     paper = 'Olfati-Saber 2006'
+    quick = ('n_agents=20', 'duration=2')
     rows = ROWS
     columns = COLUMNS
     per_seed = (('smallest clearance', 'clearance_min'),

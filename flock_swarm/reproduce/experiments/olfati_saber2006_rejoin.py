@@ -1,10 +1,10 @@
 """Olfati-Saber 2006, Section VIII, Fig. 10: 150 agents split around obstacles and rejoin
 behind them (Algorithm 3)."""
 
-from flock_swarm.reproduce.experiment import SetUp
 from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (SOURCES,
                                                                           ObstacleExperiment,
-                                                                          obstacle_claim)
+                                                                          obstacle_claim,
+                                                                          obstacle_setups)
 
 
 class Rejoin(ObstacleExperiment):
@@ -19,13 +19,9 @@ class Rejoin(ObstacleExperiment):
         'the obstacles and rejoins into one flock behind them, no agent colliding with an '
         'obstacle. The paper shows it as snapshots and gives no number.' + SOURCES)
     order = 220.0
-    quick = ('n_agents=20', 'duration=2')
     manoeuvre = 'passing the obstacles'
     criterion = obstacle_claim('splits around the obstacles and rejoins')
-    setups = (SetUp('reproduce_olfati_saber2006_rejoin', '100 s (the preset)'),
-              SetUp('reproduce_olfati_saber2006_rejoin_300s', '300 s'),
-              SetUp('reproduce_olfati_saber2006_rejoin_linear',
-                    'linear navigation (Su 2009 eq. (7)), 100 s'))
+    setups = obstacle_setups(key)
 
 
 EXPERIMENT = Rejoin()

@@ -1,10 +1,10 @@
 """Olfati-Saber 2006, Section VIII, Fig. 11: the squeezing manoeuvre of 150 agents through
 the gap between two obstacles (Algorithm 3)."""
 
-from flock_swarm.reproduce.experiment import SetUp
 from flock_swarm.reproduce.experiments.olfati_saber2006_obstacles import (SOURCES,
                                                                           ObstacleExperiment,
-                                                                          obstacle_claim)
+                                                                          obstacle_claim,
+                                                                          obstacle_setups)
 
 
 class Squeeze(ObstacleExperiment):
@@ -21,13 +21,9 @@ class Squeeze(ObstacleExperiment):
         'at least about d\' from the obstacles). The paper shows it as snapshots and gives '
         'no number.' + SOURCES)
     order = 210.0
-    quick = ('n_agents=20', 'duration=2')
     manoeuvre = 'squeezing through the gap'
     criterion = obstacle_claim('squeezes through the gap')
-    setups = (SetUp('reproduce_olfati_saber2006_squeeze', '100 s (the preset)'),
-              SetUp('reproduce_olfati_saber2006_squeeze_300s', '300 s'),
-              SetUp('reproduce_olfati_saber2006_squeeze_linear',
-                    'linear navigation (Su 2009 eq. (7)), 100 s'))
+    setups = obstacle_setups(key)
 
 
 EXPERIMENT = Squeeze()
