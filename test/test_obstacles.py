@@ -309,14 +309,13 @@ def test_spec_is_hashable_and_compares_by_value():
 
 
 def obstacle_pixels(path):
-    """Return how many pixels of a figure have the obstacles' colour on white."""
+    """Return how many pixels of a figure have the obstacles' hue (brown: red > green > blue
+    by some margin; the agents' red and blue, the grey panes and the white do not)."""
     from PIL import Image
-
-    from flock_swarm.plots import OBSTACLE_ALPHA, OBSTACLE_COLOR
-    want = 255 * (OBSTACLE_ALPHA * np.array(OBSTACLE_COLOR) + (1 - OBSTACLE_ALPHA))
     with Image.open(path) as image:
-        rgb = np.asarray(image.convert('RGB'), dtype=float)
-    return int((np.abs(rgb - want).max(axis=-1) < 4).sum())
+        rgb = np.asarray(image.convert('RGB'), dtype=int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return int(((r - g > 6) & (g - b > 6) & (r - b < 60)).sum())
 
 
 @pytest.mark.parametrize('dim', [2, 3])
@@ -339,3 +338,59 @@ def test_every_figure_of_positions_draws_the_obstacles(tmp_path, dim):
     assert frames[0].stat().st_size > 1000
     # Without the map, nothing of its colour.
     assert obstacle_pixels(plot_trajectories(series, tmp_path, filename='bare.png')) == 0
+
+
+def test_the_docs_figure_script_runs(tmp_path):
+    """scripts/figures/obstacles.py, which draws docs/figures/obstacles.png, still runs and
+    draws the obstacles."""
+    import runpy
+    from pathlib import Path
+    script = Path(__file__).resolve().parents[1] / 'scripts' / 'figures' / 'obstacles.py'
+    main_of = runpy.run_path(str(script))['main']
+    assert main_of(['--out', str(tmp_path)]) == 0
+    assert obstacle_pixels(tmp_path / 'obstacles.png') > 1000
+
+
+def test_a_dt_beyond_the_beta_terms_bound_is_refused_in_one_line(capsys, tmp_path):
+    # c2_beta = 50: dt < 2 / 50 = 0.04 s; the scenario's 0.05 s is refused, 0.02 s is not.
+    gains = 'obstacles.c2_beta=50'
+    assert main(['su2009_fig2', '--set', 'obstacles={walls: [{point: [0, -5], normal: [0, 1]}]}',
+                 '--set', gains, '--set', 'dt=0.05', '--quiet', '--out', str(tmp_path)]) == 2
+    line = capsys.readouterr().err.strip()
+    assert line.startswith('sim: error: dt: 0.05 exceeds the stability bound 0.04 of the '
+                           'beta term of the obstacles (c1_beta = 10, c2_beta = 50)')
+    sc, _ = prepare('su2009_fig2', ['obstacles={walls: [{point: [0, -5], normal: [0, 1]}]}',
+                                    gains, 'duration=0.04'])
+    assert sc.obstacles.c2_beta == 50
+
+
+def test_a_sweep_varies_the_section_and_collects_the_obstacle_metrics(tmp_path):
+    """A sweep over ``obstacles.c2_beta`` (stacked seeds) collects the three metrics, each
+    run's equal to its own ``sim`` run."""
+    import csv
+    import json
+
+    from flock_swarm.cli.sweep import main as sweep_main
+    base = head_on(5.0, duration=4.0)
+    base['initial'] = {'position_box': [[-5, 0], [-20, 20]], 'velocity_box': [[4, 6], [0, 0]]}
+    base['n_agents'] = 6
+    (tmp_path / 'scene.yaml').write_text(json.dumps(base))
+    spec = {'name': 'walls', 'scenario': str(tmp_path / 'scene.yaml'),
+            'grid': {'obstacles.c2_beta': [3.0, 8.0]}, 'seeds': 2,
+            'metrics': ['obstacle_clearance_min', 'obstacle_penetrations',
+                        'obstacle_collisions'], 'stack_agents': 12}
+    (tmp_path / 'walls.yaml').write_text(json.dumps(spec))
+    assert sweep_main([str(tmp_path / 'walls.yaml'), '--jobs', '1', '--out',
+                       str(tmp_path / 'out'), '--quiet', '--no-plots']) == 0
+    with open(tmp_path / 'out' / 'runs.csv', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == 4
+    for row in rows:
+        sc = parse_scenario({**base, 'seed': int(row['seed']),
+                             'obstacles': {**base['obstacles'],
+                                           'c2_beta': float(row['obstacles.c2_beta'])}})
+        alone = simulate(sc).summary
+        assert float(row['obstacle_clearance_min']) == pytest.approx(
+            alone['obstacle_clearance_min'], rel=0, abs=1e-9)
+        assert int(row['obstacle_penetrations']) == alone['obstacle_penetrations']
+        assert int(row['obstacle_collisions']) == alone['obstacle_collisions']

@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 import pytest
-from PIL import Image
-
 from flock_swarm.bag import BagReader
 from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.nodes.markers import OBSTACLES_NS
 from flock_swarm.testing import assert_matches_sim
+from test_network_ros import LAYOUTS as NETWORK_LAYOUTS, RUN_TIMEOUT
+from test_obstacles import obstacle_pixels
 
 #: A small demo swarm packed within each other's radius between a wall (x = -0.5) and a disc
 #: (centre (4, 9.5), radius 1): the agents near them feel the beta term from the first step.
@@ -19,11 +19,9 @@ DEMO = ['n_agents=8', 'informed.count=3', 'duration=0.4', 'record_every=3',
         'initial.position_box=[[0, 8], [0, 8]]',
         'obstacles={walls: [{point: [-0.5, 0], normal: [1, 0]}], '
         'spheres: [{centre: [4, 9.5], radius: 1}]}']
-#: The layouts of a ROS run: keyword arguments of assert_matches_sim.
-LAYOUTS = {'one process': {},
-           'processes, container': {'processes': True, 'container': True}}
-#: Wall-clock bound of one run (a hung run fails instead of blocking the suite).
-RUN_TIMEOUT = 240.0
+#: The layouts of a ROS run (keyword arguments of assert_matches_sim): one process, and the
+#: agents in one container process.
+LAYOUTS = {name: NETWORK_LAYOUTS[name] for name in ('one process', 'processes, container')}
 
 
 @pytest.mark.ros
@@ -64,15 +62,6 @@ def test_a_run_with_obstacles_matches_sim_in_every_layout(tmp_path, ros_domain, 
         assert ours[key] == s[key], key
     assert obstacle_pixels(out / 'trajectories.png') > 100
     assert obstacle_pixels(out / 'snapshots.png') > 100
-
-
-def obstacle_pixels(path):
-    """Return how many pixels of a figure have the obstacles' colour on white."""
-    from flock_swarm.plots import OBSTACLE_ALPHA, OBSTACLE_COLOR
-    want = 255 * (OBSTACLE_ALPHA * np.array(OBSTACLE_COLOR) + (1 - OBSTACLE_ALPHA))
-    with Image.open(path) as image:
-        rgb = np.asarray(image.convert('RGB'), dtype=float)
-    return int((np.abs(rgb - want).max(axis=-1) < 4).sum())
 
 
 @pytest.mark.parametrize('dim', [2, 3])

@@ -36,6 +36,8 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     cmds = {contract.cmd_topic(i) for i in range(n)}
     # Each agent's adaptive state (a topic only for a law with one): to the world.
     states = {contract.state_topic(i) for i in range(n)}
+    # Each agent's network report (realtime with a network: section only): to the world.
+    reports = {contract.network_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
     # The world also publishes the run's scenario (latched, recorded at t = 0), and the
@@ -44,10 +46,11 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     faults = {contract.FAULTS}
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO,
                         contract.OBSTACLES} | odom | status,
-                       cmds | states | leader | faults),
+                       cmds | states | reports | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i)} | faults,
+        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i),
+                                contract.network_topic(i)} | faults,
                                odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
@@ -115,9 +118,12 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     context = Context()
     rclpy.init(context=context, domain_id=ros_domain)
     base = [Parameter('scenario', value=scenario)]
-    # The presets have no obstacles: their world publishes no map.
-    optional = {absolute(contract.OBSTACLES)} | (set() if adaptive else {
-        absolute(contract.state_topic(i)) for i in range(N_AGENTS)})
+    # A lockstep run has no network reports (realtime with a network: section only); the
+    # presets have no obstacles: their world publishes no map.
+    optional = {absolute(contract.network_topic(i)) for i in range(N_AGENTS)}
+    optional.add(absolute(contract.OBSTACLES))
+    if not adaptive:
+        optional |= {absolute(contract.state_topic(i)) for i in range(N_AGENTS)}
     nodes = []
     try:
         nodes.append(WorldNode(context=context, parameter_overrides=base + [

@@ -32,6 +32,8 @@ import numpy as np
 from flock_swarm.core import potentials as pot
 from flock_swarm.core.checks import mapping, number, only, positive, vector
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.laws.base import StepViolation
+from flock_swarm.core.stability import pd_dt_max
 
 OBSTACLE_KEYS = ('spheres', 'walls', 'd_beta', 'r_beta', 'c1_beta', 'c2_beta', 'h', 'eps')
 #: [OS06] Section VIII: the desired distance to obstacles ``d' = 0.6 d`` (``d`` the law's
@@ -110,6 +112,19 @@ class ObstacleSpec:
         return a / np.sqrt(pot.squared_norm(a))[:, None] if a.size else a
 
     @cached_property
+    def offsets(self) -> np.ndarray:
+        """Return ``a_k . y_k`` of each wall, ``(W,)``: the signed distance is
+        ``a_k . q - a_k . y_k``."""
+        return _dot(self.points, self.normals) if self.walls else np.zeros(0)
+
+    @cached_property
+    def sensing_shell(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``((R + r')^2, (R - r')^2 or -1)`` per sphere: the squared distances from
+        the centre between which the surface is within the sensing range."""
+        inner = np.where(self.radii > self.r_beta, (self.radii - self.r_beta) ** 2, -1.0)
+        return (self.radii + self.r_beta) ** 2, inner
+
+    @cached_property
     def sigma_d_beta(self) -> float:
         """Return ``d_beta = ||d'||_sigma`` ([OS06] Section VII-B)."""
         return float(pot.sigma_of_distance(self.d_beta, self.eps))
@@ -169,22 +184,24 @@ def _list(value: Any, key: str) -> list:
     return value
 
 
-def _sphere(raw: Any, key: str, dim: int) -> tuple:
+def _entry(raw: Any, key: str, names: tuple[str, str]) -> dict:
+    """Return one sphere's or wall's mapping, with exactly its two keys."""
     section = mapping(raw, key)
-    only(section, ('centre', 'radius'), key + '.')
-    for name in ('centre', 'radius'):
+    only(section, names, key + '.')
+    for name in names:
         if name not in section:
             raise ScenarioError(f'{key}.{name}', 'missing')
+    return section
+
+
+def _sphere(raw: Any, key: str, dim: int) -> tuple:
+    section = _entry(raw, key, ('centre', 'radius'))
     centre = vector(section['centre'], f'{key}.centre', dim)
     return tuple(centre.tolist()), positive(section['radius'], f'{key}.radius')
 
 
 def _wall(raw: Any, key: str, dim: int) -> tuple:
-    section = mapping(raw, key)
-    only(section, ('point', 'normal'), key + '.')
-    for name in ('point', 'normal'):
-        if name not in section:
-            raise ScenarioError(f'{key}.{name}', 'missing')
+    section = _entry(raw, key, ('point', 'normal'))
     point = vector(section['point'], f'{key}.point', dim)
     normal = vector(section['normal'], f'{key}.normal', dim)
     length = float(np.sqrt(pot.squared_norm(normal)))
@@ -197,6 +214,59 @@ def _wall(raw: Any, key: str, dim: int) -> tuple:
 # Geometry
 
 
+def _sphere_sq(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
+    """Return ``||q_i - y_k||^2`` for every sphere and agent, ``(S, m)``.
+
+    Obstacle-major, one difference per component: each obstacle's row is contiguous over
+    the agents (its reductions over the agents run on contiguous memory, several times
+    faster than across an ``(m, S)`` array), and no ``(m, S, dim)`` temporary is made.
+    Elementwise, so an agent's column is the same in any batch.
+    """
+    qt = q.T
+    out = spec.centres[:, 0, None] - qt[0][None, :]
+    out *= out
+    for k in range(1, q.shape[1]):
+        d = spec.centres[:, k, None] - qt[k][None, :]
+        d *= d
+        out += d
+    return out
+
+
+def _wall_signed(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
+    """Return the signed distances ``a_k . q_i - a_k . y_k`` to the walls, ``(W, m)``."""
+    a, qt = spec.normals, q.T
+    out = a[:, 0, None] * qt[0][None, :]
+    for k in range(1, q.shape[1]):
+        out += a[:, k, None] * qt[k][None, :]
+    out -= spec.offsets[:, None]
+    return out
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Where the agents are relative to the obstacles at one instant: what the beta term
+    (:func:`beta_pairs`) and the metrics (:meth:`ObstacleMetrics.update`) both read, computed
+    once a step by the simulator (:func:`geometry`).
+
+    :ivar sq: ``||q_i - y_k||^2`` to each sphere's centre, ``(S, m)``.
+    :ivar signed: the signed distance to each wall, ``(W, m)``.
+    """
+
+    sq: np.ndarray
+    signed: np.ndarray
+
+    def part(self, lo: int, hi: int) -> 'Geometry':
+        """Return the geometry of the agents ``lo .. hi - 1`` (one run of a stack)."""
+        return Geometry(self.sq[:, lo:hi], self.signed[:, lo:hi])
+
+
+def geometry(spec: ObstacleSpec, q: np.ndarray) -> Geometry:
+    """Return the :class:`Geometry` of the agents ``q``."""
+    m = q.shape[0]
+    return Geometry(_sphere_sq(spec, q) if spec.spheres else np.zeros((0, m)),
+                    _wall_signed(spec, q) if spec.walls else np.zeros((0, m)))
+
+
 def clearances(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
     """Return each agent's signed distance to each obstacle's surface (``< 0``: inside).
 
@@ -206,15 +276,13 @@ def clearances(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
     :param q: positions, ``(m, dim)``.
     :return: ``(m, count)``.
     """
-    parts = []
+    out = np.empty((spec.count, q.shape[0]))
+    n_s = len(spec.spheres)
     if spec.spheres:
-        diff = q[:, None, :] - spec.centres[None, :, :]
-        parts.append(np.sqrt(pot.squared_norm(diff)) - spec.radii)
+        np.subtract(np.sqrt(_sphere_sq(spec, q)), spec.radii[:, None], out=out[:n_s])
     if spec.walls:
-        parts.append(_dot(q[:, None, :] - spec.points[None, :, :], spec.normals))
-    if not parts:
-        return np.zeros((q.shape[0], 0))
-    return np.concatenate(parts, axis=1)
+        out[n_s:] = _wall_signed(spec, q)
+    return out.T
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -243,13 +311,14 @@ def sphere_beta_agents(q: np.ndarray, p: np.ndarray, centre: np.ndarray,
     :param radius: their radii, ``(E,)``.
     :return: ``(qh, ph)``, each ``(E, dim)``.
     """
+    # Broadcasting over the short last axis (not pot.rowwise): the pairs within range are
+    # few, and for few rows the call overhead is what costs.
     diff = q - centre
-    dist = np.sqrt(pot.squared_norm(diff))
-    mu = radius / dist
-    a = pot.rowwise(np.divide, diff, dist)
-    qh = pot.rowwise(np.multiply, q, mu) + pot.rowwise(np.multiply, centre, 1.0 - mu)
-    tangential = p - pot.rowwise(np.multiply, a, _dot(a, p))
-    return qh, pot.rowwise(np.multiply, tangential, mu)
+    dist = np.sqrt(_dot(diff, diff))[:, None]
+    mu = radius[:, None] / dist
+    a = diff / dist
+    qh = mu * q + (1.0 - mu) * centre
+    return qh, mu * (p - a * _dot(a, p)[:, None])
 
 
 def wall_beta_agents(q: np.ndarray, p: np.ndarray, point: np.ndarray,
@@ -265,8 +334,8 @@ def wall_beta_agents(q: np.ndarray, p: np.ndarray, point: np.ndarray,
     :param normal: the walls' unit normals, ``(E, dim)``.
     :return: ``(qh, ph)``, each ``(E, dim)``.
     """
-    qh = q - pot.rowwise(np.multiply, normal, _dot(normal, q - point))
-    ph = p - pot.rowwise(np.multiply, normal, _dot(normal, p))
+    qh = q - normal * _dot(normal, q - point)[:, None]
+    ph = p - normal * _dot(normal, p)[:, None]
     return qh, ph
 
 
@@ -284,54 +353,79 @@ def phi_beta(z: np.ndarray, d_beta: float, h: float) -> np.ndarray:
     return pot.bump(np.asarray(z, dtype=float) / d_beta, h) * (pot.sigma_1(z - d_beta) - 1.0)
 
 
-def beta_pairs(spec: ObstacleSpec, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _near(spec: ObstacleSpec, geo: Geometry) -> tuple[tuple, tuple]:
+    """Return ``((k, i) of the spheres, (k, i) of the walls)`` within the sensing range,
+    each obstacle-major (by obstacle, then agent: each agent's obstacles in order)."""
+    spheres = walls = (np.zeros(0, dtype=np.intp),) * 2
+    if spec.spheres:
+        outer, inner = spec.sensing_shell
+        near = geo.sq < outer[:, None]
+        near &= geo.sq > inner[:, None]
+        spheres = np.nonzero(near)
+    if spec.walls:
+        walls = np.nonzero(np.abs(geo.signed) < spec.r_beta)
+    return spheres, walls
+
+
+def beta_pairs(spec: ObstacleSpec, q: np.ndarray,
+               geo: Geometry | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Return the (agent, obstacle) pairs within the sensing range, agent-major.
 
     An obstacle is a beta-neighbour of agent ``i`` when its beta-agent is closer than ``r'``
-    (Euclidean; [OS06] Section VII-B), i.e. when ``|clearance| < r'``.
+    (Euclidean; [OS06] Section VII-B), i.e. when ``|clearance| < r'``: for a sphere
+    ``(R - r')^2 < ||q_i - y_k||^2 < (R + r')^2``, compared without a square root.
 
     :param spec: the obstacles.
     :param q: positions, ``(m, dim)``.
+    :param geo: their :class:`Geometry` when the caller has it.
     :return: ``(agents, obstacles)``, index arrays sorted by agent then obstacle.
     """
-    near = np.abs(clearances(spec, q)) < spec.r_beta
-    return np.nonzero(near)
+    (ks, i_s), (kw, iw) = _near(spec, geometry(spec, q) if geo is None else geo)
+    agent = np.concatenate([i_s, iw])
+    obstacle = np.concatenate([ks, kw + len(spec.spheres)])
+    order = np.lexsort((obstacle, agent))
+    return agent[order], obstacle[order]
 
 
-def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray,
+              geo: Geometry | None = None) -> np.ndarray:
     """Return ``u_i^beta`` of [OS06] Algorithm 3 for each agent (zero without obstacles near).
 
     Vectorised over the (agent, obstacle) pairs within the sensing range
-    (:func:`beta_pairs`); each agent's sum runs over its obstacles in the map's order, so a
-    row depends only on that agent's state: the same whether the agent is evaluated alone,
-    with others, or with the whole swarm.
+    (:func:`beta_pairs`); each agent's sum runs over its spheres, then its walls, each in
+    the map's order, so a row depends only on that agent's state: the same whether the
+    agent is evaluated alone, with others, or with the whole swarm.
 
     :param spec: the obstacles and the term's parameters.
     :param q: positions, ``(m, dim)``.
     :param p: velocities, ``(m, dim)``.
+    :param geo: the agents' :class:`Geometry` when the caller has it.
     :return: ``(m, dim)``.
     """
     m, dim = q.shape
     out = np.zeros((m, dim))
     if not spec.active or m == 0:
         return out
-    agent, obstacle = beta_pairs(spec, q)
-    if agent.size == 0:
+    (ks, i_s), (kw, iw) = _near(spec, geometry(spec, q) if geo is None else geo)
+    if not i_s.size and not iw.size:
         return out
-    qi, pi = q[agent], p[agent]
-    n_s = len(spec.spheres)
-    qh, ph = np.empty_like(qi), np.empty_like(pi)
-    on_sphere = obstacle < n_s
-    if on_sphere.any():
-        k = obstacle[on_sphere]
-        qh[on_sphere], ph[on_sphere] = sphere_beta_agents(
-            qi[on_sphere], pi[on_sphere], spec.centres[k], spec.radii[k])
-    if (~on_sphere).any():
-        k = obstacle[~on_sphere] - n_s
-        qh[~on_sphere], ph[~on_sphere] = wall_beta_agents(
-            qi[~on_sphere], pi[~on_sphere], spec.points[k], spec.normals[k])
-    dq = qh - qi
-    sq = pot.squared_norm(dq)
+    # Each kind's pairs, obstacle-major; concatenated, every agent's pairs keep their order.
+    parts = []
+    if i_s.size:
+        qi, pi = q[i_s], p[i_s]
+        qh, ph = sphere_beta_agents(qi, pi, spec.centres[ks], spec.radii[ks])
+        parts.append((qh - qi, ph - pi))
+    if iw.size:
+        qi, pi = q[iw], p[iw]
+        qh, ph = wall_beta_agents(qi, pi, spec.points[kw], spec.normals[kw])
+        parts.append((qh - qi, ph - pi))
+    if len(parts) == 1:
+        (dq, dp), agent = parts[0], (i_s if i_s.size else iw)
+    else:
+        dq, dp = np.concatenate([parts[0][0], parts[1][0]]), np.concatenate([parts[0][1],
+                                                                             parts[1][1]])
+        agent = np.concatenate([i_s, iw])
+    sq = _dot(dq, dq)
     root = np.sqrt(1.0 + spec.eps * sq)
     # ||qh - q||_sigma in the cancellation-free form (pot.sigma_of_distance), from ||dq||^2.
     z = sq / (root + 1.0)
@@ -339,14 +433,36 @@ def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray) -> np.ndarray:
     # b_ik = rho_h(||qh_ik - q_i||_sigma / d_beta); phi_beta shares the bump.
     b = pot.bump(z / d_b, spec.h)
     action = b * (pot.sigma_1(z - d_b) - 1.0)
-    # phi_beta n_ik = (phi_beta / sqrt(1 + eps ||dq||^2)) dq, n_ik = sigma_eps(qh_ik - q_i).
-    coef = spec.c1_beta * action / root
-    damp = spec.c2_beta * b
+    # phi_beta n_ik = (phi_beta / sqrt(1 + eps ||dq||^2)) dq, n_ik = sigma_eps(qh_ik - q_i);
+    # ph_ik - p_i the velocity relative to the beta-agent.
+    term = dq * (spec.c1_beta * action / root)[:, None] + dp * (spec.c2_beta * b)[:, None]
     for col in range(dim):
-        term = dq[:, col] * coef + (ph[:, col] - pi[:, col]) * damp
-        # bincount sums each agent's pairs in order: the row does not depend on the others.
-        out[:, col] = np.bincount(agent, weights=term, minlength=m)
+        # bincount adds each agent's pairs in their order, from 0: the row depends on the
+        # agent's own pairs only.
+        out[:, col] = np.bincount(agent, weights=term[:, col], minlength=m)
     return out
+
+
+def step_bounds(spec: ObstacleSpec, dt: float) -> list[StepViolation]:
+    """Return the violated explicit-step bound of the beta term (empty when ``dt`` is fine).
+
+    Near a surface the term is a PD feedback on the agent's normal coordinate ``x``: the
+    damping ``c2_beta b_ik`` with ``b_ik = 1`` on the bump's plateau, and a stiffness
+    ``c1_beta (1 - sigma_1(-d_beta)) < 2 c1_beta`` (``phi_beta`` at the surface times the
+    slope of ``n_ik``, ``1``); :func:`~flock_swarm.core.stability.pd_dt_max` of the
+    bound ``(2 c1_beta, c2_beta)``.
+
+    :param spec: the obstacles.
+    :param dt: the scenario's step.
+    :return: the violation, or nothing.
+    """
+    if not spec.active:
+        return []
+    bound = pd_dt_max(2.0 * spec.c1_beta, spec.c2_beta)
+    if dt < bound:
+        return []
+    return [StepViolation('beta term of the obstacles', bound,
+                          f'c1_beta = {spec.c1_beta:g}, c2_beta = {spec.c2_beta:g}')]
 
 
 def inside(spec: ObstacleSpec, q: np.ndarray) -> tuple[int, int] | None:
@@ -394,23 +510,56 @@ class ObstacleMetrics:
         self.clearance_min = float('inf')
         self.penetrations: set[tuple[int, int]] = set()
         self.collisions: set[tuple[int, int]] = set()
+        # The keys (agent * count + obstacle) found at the previous instant: pairs mostly
+        # stay close for many steps, and only the new ones go through the sets of tuples.
+        self._close: set[int] = set()
+        self._inside: set[int] = set()
 
-    def update(self, q: np.ndarray) -> float:
-        """Fold in one instant; return its smallest clearance."""
-        c = clearances(self.spec, q)
-        now = float(c.min()) if c.size else float('inf')
+    def _fold(self, found: set, keys: np.ndarray, last: set[int]) -> set[int]:
+        """Add the pairs of ``keys`` not in ``last`` to ``found``; return this instant's."""
+        now = set(keys.tolist())
+        count = self.spec.count
+        found.update(divmod(key, count) for key in now - last)
+        return now
+
+    def update(self, q: np.ndarray, geo: Geometry | None = None) -> float:
+        """Fold in one instant (``geo``: its :class:`Geometry`, when the caller has it);
+        return its smallest clearance."""
+        spec, cd = self.spec, self.collision_distance
+        n_s = len(spec.spheres)
+        geo = geometry(spec, q) if geo is None else geo
+        lows = []
+        sq = signed = None
+        if spec.spheres and q.shape[0]:
+            sq = geo.sq
+            # sqrt is monotonic: the root of each sphere's least square is its least distance.
+            lows.append((np.sqrt(sq.min(axis=1)) - spec.radii).min())
+        if spec.walls and q.shape[0]:
+            signed = geo.signed
+            lows.append(signed.min())
+        now = float(min(lows)) if lows else float('inf')
         self.clearance_min = min(self.clearance_min, now)
-        if now < self.collision_distance:
-            i, k = np.nonzero(c < self.collision_distance)
-            self.collisions.update(zip(i.tolist(), k.tolist()))
-            if now < 0.0:
-                i, k = np.nonzero(c < 0.0)
-                self.penetrations.update(zip(i.tolist(), k.tolist()))
+        if now < cd:
+            keys, clear = [], []
+            if sq is not None:
+                k, i = np.nonzero(sq < ((spec.radii + cd) ** 2)[:, None])
+                keys.append(i * spec.count + k)
+                clear.append(np.sqrt(sq[k, i]) - spec.radii[k])
+            if signed is not None:
+                k, i = np.nonzero(signed < cd)
+                keys.append(i * spec.count + (k + n_s))
+                clear.append(signed[k, i])
+            keys_all, clear_all = np.concatenate(keys), np.concatenate(clear)
+            self._close = self._fold(self.collisions, keys_all[clear_all < cd], self._close)
+            self._inside = self._fold(self.penetrations, keys_all[clear_all < 0.0],
+                                      self._inside)
+        else:
+            self._close = self._inside = set()
         return now
 
 
-def with_obstacles(spec: ObstacleSpec, u: np.ndarray, q: np.ndarray,
-                   p: np.ndarray) -> np.ndarray:
+def with_obstacles(spec: ObstacleSpec, u: np.ndarray, q: np.ndarray, p: np.ndarray,
+                   geo: Geometry | None = None) -> np.ndarray:
     """Return a law's commands with the beta term added ([OS06] Algorithm 3).
 
     ``u_i = u_i^alpha + u_i^gamma`` (the law) ``+ u_i^beta``; without obstacles ``u`` itself,
@@ -420,8 +569,9 @@ def with_obstacles(spec: ObstacleSpec, u: np.ndarray, q: np.ndarray,
     :param u: the law's commands of the agents ``q``, ``(m, dim)``.
     :param q: their positions.
     :param p: their velocities.
+    :param geo: their :class:`Geometry` when the caller has it.
     :return: the commands.
     """
     if not spec.active:
         return u
-    return u + beta_term(spec, q, p)
+    return u + beta_term(spec, q, p, geo)

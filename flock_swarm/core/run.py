@@ -28,8 +28,9 @@ from flock_swarm.core.laws.base import (AgentData, Law, StepViolation, advance_s
                                         swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
-from flock_swarm.core.obstacles import (ObstacleMetrics, ObstacleSpec, check_start,
-                                        with_obstacles)
+from flock_swarm.core.obstacles import (Geometry, ObstacleMetrics, ObstacleSpec, check_start,
+                                        geometry, with_obstacles)
+from flock_swarm.core.obstacles import step_bounds as obstacle_step_bounds
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.errors import PluginError
 from flock_swarm.core.registry import LAW_GROUP, entries
@@ -127,13 +128,14 @@ class RunLog:
         self.fold_obstacles(q)
         return self.record(k, t, q, p, u, leader, informed, last, **extra)
 
-    def fold_obstacles(self, q: np.ndarray) -> None:
+    def fold_obstacles(self, q: np.ndarray, geo: Geometry | None = None) -> None:
         """Fold one step's agent-obstacle clearances into the whole-run metrics (every step).
 
-        Part of :meth:`observe`; a stack of runs (:func:`simulate_stack`) calls it for each.
+        Part of :meth:`observe`; a stack of runs (:func:`simulate_stack`) calls it for each,
+        with the step's :class:`~flock_swarm.core.obstacles.Geometry` it computed already.
         """
         if self.metrics.obstacles is not None:
-            self.clearance = self.metrics.obstacles.update(q)
+            self.clearance = self.metrics.obstacles.update(q, geo)
 
     def record(self, k: int, t: float, q: np.ndarray, p: np.ndarray, u: np.ndarray,
                leader: LeaderState, informed: np.ndarray, last: bool,
@@ -177,6 +179,38 @@ def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
     if sc.law.all_pairs:
         return all_pairs_weights(sc.n_agents, None, q, sc.law)
     return disk_graph(q, sc.law.radius, sc.law.strict_radius)
+
+
+class LinkObserver:
+    """The network statistics of a run's agent links, counted without evaluating the law.
+
+    An observer of a lockstep run (the world node, ``analyze`` on a bag) sends, step by
+    step, the messages between the agents ``sim`` sends (nobody informed: the statistics are
+    of the agents' links) and counts what the agents use
+    (:meth:`~flock_swarm.core.network.NetworkState.observe`): the statistics ``sim`` records.
+    """
+
+    def __init__(self, sc: Scenario, real: Realization, static: EdgeList | None) -> None:
+        """Create the observer of a run of ``sc`` (its ``network:`` section active)."""
+        self.sc, self.real, self.static = sc, real, static
+        self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight)
+        self.nobody = np.zeros(sc.n_agents, dtype=bool)
+
+    def step(self, k: int, q: np.ndarray, p: np.ndarray) -> list[int]:
+        """Send step ``k``'s messages and return its counts
+        (:class:`~flock_swarm.core.network.Tally`'s order).
+
+        :param k: the step (every step, in order).
+        :param q: the agents' positions at ``k``.
+        :param p: their velocities.
+        """
+        sc = self.sc
+        self.net.send(k, q, p, None, interaction_graph(sc, self.real, q, self.static),
+                      self.nobody)
+        self.net.observe(q, p, sc.dt)
+        return self.net.counts
 
 
 def whole_run_pairs(sc: Scenario, q: np.ndarray, static: EdgeList | None,
@@ -271,14 +305,15 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
     """Return the bounds the scenario's ``dt`` violates (empty when it is fine).
 
     The law's own bounds (:meth:`~flock_swarm.core.laws.base.Law.step_bounds`, given the
-    run's :class:`~flock_swarm.core.laws.base.LawSetup`), then RK4's for the leader model
+    run's :class:`~flock_swarm.core.laws.base.LawSetup`), the beta term's of the obstacles
+    (:func:`~flock_swarm.core.obstacles.step_bounds`), then RK4's for the leader model
     and the intrinsic dynamics (:func:`~flock_swarm.core.stability.model_bounds`).
 
     :param sc: the scenario.
     :param real: its realisation (fixed graphs, informed set).
     :return: the violations.
     """
-    found = list(sc.law.step_bounds(real.setup))
+    found = list(sc.law.step_bounds(real.setup)) + obstacle_step_bounds(sc.obstacles, sc.dt)
     for part, model in (('leader model', sc.leader.model), ('intrinsic dynamics', sc.intrinsic)):
         found += model_bounds(part, model, sc.leader.velocity, sc.dim, sc.dt)
     return found
@@ -431,6 +466,9 @@ class _Stack:
             else None
         self._disk = static is None and not sc.law.all_pairs
         self.graph = self._new_graph()
+        #: ``(q, its Geometry)``: the obstacle geometry of the positions ``q`` (the same
+        #: array object: a step replaces ``q``, never writes into it).
+        self.geometry: tuple[np.ndarray, Geometry] | None = None
         #: The messages between the agents (``network:``), ``None`` without the section.
         self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
                                 neighbourhood_of(sc.graph_type, sc.law.all_pairs),
@@ -496,7 +534,7 @@ class _Stack:
 
         t = step * dt
 
-        obstacles = self.scenarios[0].obstacles
+        obstacles, geo = self.scenarios[0].obstacles, self.obstacle_geometry()
 
         def alone(row: int) -> np.ndarray:
             one = np.array([row])
@@ -505,8 +543,18 @@ class _Stack:
                                   q[one], p[one])
         return evaluate_law(law, step, np.arange(q.shape[0]) % self.size, q.shape[1],
                             lambda: with_obstacles(obstacles, swarm_control(
-                                law, q, p, edges, leader, agents, dt, t), q, p),
+                                law, q, p, edges, leader, agents, dt, t), q, p, geo),
                             alone)
+
+    def obstacle_geometry(self) -> Geometry | None:
+        """Return the agents' geometry relative to the obstacles at the current positions,
+        computed once a step for the beta term and the metrics (``None``: no obstacles)."""
+        spec = self.scenarios[0].obstacles
+        if not spec.active:
+            return None
+        if self.geometry is None or self.geometry[0] is not self.q:
+            self.geometry = (self.q, geometry(spec, self.q))
+        return self.geometry[1]
 
     def end_non_finite(self, u: np.ndarray, leader: LeaderState, law: Law,
                        step: int) -> np.ndarray | None:
@@ -570,7 +618,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
                 u = evaluate_law(law, step, np.arange(n_rows) % stack.size, sc.dim,
                                  lambda: with_obstacles(sc.obstacles, stack.net.control(
                                      None, stack.q, stack.p, stack.agents, dt, step * dt)[0],
-                                     stack.q, stack.p))
+                                     stack.q, stack.p, stack.obstacle_geometry()))
             u = stack.end_non_finite(u, state, law, step)
             if u is None:
                 return
@@ -582,8 +630,9 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,
                                       None if stack.graph is None else stack.graph.sq_dist)
             if sc.obstacles.active:
+                geo = stack.obstacle_geometry()
                 for b, log in enumerate(logs):
-                    log.fold_obstacles(q[b * m:(b + 1) * m])
+                    log.fold_obstacles(q[b * m:(b + 1) * m], geo.part(b * m, (b + 1) * m))
             if step % every == 0 or step == steps:
                 net_stats = {} if stack.net is None else stack.net.recorded(dt)
                 for b, log in enumerate(logs):
