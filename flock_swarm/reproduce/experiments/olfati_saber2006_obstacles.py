@@ -19,10 +19,11 @@ from flock_swarm.reproduce.experiment import Experiment, FractionClaim, SetUp
 
 #: The rows every obstacle experiment shows (what, metric, the paper's value).
 ROWS = (
-    ('run length t_final [s] (paper: about 44 s of snapshots)', 't_final', 'not given'),
+    ('run length t_final [s] (the paper\'s snapshots end near 42-44 s)', 't_final',
+     'not given'),
     ('smallest agent-obstacle clearance over the run [m] (> 0: no contact)', 'clearance_min',
      '> 0'),
-    ('agent-obstacle penetrations (steps x agents inside an obstacle)', 'penetrations', '0'),
+    ('(agent, obstacle) pairs with the agent ever inside the obstacle', 'penetrations', '0'),
     ('agents past the obstacles at t_final', 'agents_passed', 'all'),
     ('largest number of r-disk components while passing', 'components_max_passing', '-'),
     ('r-disk components at t_final', 'components_final', '1 (one flock)'),
