@@ -394,3 +394,23 @@ def test_a_sweep_varies_the_section_and_collects_the_obstacle_metrics(tmp_path):
             alone['obstacle_clearance_min'], rel=0, abs=1e-9)
         assert int(row['obstacle_penetrations']) == alone['obstacle_penetrations']
         assert int(row['obstacle_collisions']) == alone['obstacle_collisions']
+
+
+@pytest.mark.parametrize('kind', ['spheres', 'walls'])
+def test_a_map_of_one_kind_has_empty_arrays_of_the_other(kind):
+    """A map of spheres only (the squeeze preset's) or walls only gives ``(0, dim)`` arrays for
+    the other kind: drawing and the term once failed on an empty reshape."""
+    full = mixed_spec(2)
+    spec = ObstacleSpec(**{kind: getattr(full, kind), 'd_beta': full.d_beta,
+                           'r_beta': full.r_beta})
+    assert spec.centres.shape == (len(spec.spheres), 2)
+    assert spec.points.shape == spec.normals.shape == (len(spec.walls), 2)
+    q = np.array([[3.0, 0.0], [0.0, -7.0]])
+    assert beta_term(spec, q, np.zeros_like(q)).shape == (2, 2)
+
+
+def test_sim_plots_a_preset_with_spheres_only(tmp_path):
+    """`sim olfati_saber2006_squeeze --plots` (two spheres, no wall) draws its figures."""
+    assert main(['olfati_saber2006_squeeze', '--set', 'duration=1', '--out', str(tmp_path),
+                 '--plots']) == 0
+    assert (tmp_path / 'trajectories.png').stat().st_size > 1000

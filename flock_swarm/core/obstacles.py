@@ -89,11 +89,21 @@ class ObstacleSpec:
         """Return the number of obstacles: the spheres (ids ``0..S-1``), then the walls."""
         return len(self.spheres) + len(self.walls)
 
+    @property
+    def dim(self) -> int:
+        """Return the space's dimension (0 without obstacles)."""
+        first = self.spheres or self.walls
+        return len(first[0][0]) if first else 0
+
+    def _rows(self, rows: list) -> np.ndarray:
+        """Return vectors as a ``(len(rows), dim)`` array (also when there are none of a kind,
+        where a plain reshape cannot infer the width)."""
+        return np.array(rows, dtype=float).reshape(len(rows), self.dim)
+
     @cached_property
     def centres(self) -> np.ndarray:
         """Return the spheres' centres ``y_k``, ``(S, dim)``."""
-        centres = np.array([c for c, _ in self.spheres], dtype=float)
-        return centres.reshape(len(self.spheres), -1)
+        return self._rows([c for c, _ in self.spheres])
 
     @cached_property
     def radii(self) -> np.ndarray:
@@ -103,12 +113,12 @@ class ObstacleSpec:
     @cached_property
     def points(self) -> np.ndarray:
         """Return a point ``y_k`` of each wall, ``(W, dim)``."""
-        return np.array([y for y, _ in self.walls], dtype=float).reshape(len(self.walls), -1)
+        return self._rows([y for y, _ in self.walls])
 
     @cached_property
     def normals(self) -> np.ndarray:
         """Return the walls' unit normals ``a_k`` (normalised), ``(W, dim)``."""
-        a = np.array([n for _, n in self.walls], dtype=float).reshape(len(self.walls), -1)
+        a = self._rows([n for _, n in self.walls])
         return a / np.sqrt(pot.squared_norm(a))[:, None] if a.size else a
 
     @cached_property
