@@ -8,9 +8,7 @@
  *   Taker(subscriptions)     take() -> (data, meta): every available serialised message of
  *                            every subscription, in one contiguous bytes object, and per
  *                            message (subscription index, size, source timestamp [ns]) as
- *                            int64 triplets. notify(guard_condition, threshold) triggers an
- *                            rcl guard condition once `threshold` messages are waiting, so
- *                            an executor wakes once a step instead of once a message.
+ *                            int64 triplets.
  *   Publishers(publishers)   publish(data, targets, sizes): message m (sizes[m] bytes, the
  *                            messages back to back in data) to publisher targets[m].
  *
@@ -24,12 +22,10 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
-#include <stdatomic.h>
 #include <stdint.h>
 #include <string.h>
 
 #include <rcl/error_handling.h>
-#include <rcl/guard_condition.h>
 #include <rcl/publisher.h>
 #include <rcl/subscription.h>
 #include <rcutils/allocator.h>
@@ -108,48 +104,12 @@ typedef struct
   int64_t *meta;
   size_t meta_cap; /* messages */
   size_t max_bytes;
-  /* notify(): messages signalled by rmw and not taken yet; the guard condition to trigger
-   * once `threshold` of them wait (triggered once until the next take). */
-  atomic_size_t pending;
-  atomic_int armed;
-  size_t threshold;
-  rcl_guard_condition_t *guard;
-  int notifying;
   int closed;
 } Taker;
-
-/* rmw's on-new-message callback (a DDS listener thread, no GIL): count, trigger once. */
-static void
-on_new_message(const void *user_data, size_t number_of_events)
-{
-  Taker *self = (Taker *)user_data;
-  size_t now = atomic_fetch_add(&self->pending, number_of_events) + number_of_events;
-  if (now >= self->threshold && atomic_exchange(&self->armed, 0)) {
-    /* A failure leaves the step to the node's timer (it takes whatever waits). */
-    if (rcl_trigger_guard_condition(self->guard) != RCL_RET_OK) {
-      rcl_reset_error();
-    }
-  }
-}
-
-static void
-taker_stop_notify(Taker *self)
-{
-  if (!self->notifying) {
-    return;
-  }
-  for (Py_ssize_t i = 0; i < self->n; i++) {
-    if (rcl_subscription_set_on_new_message_callback(self->subs[i], NULL, NULL) != RCL_RET_OK) {
-      rcl_reset_error();
-    }
-  }
-  self->notifying = 0;
-}
 
 static void
 taker_release(Taker *self)
 {
-  taker_stop_notify(self);
   if (self->scratch_ready) {
     if (rmw_serialized_message_fini(&self->scratch) != RMW_RET_OK) {
       rcl_reset_error();
@@ -202,8 +162,6 @@ taker_init(Taker *self, PyObject *args, PyObject *kwds)
     return -1;
   }
   self->scratch_ready = 1;
-  atomic_store(&self->pending, 0);
-  atomic_store(&self->armed, 0);
   return 0;
 }
 
@@ -296,15 +254,6 @@ taker_take(Taker *self, PyObject *Py_UNUSED(ignored))
     }
   }
   Py_END_ALLOW_THREADS
-  if (self->notifying) {
-    /* Taken messages no longer wait; re-arm the trigger for the next step. */
-    size_t before = atomic_load(&self->pending);
-    while (!atomic_compare_exchange_weak(&self->pending, &before,
-      before > count ? before - count : 0))
-    {
-    }
-    atomic_store(&self->armed, 1);
-  }
   if (no_memory) {
     return PyErr_NoMemory();
   }
@@ -328,54 +277,10 @@ taker_take(Taker *self, PyObject *Py_UNUSED(ignored))
 }
 
 static PyObject *
-taker_notify(Taker *self, PyObject *args)
-{
-  PyObject *guard_ptr;
-  Py_ssize_t threshold;
-  if (!PyArg_ParseTuple(args, "On", &guard_ptr, &threshold) || !taker_open(self)) {
-    return NULL;
-  }
-  if (threshold < 1) {
-    PyErr_SetString(PyExc_ValueError, "threshold must be >= 1");
-    return NULL;
-  }
-  void *guard = PyLong_AsVoidPtr(guard_ptr);
-  if (guard == NULL) {
-    if (!PyErr_Occurred()) {
-      PyErr_SetString(PyExc_ValueError, "the guard condition is a null pointer");
-    }
-    return NULL;
-  }
-  taker_stop_notify(self);
-  self->guard = (rcl_guard_condition_t *)guard;
-  self->threshold = (size_t)threshold;
-  atomic_store(&self->pending, 0);
-  atomic_store(&self->armed, 1);
-  self->notifying = 1;
-  for (Py_ssize_t i = 0; i < self->n; i++) {
-    rcl_ret_t ret = rcl_subscription_set_on_new_message_callback(
-      self->subs[i], on_new_message, self);
-    if (ret != RCL_RET_OK) {
-      char msg[ERR_LEN];
-      take_rcl_error(msg, sizeof(msg));
-      taker_stop_notify(self);
-      return raise_rcl("rcl_subscription_set_on_new_message_callback", ret, msg);
-    }
-  }
-  Py_RETURN_NONE;
-}
-
-static PyObject *
 taker_close(Taker *self, PyObject *Py_UNUSED(ignored))
 {
   taker_release(self);
   Py_RETURN_NONE;
-}
-
-static PyObject *
-taker_get_pending(Taker *self, void *Py_UNUSED(closure))
-{
-  return PyLong_FromSize_t(atomic_load(&self->pending));
 }
 
 static PyObject *
@@ -389,17 +294,12 @@ static PyMethodDef taker_methods[] = {
     "take() -> (data, meta): every available serialised message of every subscription, "
     "back to back in data; meta holds int64 (subscription index, size, source timestamp "
     "[ns]) per message."},
-  {"notify", (PyCFunction)taker_notify, METH_VARARGS,
-    "notify(guard_condition_pointer, threshold): trigger the rcl guard condition once "
-    "threshold messages wait untaken (once per take())."},
   {"close", (PyCFunction)taker_close, METH_NOARGS,
-    "close(): stop notifying and free the buffers; the Taker is unusable after."},
+    "close(): free the buffers; the Taker is unusable after."},
   {NULL, NULL, 0, NULL}
 };
 
 static PyGetSetDef taker_getset[] = {
-  {"pending", (getter)taker_get_pending, NULL,
-    "messages signalled since the last take() (notify() only)", NULL},
   {"size", (getter)taker_get_size, NULL, "number of subscriptions", NULL},
   {NULL, NULL, NULL, NULL, NULL}
 };
