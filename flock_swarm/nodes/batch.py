@@ -141,9 +141,12 @@ class BatchPublish:
         if not messages:
             return
         targets = np.fromiter((row for row, _ in messages), dtype=np.int64, count=len(messages))
-        sizes = np.fromiter((len(data) for _, data in messages), dtype=np.int64,
-                            count=len(messages))
-        self.publishers.publish(b''.join(data for _, data in messages), targets, sizes)
+        self.publish_to(targets, [data for _, data in messages])
+
+    def publish_to(self, targets: np.ndarray, messages: Sequence[bytes]) -> None:
+        """Publish ``messages[m]`` on publisher ``targets[m]`` (int64), in order."""
+        sizes = np.fromiter(map(len, messages), dtype=np.int64, count=len(messages))
+        self.publishers.publish(b''.join(messages), targets, sizes)
 
     def close(self) -> None:
         """Release the publishers (idempotent)."""
