@@ -7,8 +7,11 @@ Also run under AddressSanitizer and UndefinedBehaviorSanitizer by scripts/saniti
 import gc
 import os
 import resource
+import shutil
+import subprocess
 import sys
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -247,3 +250,21 @@ def test_asking_for_c_without_the_extension_names_why(monkeypatch):
         batch.use_c_path('c')
     assert batch.use_c_path('auto') is False
     assert os.environ.get(batch.ENV) is None
+
+
+def test_a_build_without_a_compiler_succeeds_and_says_why_in_one_line(tmp_path):
+    root = Path(__file__).resolve().parent.parent
+    for name in ('setup.py', 'setup.cfg', 'package.xml'):
+        shutil.copy(root / name, tmp_path / name)
+    shutil.copytree(root / 'resource', tmp_path / 'resource')
+    (tmp_path / 'flock_swarm').mkdir()
+    (tmp_path / 'flock_swarm' / '__init__.py').touch()
+    shutil.copy(root / 'flock_swarm' / '_rclbatch.c', tmp_path / 'flock_swarm')
+    result = subprocess.run([sys.executable, 'setup.py', '-q', 'build_ext', '--inplace'],
+                            cwd=tmp_path, env=dict(os.environ, CC='/bin/false'),
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    lines = [line for line in result.stderr.splitlines() if 'flock_swarm:' in line]
+    assert lines == ["flock_swarm: C message path not built (command '/bin/false' failed with "
+                     'exit code 1); the nodes use pure rclpy'], result.stderr
+    assert not list((tmp_path / 'flock_swarm').glob('_rclbatch*.so'))
