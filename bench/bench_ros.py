@@ -535,6 +535,20 @@ def machine() -> dict:
             'platform': platform.platform(), 'load_average': os.getloadavg()}
 
 
+def growth_checks(rows: list[dict], layouts: list[str], n: int,
+                  bound: float) -> list[tuple[str, bool]]:
+    """Return, for each layout measured at N = 100 and ``n``, whether the cost per
+    agent-step at ``n`` is within ``bound`` times that at N = 100."""
+    checks = []
+    for layout in layouts:
+        by_n = {r['n']: r for r in rows if r['layout'] == layout}
+        if 100 in by_n and n in by_n:
+            growth = by_n[n]['us_per_agent_step'] / by_n[100]['us_per_agent_step']
+            checks.append((f'{layout}: cost per agent-step at N={n} within {bound:g}x that at '
+                           f'N=100 ({growth:.2f}x)', growth <= bound))
+    return checks
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark (or one floor process with ``--role``)."""
     # Started in the background from a script, SIGINT would be ignored here and in every
@@ -648,13 +662,8 @@ def main(argv: list[str] | None = None) -> int:
                 r['recording_cost'] <= 0.10) for r in rows]
     checks += [(f'one N=100: >= 20 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 20)
                for r in rows if r['layout'] == 'one' and r['n'] == 100]
-    for layout in args.layouts:
-        # Issue 17: the cost of an agent-step may not grow much with N.
-        by_n = {r['n']: r for r in rows if r['layout'] == layout}
-        if 100 in by_n and 1000 in by_n:
-            growth = by_n[1000]['us_per_agent_step'] / by_n[100]['us_per_agent_step']
-            checks.append((f'{layout}: cost per agent-step at N=1000 within 1.5x that at '
-                           f'N=100 ({growth:.2f}x)', growth <= 1.5))
+    # Issue 17: the cost of an agent-step may not grow much with N.
+    checks += growth_checks(rows, args.layouts, 1000, 1.5)
     checks += [(f'{r["layout"]} N=1000: >= 25 steps/s with recording ({r["pipeline"]:.1f})',
                 r['pipeline'] >= 25) for r in rows if r['n'] == 1000]
     # Issue 28 (the compiled message path).
@@ -666,12 +675,7 @@ def main(argv: list[str] | None = None) -> int:
     checks += [(f'{r["layout"]} N=1000: >= 50 steps/s with recording, real time at dt = 0.02 '
                 f'({r["pipeline"]:.1f})', r['pipeline'] >= 50)
                for r in rows if r['n'] == 1000]
-    for layout in args.layouts:
-        by_n = {r['n']: r for r in rows if r['layout'] == layout}
-        if 100 in by_n and 2000 in by_n:
-            growth = by_n[2000]['us_per_agent_step'] / by_n[100]['us_per_agent_step']
-            checks.append((f'{layout}: cost per agent-step at N=2000 within 1.3x that at '
-                           f'N=100 ({growth:.2f}x)', growth <= 1.3))
+    checks += growth_checks(rows, args.layouts, 2000, 1.3)
     checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:

@@ -283,12 +283,6 @@ taker_close(Taker *self, PyObject *Py_UNUSED(ignored))
   Py_RETURN_NONE;
 }
 
-static PyObject *
-taker_get_size(Taker *self, void *Py_UNUSED(closure))
-{
-  return PyLong_FromSsize_t(self->n);
-}
-
 static PyMethodDef taker_methods[] = {
   {"take", (PyCFunction)taker_take, METH_NOARGS,
     "take() -> (data, meta): every available serialised message of every subscription, "
@@ -297,11 +291,6 @@ static PyMethodDef taker_methods[] = {
   {"close", (PyCFunction)taker_close, METH_NOARGS,
     "close(): free the buffers; the Taker is unusable after."},
   {NULL, NULL, 0, NULL}
-};
-
-static PyGetSetDef taker_getset[] = {
-  {"size", (getter)taker_get_size, NULL, "number of subscriptions", NULL},
-  {NULL, NULL, NULL, NULL, NULL}
 };
 
 static PyTypeObject TakerType = {
@@ -315,7 +304,6 @@ static PyTypeObject TakerType = {
   .tp_init = (initproc)taker_init,
   .tp_dealloc = (destructor)taker_dealloc,
   .tp_methods = taker_methods,
-  .tp_getset = taker_getset,
 };
 
 /* ----------------------------------------------------------------------- Publishers ---- */
@@ -462,12 +450,6 @@ publishers_close(Publishers *self, PyObject *Py_UNUSED(ignored))
   Py_RETURN_NONE;
 }
 
-static PyObject *
-publishers_get_size(Publishers *self, void *Py_UNUSED(closure))
-{
-  return PyLong_FromSsize_t(self->n);
-}
-
 static PyMethodDef publishers_methods[] = {
   {"publish", (PyCFunction)publishers_publish, METH_VARARGS,
     "publish(data, targets, sizes) -> count: message m (sizes[m] bytes, back to back in "
@@ -475,11 +457,6 @@ static PyMethodDef publishers_methods[] = {
   {"close", (PyCFunction)publishers_close, METH_NOARGS,
     "close(): forget the publishers; unusable after."},
   {NULL, NULL, 0, NULL}
-};
-
-static PyGetSetDef publishers_getset[] = {
-  {"size", (getter)publishers_get_size, NULL, "number of publishers", NULL},
-  {NULL, NULL, NULL, NULL, NULL}
 };
 
 static PyTypeObject PublishersType = {
@@ -493,7 +470,6 @@ static PyTypeObject PublishersType = {
   .tp_init = (initproc)publishers_init,
   .tp_dealloc = (destructor)publishers_dealloc,
   .tp_methods = publishers_methods,
-  .tp_getset = publishers_getset,
 };
 
 /* --------------------------------------------------------------------------- module ---- */

@@ -69,6 +69,16 @@ def nodes(ros_context):
     receiver.destroy_node()
 
 
+def two_topics(sender: Node, receiver: Node) -> tuple[list, batch.BatchTake]:
+    """Return two publishers of ``sender`` and a take of ``receiver``'s subscriptions to
+    them (whose callbacks must never run)."""
+    qos = qos_profile(LOCKSTEP_QOS)
+    pubs = [sender.create_publisher(AccelStamped, t, qos) for t in TOPICS[:2]]
+    return pubs, batch.BatchTake([receiver.create_subscription(AccelStamped, t, unexpected,
+                                                               qos, raw=True)
+                                  for t in TOPICS[:2]])
+
+
 def matched(executor, pubs, count=1):
     spin_until(executor, lambda: all(p.get_subscription_count() >= count for p in pubs), 20,
                'the subscriptions to match')
@@ -105,17 +115,14 @@ def test_batch_take_gets_what_rclpy_publishes(nodes):
 
 def test_batch_take_reports_sizes_and_source_stamps(nodes):
     sender, receiver, executor = nodes
-    qos = qos_profile(LOCKSTEP_QOS)
-    pubs = [sender.create_publisher(AccelStamped, t, qos) for t in TOPICS[:2]]
-    take = batch.BatchTake([receiver.create_subscription(AccelStamped, t, unexpected, qos,
-                                                         raw=True) for t in TOPICS[:2]])
+    pubs, take = two_topics(sender, receiver)
     try:
         matched(executor, pubs)
         sent = messages(1, 2)
         for pub, data in zip(pubs, sent):
             pub.publish(data)
         raw = []
-        wait_for(lambda: raw.append(take.taker.take()) or
+        wait_for(lambda: raw.append(take.native.take()) or
                  sum(len(m) for _, m in raw) == 2 * 3 * 8, 20, 'two messages', 0.01)
         data = b''.join(d for d, _ in raw)
         meta = np.frombuffer(b''.join(m for _, m in raw), dtype=np.int64).reshape(-1, 3)
@@ -188,17 +195,14 @@ def test_an_rcl_error_is_a_python_exception_with_rcls_message(nodes):
 
 def test_reference_counts_and_memory_stay_flat_over_many_calls(nodes):
     sender, receiver, executor = nodes
-    qos = qos_profile(LOCKSTEP_QOS)
-    pubs = [sender.create_publisher(AccelStamped, t, qos) for t in TOPICS[:2]]
-    take = batch.BatchTake([receiver.create_subscription(AccelStamped, t, unexpected, qos,
-                                                         raw=True) for t in TOPICS[:2]])
+    pubs, take = two_topics(sender, receiver)
     out = batch.BatchPublish(pubs)
     try:
         matched(executor, pubs)
         data = AccelEncoder().encode(0, (1.0, 2.0, 3.0))
         blob, targets, sizes = data * 2, np.array([0, 1], dtype=np.int64), \
             np.array([len(data)] * 2, dtype=np.int64)
-        taker, publishers = take.taker, out.publishers
+        taker, publishers = take.native, out.native
         watched = (blob, targets, sizes, taker, publishers)
 
         def calls(count):

@@ -39,7 +39,8 @@ from flock_swarm.core.faults import RunFault, non_finite_fault
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, AgentController,
                                           OdometryInbox, parse_agent_ids)
-from flock_swarm.nodes.batch import MESSAGE_PATH, BatchPublish, BatchTake, use_c_path
+from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
+                                     use_c_path)
 from flock_swarm.nodes.fault_report import FaultReporter
 from flock_swarm.nodes.graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
@@ -339,9 +340,7 @@ class AgentNode(Node):
         """Release the compiled path's hold on the subscriptions and publishers, then
         destroy the node."""
         # getattr: a node whose construction failed has neither.
-        for held in (getattr(self, 'odom_take', None), getattr(self, 'batch_out', None)):
-            if held is not None:
-                held.close()
+        release(getattr(self, 'odom_take', None), getattr(self, 'batch_out', None))
         super().destroy_node()
 
     def close(self) -> None:

@@ -23,7 +23,7 @@ equivalence tests on both paths).
 """
 
 import os
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -88,7 +88,36 @@ def use_c_path(parameter: str = 'auto') -> bool:
     return True
 
 
-class BatchTake:
+class _Held:
+    """rclpy handles held in use while the extension's object holds their rcl pointers (so
+    rclpy destroys none of them underneath it), released by :meth:`close`."""
+
+    def __init__(self, entities: Sequence, make: Callable[[list[int]], Any]) -> None:
+        """Enter every ``entity.handle`` and set :attr:`native` to ``make(pointers)``."""
+        self.handles = [entity.handle for entity in entities]
+        for handle in self.handles:
+            handle.__enter__()
+        self.native = make([handle.pointer for handle in self.handles])
+
+    def close(self) -> None:
+        """Free the extension's object and release the handles (idempotent)."""
+        if self.native is None:
+            return
+        self.native.close()
+        self.native = None
+        for handle in self.handles:
+            handle.__exit__(None, None, None)
+        self.handles = []
+
+
+def release(*held: '_Held | None') -> None:
+    """Close each of ``held`` that is not ``None`` (a node's, before it is destroyed)."""
+    for one in held:
+        if one is not None:
+            one.close()
+
+
+class BatchTake(_Held):
     """Every waiting message of a set of rclpy subscriptions taken at once.
 
     The subscriptions stay the node's (the executor's events and callbacks are rclpy's):
@@ -98,16 +127,12 @@ class BatchTake:
 
     def __init__(self, subscriptions: Sequence) -> None:
         """Hold ``subscriptions`` (rclpy subscriptions, in use until :meth:`close`)."""
-        self.handles = [sub.handle for sub in subscriptions]
-        # In use until close(): rclpy destroys none of them while the taker holds its pointer.
-        for handle in self.handles:
-            handle.__enter__()
-        self.taker = extension().Taker([handle.pointer for handle in self.handles])
+        super().__init__(subscriptions, extension().Taker)
 
     def take(self) -> list[tuple[int, bytes]]:
         """Return every waiting message as ``(subscription index, bytes)``, subscription by
         subscription (each one's in order of arrival)."""
-        data, meta = self.taker.take()
+        data, meta = self.native.take()
         if not meta:
             return []
         rows = np.frombuffer(meta, dtype=np.int64).reshape(-1, 3)
@@ -115,26 +140,13 @@ class BatchTake:
         starts = [0] + ends[:-1]
         return [(i, data[lo:hi]) for i, lo, hi in zip(rows[:, 0].tolist(), starts, ends)]
 
-    def close(self) -> None:
-        """Stop taking; release the subscriptions (idempotent)."""
-        if self.taker is None:
-            return
-        self.taker.close()
-        self.taker = None
-        for handle in self.handles:
-            handle.__exit__(None, None, None)
-        self.handles = []
 
-
-class BatchPublish:
+class BatchPublish(_Held):
     """A step's serialised messages published at once on a list of rclpy publishers."""
 
     def __init__(self, publishers: Sequence) -> None:
         """Hold ``publishers`` (rclpy publishers, in use until :meth:`close`)."""
-        self.handles = [pub.handle for pub in publishers]
-        for handle in self.handles:
-            handle.__enter__()
-        self.publishers = extension().Publishers([handle.pointer for handle in self.handles])
+        super().__init__(publishers, extension().Publishers)
 
     def publish(self, messages: Sequence[tuple[int, bytes]]) -> None:
         """Publish each ``(publisher index, bytes)`` of ``messages``, in order."""
@@ -146,14 +158,4 @@ class BatchPublish:
     def publish_to(self, targets: np.ndarray, messages: Sequence[bytes]) -> None:
         """Publish ``messages[m]`` on publisher ``targets[m]`` (int64), in order."""
         sizes = np.fromiter(map(len, messages), dtype=np.int64, count=len(messages))
-        self.publishers.publish(b''.join(messages), targets, sizes)
-
-    def close(self) -> None:
-        """Release the publishers (idempotent)."""
-        if self.publishers is None:
-            return
-        self.publishers.close()
-        self.publishers = None
-        for handle in self.handles:
-            handle.__exit__(None, None, None)
-        self.handles = []
+        self.native.publish(b''.join(messages), targets, sizes)

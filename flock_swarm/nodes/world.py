@@ -45,7 +45,8 @@ from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
 from flock_swarm.core.summary import with_failure
-from flock_swarm.nodes.batch import MESSAGE_PATH, BatchPublish, BatchTake, use_c_path
+from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
+                                     use_c_path)
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
 from flock_swarm.nodes.graph import check_claims, command_claims
@@ -618,9 +619,7 @@ class WorldNode(RecordedNode):
         """Release the compiled path's hold on the subscriptions and publishers, then
         destroy the node."""
         # getattr: a node whose construction failed has neither.
-        for held in (getattr(self, 'cmd_take', None), getattr(self, 'state_out', None)):
-            if held is not None:
-                held.close()
+        release(getattr(self, 'cmd_take', None), getattr(self, 'state_out', None))
         super().destroy_node()
 
 
