@@ -8,7 +8,8 @@
  *   Taker(subscriptions)     take() -> (data, meta): every available serialised message of
  *                            every subscription, in one contiguous bytes object, and per
  *                            message (subscription index, size, source timestamp [ns]) as
- *                            int64 triplets.
+ *                            int64 triplets. An rcl error raises, and the messages taken
+ *                            before it in that call are dropped.
  *   Publishers(publishers)   publish(data, targets, sizes): message m (sizes[m] bytes, the
  *                            messages back to back in data) to publisher targets[m].
  *
@@ -119,10 +120,11 @@ taker_release(Taker *self)
   PyMem_Free(self->subs);
   self->subs = NULL;
   self->n = 0;
-  PyMem_Free(self->data);
+  /* Raw: grown by grow() without the GIL. */
+  PyMem_RawFree(self->data);
   self->data = NULL;
   self->data_cap = 0;
-  PyMem_Free(self->meta);
+  PyMem_RawFree(self->meta);
   self->meta = NULL;
   self->meta_cap = 0;
   self->closed = 1;
