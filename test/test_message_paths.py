@@ -4,9 +4,10 @@ fallback (run here for a representative set of the equivalence and fault tests).
 
 Chosen for the fallback: the one-process equivalence (test_nodes, test_testing), the
 network model in every layout (test_network_ros: one process, container, a process per
-agent), the adaptive state in every layout (test_adaptive_state), the guard's rejections and
+agent), the adaptive state in one process (test_adaptive_state), the guard's rejections and
 counts under forged messages, a stalled step offered again, and a law's non-finite commands
-(test_faults, test_run_faults).
+(test_faults, test_run_faults). About 12 runs of a few agents: the rest of the suite runs
+on the compiled path.
 """
 
 import os
@@ -28,7 +29,7 @@ FALLBACK_TESTS = [
     'test_nodes.py::test_a_steps_commands_are_taken_at_once_and_give_sims_run',
     'test_testing.py::test_a_lockstep_run_matches_sim_bit_for_bit',
     'test_network_ros.py::test_delay_loss_and_noise_match_sim_in_every_layout',
-    'test_adaptive_state.py::test_zhou_matches_sim_in_every_layout',
+    'test_adaptive_state.py::test_zhou_matches_sim_in_every_layout[one process]',
     'test_faults.py::test_faulty_messages_are_rejected_counted_and_harmless',
     'test_faults.py::test_stalled_step_is_offered_again_with_backoff',
     'test_run_faults.py::test_non_finite_commands_of_a_law_fail_the_run_by_default_and_are_'
