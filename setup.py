@@ -1,9 +1,70 @@
 from glob import glob
+import os
+import sys
+import sysconfig
 
+from setuptools import Extension
 from setuptools import find_packages
 from setuptools import setup
+from setuptools.command.build_ext import build_ext
 
 package_name = 'flock_swarm'
+
+
+def _rcl_prefixes() -> list[str]:
+    """Return the prefixes that may hold the ROS wheels' include/ and lib/ (the
+    interpreter's, then AMENT_PREFIX_PATH's)."""
+    prefixes = [sys.prefix, sysconfig.get_config_var('prefix') or sys.prefix]
+    prefixes += [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    return list(dict.fromkeys(prefixes))
+
+
+def rclbatch_extension() -> tuple[list[Extension], str | None]:
+    """Return the C extension (compiled message path, docs/performance.md) and ``None``, or no
+    extension and why: without rcl's headers and libraries the nodes use pure rclpy."""
+    for prefix in _rcl_prefixes():
+        include, lib = os.path.join(prefix, 'include'), os.path.join(prefix, 'lib')
+        if os.path.isfile(os.path.join(include, 'rcl', 'rcl', 'rcl.h')) \
+                and os.path.isfile(os.path.join(lib, 'librcl.so')):
+            # The wheels put each package's headers in include/<package>/<package>/ (ROS 2's
+            # layout since Humble): rcl's include the others', so every one is on the path.
+            dirs = sorted(entry.path for entry in os.scandir(include)
+                          if entry.is_dir() and not entry.name.startswith('python'))
+            return [Extension(
+                'flock_swarm._rclbatch', ['flock_swarm/_rclbatch.c'],
+                include_dirs=dirs, library_dirs=[lib], libraries=['rcl', 'rmw', 'rcutils'],
+                runtime_library_dirs=[lib], extra_compile_args=['-std=c11', '-O2'],
+                optional=True)], None
+    return [], 'rcl headers and librcl.so not found under ' + ', '.join(_rcl_prefixes())
+
+
+class OptionalBuildExt(build_ext):
+    """build_ext that never fails the installation: an extension it cannot build is left
+    out with one line saying why (the nodes fall back to pure rclpy)."""
+
+    def run(self) -> None:
+        try:
+            super().run()
+        except Exception as exc:  # noqa: B902 (no compiler at all is a DistutilsError)
+            self._skipped(exc)
+
+    def build_extension(self, ext) -> None:
+        try:
+            super().build_extension(ext)
+        except Exception as exc:  # noqa: B902
+            self._skipped(exc)
+
+    @staticmethod
+    def _skipped(exc: Exception) -> None:
+        reason = ' '.join(str(exc).split())[:300]
+        print(f'flock_swarm: C message path not built ({reason}); the nodes use pure rclpy',
+              file=sys.stderr)
+
+
+EXT_MODULES, EXT_SKIPPED = rclbatch_extension()
+if EXT_SKIPPED is not None:
+    print(f'flock_swarm: C message path not built ({EXT_SKIPPED}); the nodes use pure rclpy',
+          file=sys.stderr)
 
 setup(
     name=package_name,
@@ -21,7 +82,9 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*_launch.py')),
     ],
     install_requires=['setuptools'],
-    zip_safe=True,
+    ext_modules=EXT_MODULES,
+    cmdclass={'build_ext': OptionalBuildExt},
+    zip_safe=False,
     maintainer='flock_swarm developers',
     maintainer_email='dev@flock-swarm.invalid',
     description=(

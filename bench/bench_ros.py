@@ -25,6 +25,13 @@ For each layout and N it runs, in fresh processes and one after the other:
     starts, raw subscriptions (``raw=True``) reading the step off the bytes. This is how the
     pipeline's nodes move messages (``flock_swarm.nodes.wire``), and the lowest cost of the
     pattern in rclpy.
+``C floor``
+    the raw floor's bytes moved as the pipeline's nodes move them on the compiled path
+    (``flock_swarm.nodes.batch``, issue 28): ``/clock`` and the odometry published in one
+    call, a step's commands (the agent host: its odometry) taken at once from the first
+    message's callback, the host's commands published in one call. Not run when the
+    extension is not built or ``FLOCK_SWARM_MESSAGE_PATH=rclpy`` (the pipeline then runs
+    on rclpy too).
 
 Each variant runs ``--repeat`` times, interleaved, and the best run counts (on a shared
 machine the least disturbed one); every run is in the JSON.
@@ -47,7 +54,10 @@ Targets (issue 5): pipeline >= 70 % of the floor's steps/s at every N (checked a
 both floors); N = 100 in one
 process >= 20 steps/s; recording costs <= 10 % (pipeline against no-record). Issue 17, with
 ``--sizes 100 200 500 1000``: cost per agent-step at N = 1000 within 1.5x that at N = 100 in
-each layout, N = 1000 at >= 25 steps/s with recording. The memory check
+each layout, N = 1000 at >= 25 steps/s with recording. Issue 28, with ``--sizes 100 300 1000 2000
+--layouts one container``: pipeline >= 70 % of the C floor at N = 100 and 1000, N = 100 in
+one process >= 500 steps/s, N = 1000 >= 50 steps/s with recording (real time at dt = 0.02),
+cost per agent-step at N = 2000 within 1.3x that at N = 100. The memory check
 (``--memory``; ``--memory-n N`` agents, default 30) runs the one-process pipeline for S and
 10 S steps and compares peak RSS (target: < 1.2x).
 """
@@ -63,6 +73,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from flock_swarm.console import accept_sigint
 from flock_swarm.nodes.harness import process_environment
 from flock_swarm.nodes.supervisor import stop
@@ -73,6 +85,8 @@ DENSITY = 30 / 400.0
 RUN_TIMEOUT = 900.0
 #: Domain id of the benchmark runs (isolated from the test suite's 1-200).
 DOMAIN = 220
+#: Why there is no C floor when the extension is built (the path is forced to rclpy).
+ENV_RCLPY = 'FLOCK_SWARM_MESSAGE_PATH=rclpy'
 
 
 def scenario_overrides(n: int, steps: int) -> list[str]:
@@ -154,7 +168,7 @@ class Wire:
 
 
 def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int], context,
-                raw: bool = False):
+                raw: bool = False, c: bool = False):
     """Return the floor's nodes for one process and its shared state.
 
     :param role: ``one`` (all), ``world``, ``leader`` or ``agents``.
@@ -164,6 +178,11 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
     :param agent_ids: the agents this process hosts (role ``one`` or ``agents``).
     :param context: the rclpy context.
     :param raw: move serialised bytes (see :class:`Wire`).
+    :param c: with ``raw``, move a step's messages with the compiled extension
+        (:mod:`flock_swarm.nodes.batch`) as the pipeline's nodes do on the C path: the world
+        publishes ``/clock`` and the odometry in one call and takes the rest of a step's
+        commands from the first one's callback, the agent host likewise with the odometry
+        and its commands.
     """
     from geometry_msgs.msg import AccelStamped
     from nav_msgs.msg import Odometry
@@ -172,6 +191,7 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
 
     from flock_swarm import contract
     from flock_swarm.contract import CLOCK, LEADER_ACCEL, LEADER_ODOM, cmd_topic, odom_topic
+    from flock_swarm.nodes.batch import BatchPublish, BatchTake
     from flock_swarm.nodes.stepper import RESEND_PERIOD, first_resend_wait, next_resend_wait
     CLOCK_QOS, LOCKSTEP_QOS = (contract.qos_profile(q) for q in (contract.CLOCK_QOS,
                                                                  contract.LOCKSTEP_QOS))
@@ -179,8 +199,10 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                         'started': False, 'stall': 0.0, 'wait': RESEND_PERIOD,
                         'began': 0.0, 'last_step_s': 0.0, 'resends': 0,
                         'report': time.monotonic() + REPORT_PERIOD}
-    wire = Wire(raw, n, WARMUP + steps)
-    kw = {'raw': True} if raw else {}
+    wire = Wire(raw or c, n, WARMUP + steps)
+    kw = {'raw': True} if raw or c else {}
+    # The extension's takers and publishers (closed before the nodes are destroyed).
+    state['held'] = []
 
     if role in ('one', 'world'):
         world = Node('floor_world', context=context)
@@ -201,6 +223,9 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                 state['wait'] = first_resend_wait(state['last_step_s'])
             state['stall'] = now + state['wait']
             clock, odom = wire.states(state['step'])
+            if c:
+                out.publish_to(targets, [clock] + odom)
+                return
             clock_pub.publish(clock)
             for pub, msg in zip(odom_pubs, odom):
                 pub.publish(msg)
@@ -214,15 +239,26 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
                 state['last_step_s'] = time.monotonic() - state['began']
                 state['step'] += 1
                 if state['step'] == WARMUP:
-                    state['t0'] = time.perf_counter()
+                    state['t0'], state['cpu0'] = time.perf_counter(), time.process_time()
                 if state['step'] == WARMUP + steps:
-                    state['t1'] = time.perf_counter()
+                    state['t1'], state['cpu1'] = time.perf_counter(), time.process_time()
                 else:
                     tick()
 
-        for i in range(n):
-            world.create_subscription(AccelStamped, cmd_topic(i),
-                                      lambda m: arrived(m, 'cmds'), LOCKSTEP_QOS, **kw)
+        cmd_take = []
+
+        def on_command(msg):
+            arrived(msg, 'cmds')
+            for _, more in cmd_take[0].take() if cmd_take else ():
+                arrived(more, 'cmds')
+
+        cmd_subs = [world.create_subscription(AccelStamped, cmd_topic(i), on_command,
+                                              LOCKSTEP_QOS, **kw) for i in range(n)]
+        if c:
+            cmd_take.append(BatchTake(cmd_subs))
+            out = BatchPublish([clock_pub] + odom_pubs)
+            targets = np.arange(n + 1, dtype=np.int64)
+            state['held'] += [cmd_take[0], out]
         world.create_subscription(Odometry, LEADER_ODOM, lambda m: arrived(m, 'leader'),
                                   LOCKSTEP_QOS, **kw)
         world.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: arrived(m, 'leader'),
@@ -285,12 +321,26 @@ def floor_nodes(role: str, n: int, steps: int, hosts: int, agent_ids: list[int],
             if box['leader'] >= 2 and box['odom'] // n > box['answers']:
                 box['answers'] = box['odom'] // n
                 cmd = wire.command(k)
+                if c:
+                    answer.publish_to(rows, [cmd] * len(pubs))
+                    return
                 for pub in pubs:
                     pub.publish(cmd)
 
-        for j in range(n):
-            host.create_subscription(Odometry, odom_topic(j), lambda m: got(m, 'odom'),
-                                     LOCKSTEP_QOS, **kw)
+        odom_take = []
+
+        def on_odom(msg):
+            got(msg, 'odom')
+            for _, more in odom_take[0].take() if odom_take else ():
+                got(more, 'odom')
+
+        odom_subs = [host.create_subscription(Odometry, odom_topic(j), on_odom, LOCKSTEP_QOS,
+                                              **kw) for j in range(n)]
+        if c:
+            odom_take.append(BatchTake(odom_subs))
+            answer = BatchPublish(pubs)
+            rows = np.arange(len(pubs), dtype=np.int64)
+            state['held'] += [odom_take[0], answer]
         host.create_subscription(Odometry, LEADER_ODOM, lambda m: got(m, 'leader'),
                                  LOCKSTEP_QOS, **kw)
         host.create_subscription(AccelStamped, LEADER_ACCEL, lambda m: got(m, 'leader'),
@@ -309,7 +359,7 @@ def run_floor_role(args) -> int:
     rclpy.init(context=context, domain_id=args.domain)
     ids = list(range(args.n)) if args.agent_ids is None else args.agent_ids
     nodes, state = floor_nodes(args.role, args.n, args.steps, args.hosts, ids, context,
-                               raw=args.raw)
+                               raw=args.raw, c=args.c)
     ex = make_executor(context)
     for node in nodes:
         ex.add_node(node)
@@ -321,8 +371,14 @@ def run_floor_role(args) -> int:
         pass
     if state['t1'] is not None:
         print(json.dumps({'steps_per_s': args.steps / (state['t1'] - state['t0']),
-                          'resent_steps': state['resends']}), flush=True)
+                          'resent_steps': state['resends'],
+                          # CPU of every thread of this process (DDS's included) per step:
+                          # steadier than the rate on a shared machine.
+                          'cpu_ms_per_step':
+                              1e3 * (state['cpu1'] - state['cpu0']) / args.steps}), flush=True)
     ex.shutdown()
+    for held in state['held']:
+        held.close()
     for node in nodes:
         node.destroy_node()
     rclpy.try_shutdown(context=context)
@@ -367,11 +423,11 @@ def _env(layout: str, n: int) -> dict:
     return env
 
 
-def floor(layout: str, n: int, steps: int, raw: bool = False) -> dict:
+def floor(layout: str, n: int, steps: int, raw: bool = False, c: bool = False) -> dict:
     """Return the floor's steps/s and re-offered steps for a layout (``raw``: serialised
-    bytes, see :class:`Wire`)."""
+    bytes, see :class:`Wire`; ``c``: moved by the compiled extension)."""
     me = [sys.executable, str(Path(__file__).resolve()), '--n', str(n), '--steps', str(steps),
-          '--domain', str(DOMAIN)] + (['--raw'] if raw else [])
+          '--domain', str(DOMAIN)] + (['--raw'] if raw else []) + (['--c'] if c else [])
     env = _env(layout, n)
     if layout == 'one':
         out = subprocess.run(me + ['--role', 'one', '--hosts', '1'], capture_output=True,
@@ -483,6 +539,20 @@ def machine() -> dict:
             'platform': platform.platform(), 'load_average': os.getloadavg()}
 
 
+def growth_checks(rows: list[dict], layouts: list[str], n: int,
+                  bound: float) -> list[tuple[str, bool]]:
+    """Return, for each layout measured at N = 100 and ``n``, whether the cost per
+    agent-step at ``n`` is within ``bound`` times that at N = 100."""
+    checks = []
+    for layout in layouts:
+        by_n = {r['n']: r for r in rows if r['layout'] == layout}
+        if 100 in by_n and n in by_n:
+            growth = by_n[n]['us_per_agent_step'] / by_n[100]['us_per_agent_step']
+            checks.append((f'{layout}: cost per agent-step at N={n} within {bound:g}x that at '
+                           f'N=100 ({growth:.2f}x)', growth <= bound))
+    return checks
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark (or one floor process with ``--role``)."""
     # Started in the background from a script, SIGINT would be ignored here and in every
@@ -513,6 +583,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--agent-ids', type=int, nargs='+', help=argparse.SUPPRESS)
     parser.add_argument('--domain', type=int, default=DOMAIN, help=argparse.SUPPRESS)
     parser.add_argument('--raw', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--c', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.role is not None:
         return run_floor_role(args)
@@ -521,9 +592,15 @@ def main(argv: list[str] | None = None) -> int:
     info = machine()
     print(f'# machine: {info}', flush=True)
     rows, failed = [], []
-    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"pipeline":>9} {"ratio":>6} '
-          f'{"raw r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6} {"us/a-st":>8} '
-          f'{"outside":>8} {"RSS MiB":>8}  [steps/s; us per agent-step, s outside the steps]',
+    from flock_swarm.nodes.batch import use_c_path, why_not_built
+    with_c = use_c_path()
+    if not with_c:
+        print(f'# no C floor: the pipeline runs on pure rclpy ({why_not_built() or ENV_RCLPY})',
+              flush=True)
+    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"C fl.":>8} {"pipeline":>9} '
+          f'{"ratio":>6} {"raw r.":>6} {"C r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6} '
+          f'{"us/a-st":>8} {"outside":>8} {"RSS MiB":>8}  '
+          '[steps/s; us per agent-step, s outside the steps]',
           flush=True)
     for layout in args.layouts:
         for n in args.sizes:
@@ -532,11 +609,13 @@ def main(argv: list[str] | None = None) -> int:
             steps = args.steps if layout != 'processes' else max(50, args.steps * 10 // n)
             # Interleaved repeats, best of each: the run least disturbed by whatever else the
             # shared machine was doing.
-            fls, raws, fulls, bares = [], [], [], []
+            fls, raws, cs, fulls, bares = [], [], [], [], []
             try:
                 for _ in range(args.repeat):
                     fls.append(floor(layout, n, steps))
                     raws.append(floor(layout, n, steps, raw=True))
+                    if with_c:
+                        cs.append(floor(layout, n, steps, c=True))
                     fulls.append(pipeline(layout, n, steps, record=True))
                     bares.append(pipeline(layout, n, steps, record=False))
             except (RuntimeError, subprocess.TimeoutExpired, ValueError) as exc:
@@ -544,19 +623,23 @@ def main(argv: list[str] | None = None) -> int:
                 failed.append({'layout': layout, 'n': n, 'steps': steps,
                                'discovery': discovery_range(layout, n), 'error': str(exc),
                                'floor_runs': rates(fls), 'raw_floor_runs': rates(raws),
+                               'c_floor_runs': rates(cs),
                                'pipeline_runs': rates(fulls)})
                 print(f'{layout:>10} {n:>4} failed: {exc}', flush=True)
                 continue
             fl, raw = max(rates(fls)), max(rates(raws))
+            c_fl = max(rates(cs)) if cs else math.nan
             full = max(fulls, key=lambda r: r['steps_per_s'])
             bare = max(bares, key=lambda r: r['steps_per_s'])
             row = {'layout': layout, 'n': n, 'steps': steps, 'floor': fl, 'raw_floor': raw,
                    'discovery': discovery_range(layout, n),
+                   'c_floor': c_fl, 'c_path': with_c,
                    'floor_runs': rates(fls), 'raw_floor_runs': rates(raws),
+                   'c_floor_runs': rates(cs),
                    'pipeline_runs': rates(fulls), 'no_record_runs': rates(bares),
                    # Steps offered again (stalled: see WorldStepper.resent), per run.
                    'resent_steps': {name: [r['resent_steps'] for r in runs] for name, runs in
-                                    (('floor', fls), ('raw_floor', raws),
+                                    (('floor', fls), ('raw_floor', raws), ('c_floor', cs),
                                      ('pipeline', fulls), ('no_record', bares))},
                    'pipeline': full['steps_per_s'], 'rtf': full['rtf'],
                    'us_per_agent_step': full['us_per_agent_step'],
@@ -566,10 +649,12 @@ def main(argv: list[str] | None = None) -> int:
                    'peak_rss_mib': full['peak_rss_mib'],
                    'no_record': bare['steps_per_s'],
                    'ratio': full['steps_per_s'] / fl, 'raw_ratio': full['steps_per_s'] / raw,
+                   'c_ratio': full['steps_per_s'] / c_fl,
                    'recording_cost': 1.0 - full['steps_per_s'] / bare['steps_per_s']}
             rows.append(row)
-            print(f'{layout:>10} {n:>4} {fl:8.1f} {raw:8.1f} {row["pipeline"]:9.1f} '
-                  f'{row["ratio"]:6.2f} {row["raw_ratio"]:6.2f} {row["no_record"]:7.1f} '
+            print(f'{layout:>10} {n:>4} {fl:8.1f} {raw:8.1f} {c_fl:8.1f} {row["pipeline"]:9.1f} '
+                  f'{row["ratio"]:6.2f} {row["raw_ratio"]:6.2f} {row["c_ratio"]:6.2f} '
+                  f'{row["no_record"]:7.1f} '
                   f'{100 * row["recording_cost"]:7.1f}% {row["rtf"]:6.2f} '
                   f'{row["us_per_agent_step"]:8.1f} {row["outside_steps_s"]:8.1f} '
                   f'{row["peak_rss_mib"]:8.0f}', flush=True)
@@ -581,15 +666,20 @@ def main(argv: list[str] | None = None) -> int:
                 r['recording_cost'] <= 0.10) for r in rows]
     checks += [(f'one N=100: >= 20 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 20)
                for r in rows if r['layout'] == 'one' and r['n'] == 100]
-    for layout in args.layouts:
-        # Issue 17: the cost of an agent-step may not grow much with N.
-        by_n = {r['n']: r for r in rows if r['layout'] == layout}
-        if 100 in by_n and 1000 in by_n:
-            growth = by_n[1000]['us_per_agent_step'] / by_n[100]['us_per_agent_step']
-            checks.append((f'{layout}: cost per agent-step at N=1000 within 1.5x that at '
-                           f'N=100 ({growth:.2f}x)', growth <= 1.5))
+    # Issue 17: the cost of an agent-step may not grow much with N.
+    checks += growth_checks(rows, args.layouts, 1000, 1.5)
     checks += [(f'{r["layout"]} N=1000: >= 25 steps/s with recording ({r["pipeline"]:.1f})',
                 r['pipeline'] >= 25) for r in rows if r['n'] == 1000]
+    # Issue 28 (the compiled message path).
+    checks += [(f'{r["layout"]} N={r["n"]}: pipeline >= 70% of the C floor '
+                f'({r["c_ratio"]:.2f})', r['c_ratio'] >= 0.7)
+               for r in rows if r['n'] in (100, 1000) and with_c]
+    checks += [(f'one N=100: >= 500 steps/s ({r["pipeline"]:.1f})', r['pipeline'] >= 500)
+               for r in rows if r['layout'] == 'one' and r['n'] == 100]
+    checks += [(f'{r["layout"]} N=1000: >= 50 steps/s with recording, real time at dt = 0.02 '
+                f'({r["pipeline"]:.1f})', r['pipeline'] >= 50)
+               for r in rows if r['n'] == 1000]
+    checks += growth_checks(rows, args.layouts, 2000, 1.3)
     checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:

@@ -93,6 +93,15 @@ def test_installed_package_shadows_the_working_tree(workspace):
     assert shebang == f'#!{sys.executable}'
 
 
+def test_colcon_build_compiles_the_c_message_path(workspace):
+    check = 'from flock_swarm.nodes import batch; print(batch.extension().__file__)'
+    result = run_installed(workspace, ['python', '-c', check], subprocess_env())
+    assert result.returncode == 0, result.stderr
+    built = Path(result.stdout.strip()).resolve()
+    assert built.is_relative_to((workspace / 'install' / PACKAGE).resolve()), built
+    assert built.name.startswith('_rclbatch.') and built.suffix == '.so'
+
+
 def test_installed_world_runs_lockstep_steps(workspace, tmp_path, ros_domain):
     out = tmp_path / 'out'
     env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')

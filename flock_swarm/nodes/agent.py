@@ -52,6 +52,8 @@ from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, AgentController,
                                           OdometryInbox, parse_agent_ids)
+from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
+                                     use_c_path)
 from flock_swarm.nodes.fault_report import FaultReporter
 from flock_swarm.nodes.graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
@@ -90,7 +92,7 @@ AGENT_PARAMS = COMMON_PARAMS + (
     Param('command', '', "the command interface: '' (the scenario's plant.command), accel "
           '(cmd_accel only) or cmd_vel (a robot plant: Twist on cmd_vel too)',
           lambda v: v in ('', *COMMANDS), "must be '', 'accel' or 'cmd_vel', got {value!r}"),
-) + LIMIT_PARAMS + (KEEP_RUNNING,)
+) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH)
 
 
 class AgentNode(Node):
@@ -119,6 +121,9 @@ class AgentNode(Node):
         self.failure: str | None = None
         self.clock = StepClock(sc.dt)
         self.lockstep = params['mode'] == 'lockstep'
+        # Lockstep on the compiled path (flock_swarm.nodes.batch): a step's odometry is taken
+        # at once from its first message's callback, the commands published at once.
+        self.c_path = use_c_path(params['message_path']) and self.lockstep
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
                                 self.get_logger().warning)
         qos = qos_profile(LOCKSTEP_QOS)
@@ -148,9 +153,12 @@ class AgentNode(Node):
         self.children = [f'agent_{j}' for j in range(sc.n_agents)]
         # Lockstep: a step's odometry, queued as it comes, then taken in one pass.
         self.inbox = OdometryInbox(self.controller, self.guard, self.odom_topics, self.children)
-        for j in range(sc.n_agents):
-            self.create_subscription(Odometry, odom_topic(j),
-                                     lambda data, j=j: self.on_odom(j, data), qos, raw=True)
+        odom_subs = [self.create_subscription(Odometry, odom_topic(j),
+                                              lambda data, j=j: self.on_odom(j, data), qos,
+                                              raw=True)
+                     for j in range(sc.n_agents)]
+        self.odom_take = BatchTake(odom_subs) if self.c_path else None
+        self.batch_out = BatchPublish(self.pubs) if self.c_path else None
         self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, qos, raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel, qos,
                                  raw=True)
@@ -176,7 +184,15 @@ class AgentNode(Node):
         is in (:meth:`take_odometry`), realtime handles it at once."""
         if not self.lockstep:
             self.on_one_odom(j, data)
-        elif self.inbox.put(j, data):
+            return
+        self.queue_odom(j, data)
+        if self.odom_take is not None:
+            for i, more in self.odom_take.take():
+                self.queue_odom(i, more)
+
+    def queue_odom(self, j: int, data: bytes) -> None:
+        """Lockstep: queue agent ``j``'s odometry; take the queue once every agent's is in."""
+        if self.inbox.put(j, data):
             self.take_odometry()
 
     def take_odometry(self) -> None:
@@ -339,15 +355,19 @@ class AgentNode(Node):
         """
         if not self.outbox:
             return
-        waiting, matched = [], self.matched
+        waiting, ready, matched = [], [], self.matched
         for row, msg in self.outbox:
-            pub = self.pubs[row]
-            if matched[row] or pub.get_subscription_count() > 0:
+            if matched[row] or self.pubs[row].get_subscription_count() > 0:
                 matched[row] = True
-                pub.publish(msg)
+                ready.append((row, msg))
             else:
                 waiting.append((row, msg))
         self.outbox = waiting
+        if self.batch_out is not None:
+            self.batch_out.publish(ready)
+            return
+        for row, msg in ready:
+            self.pubs[row].publish(msg)
 
     # -- realtime and housekeeping ---------------------------------------------------------------
 
@@ -360,6 +380,13 @@ class AgentNode(Node):
     def check_claims(self) -> None:
         """Report another node publishing commands for one of our agents (a duplicate id)."""
         check_claims(self, self.scenario.n_agents, self.duplicates, self.controller.ids)
+
+    def destroy_node(self) -> None:
+        """Release the compiled path's hold on the subscriptions and publishers, then
+        destroy the node."""
+        # getattr: a node whose construction failed has neither.
+        release(getattr(self, 'odom_take', None), getattr(self, 'batch_out', None))
+        super().destroy_node()
 
     def close(self) -> None:
         """Log what was rejected and what was replaced by zero; let a fault report reach

@@ -48,6 +48,8 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
 from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.summary import with_failure
+from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
+                                     use_c_path)
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
 from flock_swarm.nodes.graph import check_claims, command_claims
@@ -113,7 +115,7 @@ WORLD_PARAMS = COMMON_PARAMS + (
     Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
           'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
           'must be 0 or more, not {value}'),
-) + LIMIT_PARAMS
+) + LIMIT_PARAMS + (MESSAGE_PATH,)
 
 
 class WorldNode(RecordedNode):
@@ -134,6 +136,10 @@ class WorldNode(RecordedNode):
         self.mode = params['mode']
         settings = WorldSettings.from_parameters(params.values, self.mode == 'lockstep')
         self.lockstep = settings.lockstep
+        # Lockstep on the compiled path (flock_swarm.nodes.batch): a step's commands are
+        # taken at once from its first command's callback; /clock and the odometry go out
+        # in one call. Decided first: a refusal leaves nothing behind.
+        self.c_path = use_c_path(params['message_path']) and self.lockstep
         self.record = params['record']
         self.expect_subscribers = params['expect_subscribers']
         self.expect_telemetry = params['expect_telemetry_subscribers']
@@ -211,6 +217,13 @@ class WorldNode(RecordedNode):
                              for i in range(sc.n_agents)] if self.stepper.velocity else []
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
+        # Lockstep on the compiled path: see self.c_path.
+        subs = {sub.topic_name: sub for sub in self.subscriptions}
+        self.cmd_take = BatchTake([subs[name] for name in self.cmd_topics]) \
+            if self.c_path else None
+        self.state_out = BatchPublish([self.clock_pub] + self.odom_pubs) \
+            if self.c_path else None
+        self.state_targets = np.arange(1 + sc.n_agents, dtype=np.int64)
         wall_timer(self, 1.0, self.check_claims)
         self.leader_odom_topic = subscribe(Odometry, LEADER_ODOM, decode_odometry,
                                            self.on_leader_odom)
@@ -250,6 +263,10 @@ class WorldNode(RecordedNode):
         complete the step."""
         if self.inbox.put(i, data):
             self.take_commands()
+        if self.cmd_take is not None:
+            for j, more in self.cmd_take.take():
+                if self.inbox.put(j, more):
+                    self.take_commands()
 
     def take_commands(self) -> None:
         """Lockstep: handle the queued commands, at once when they are the open step's
@@ -391,13 +408,20 @@ class WorldNode(RecordedNode):
         rows = (st.q, st.p) if st.plant is None else odometry_rows(st.plant, st.x,
                                                                    self.scenario.dim)
         sent += zip(self.odom_pubs, self.odom_encoder.encode(t_ns, *rows))
-        for pub, data in sent:
-            pub.publish(data)
+        self.send(sent)
         for sink in self.sinks:
             for name, (_, data) in zip(self.state_topics, sent):
                 sink.write(name, data, t_ns)
             sink.flush()
         self.step_bytes = sent
+
+    def send(self, sent: list[tuple]) -> None:
+        """Publish ``/clock`` and every odometry, ``(publisher, bytes)`` in that order."""
+        if self.state_out is not None:
+            self.state_out.publish_to(self.state_targets, [data for _, data in sent])
+            return
+        for pub, data in sent:
+            pub.publish(data)
 
     def go_on(self, obs: Observation) -> None:
         """After a step observed: finish after the last, else integrate (or diverge)."""
@@ -502,8 +526,7 @@ class WorldNode(RecordedNode):
             self.finish_step(timed_out=True)
         elif due == 'resend':
             # Offered again, not recorded again (see WorldStepper.resent).
-            for pub, data in self.step_bytes:
-                pub.publish(data)
+            self.send(self.step_bytes)
 
     def begin_step(self) -> None:
         """Publish ``/clock`` and every odometry for the current step."""
@@ -649,6 +672,13 @@ class WorldNode(RecordedNode):
         if self.stepper.end('interrupted'):
             self.write_results()
         self.status_pub.wait_for_all_acked(Duration(seconds=2))
+
+    def destroy_node(self) -> None:
+        """Release the compiled path's hold on the subscriptions and publishers, then
+        destroy the node."""
+        # getattr: a node whose construction failed has neither.
+        release(getattr(self, 'cmd_take', None), getattr(self, 'state_out', None))
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:
