@@ -1,0 +1,44 @@
+"""``analyze`` of a robot plant's bag: the plant state rebuilt from the odometry.
+
+The world's odometry of a robot plant carries the plant state (for the unicycle the axle, its
+heading and its body twist, not the point the law steers); ``analyze`` rebuilds the state
+with :meth:`~flock_swarm.core.plants.base.Plant.from_odometry` and measures the law's point,
+so the analysis of a lockstep bag is the world's (and ``sim``'s) run bit for bit.
+"""
+
+import json
+
+import numpy as np
+from numpy.testing import assert_array_equal
+import pytest
+
+from flock_swarm.cli.analyze import main as analyze_main
+from flock_swarm.testing import assert_matches_sim
+from test_analyze import assert_summaries_agree
+from test_plants_ros import DEMO, RUN_TIMEOUT, UNICYCLE, VELOCITY_LAG
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('plant', [UNICYCLE, VELOCITY_LAG], ids=['unicycle', 'velocity_lag'])
+def test_analyze_of_a_lockstep_robot_bag_is_sims_run(tmp_path, ros_domain, plant):
+    run = assert_matches_sim('demo', tmp_path / 'run', DEMO + [plant], domain_id=ros_domain,
+                             atol=0, timeout=RUN_TIMEOUT)
+    out = tmp_path / 'analysis'
+    assert analyze_main([str(run.out / 'bag'), '--out', str(out), '--verify', '--quiet',
+                         '--no-anim']) == 0
+    ours = json.loads((out / 'summary.json').read_text())
+    assert ours['verify_passed'] is True
+    assert ours['verify_max_position_error'] == ours['verify_max_velocity_error'] == 0.0
+    assert_summaries_agree(ours, run.summary)
+    world = run.timeseries()
+    with np.load(out / 'timeseries.npz') as data:
+        series = dict(data)
+    assert sorted(series) == sorted(world)
+    for name, values in world.items():
+        assert_array_equal(series[name], values, err_msg=name)
+    assert 'plant_state' in series
+    if 'unicycle' in plant:
+        # The law's point is ell = 0.3 m ahead of the axle the odometry carries.
+        ahead = np.linalg.norm(series['q'] - series['plant_state'][:, :, :2], axis=2)
+        np.testing.assert_allclose(ahead, 0.3, rtol=1e-12)
+        assert series['heading'].shape == series['t'].shape + (6,)
