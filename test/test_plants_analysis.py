@@ -42,3 +42,47 @@ def test_analyze_of_a_lockstep_robot_bag_is_sims_run(tmp_path, ros_domain, plant
         ahead = np.linalg.norm(series['q'] - series['plant_state'][:, :, :2], axis=2)
         np.testing.assert_allclose(ahead, 0.3, rtol=1e-12)
         assert series['heading'].shape == series['t'].shape + (6,)
+
+
+#: A small dense demo swarm (every pair within the radius), short.
+SMALL = {'n_agents': 6, 'informed.count': 3, 'duration': 0.6,
+         'initial.position_box': [[0, 6], [0, 6]]}
+#: What a sweep collects of each run.
+METRICS = ['eta', 'velocity_mismatch_max', 'min_pair_distance', 'collisions']
+
+
+@pytest.mark.parametrize('fixed, grid', [
+    ({'plant.model': 'velocity_lag', 'plant.max_speed': 1.5},
+     {'plant.tau': [0.05, 0.3]}),
+    ({}, {'plant.model': ['double_integrator', 'velocity_lag', 'unicycle']})],
+    ids=['plant.tau', 'plant.model'])
+def test_a_sweep_over_plant_keys_equals_each_sim_run(tmp_path, fixed, grid):
+    """Each run of a sweep over a ``plant.*`` key is its own ``sim`` run."""
+    import csv
+
+    from flock_swarm.cli.sweep import main as sweep_main
+    from flock_swarm.core.run import simulate
+    from flock_swarm.presets import prepare
+    spec = tmp_path / 'plants.yaml'
+    spec.write_text(json.dumps({'name': 'plants', 'scenario': 'demo',
+                                'set': {**SMALL, **fixed}, 'grid': grid, 'seeds': 2,
+                                'metrics': METRICS}))
+    assert sweep_main([str(spec), '--jobs', '1', '--out', str(tmp_path / 'out'), '--quiet',
+                       '--no-plots']) == 0
+    with open(tmp_path / 'out' / 'runs.csv', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    (key, values), = grid.items()
+    assert len(rows) == 2 * len(values) and {r['status'] for r in rows} == {'completed'}
+    summaries = set()
+    for row in rows:
+        value, = (v for v in values if str(v) == row[key])
+        point = {**SMALL, **fixed, key: value}
+        sc, _ = prepare('demo', [f'{k}={json.dumps(v)}' for k, v in point.items()],
+                        seed=int(row['seed']))
+        assert sc.plant.model.name == point.get('plant.model', 'double_integrator')
+        alone = simulate(sc).summary
+        for name in METRICS:
+            assert float(row[name]) == alone[name], (key, row[key], name)
+        summaries.add(tuple(alone[name] for name in METRICS))
+    # The key made a difference.
+    assert len(summaries) == len(rows)
