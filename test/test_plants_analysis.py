@@ -7,6 +7,7 @@ so the analysis of a lockstep bag is the world's (and ``sim``'s) run bit for bit
 """
 
 import json
+from pathlib import Path
 
 import numpy as np
 from numpy.testing import assert_array_equal
@@ -86,3 +87,77 @@ def test_a_sweep_over_plant_keys_equals_each_sim_run(tmp_path, fixed, grid):
         summaries.add(tuple(alone[name] for name in METRICS))
     # The key made a difference.
     assert len(summaries) == len(rows)
+
+
+def plant_example() -> str:
+    """Return the plant plugin of docs/extending.md (section 8), the text of its module."""
+    text = (Path(__file__).resolve().parents[1] / 'docs' / 'extending.md').read_text()
+    section = text.split('## 8. A plant model', 1)[1]
+    block = section.split('```python\n', 1)[1].split('```', 1)[0]
+    assert block.startswith('# my_flock/kinematic.py\n')
+    assert "'flock_swarm.plants': ['kinematic = my_flock.kinematic:Kinematic']" in section
+    return block
+
+
+def outputs(out: Path) -> tuple[dict, dict]:
+    with np.load(out / 'timeseries.npz') as data:
+        return json.loads((out / 'summary.json').read_text()), dict(data)
+
+
+@pytest.mark.ros
+def test_the_plant_plugin_of_the_docs_flies_in_sim_swarm_and_analyze(tmp_path, ros_domain):
+    """docs/extending.md's plant, installed as a distribution (its entry point on
+    ``PYTHONPATH``, what ``pip install`` leaves behind): listed, flown by ``sim``, a lockstep
+    ``swarm`` run equal to it bit for bit, and its bag analysed to the same run."""
+    import os
+    import subprocess
+    import sys
+
+    from flock_swarm.testing import compare_runs, SIM_ONLY
+    site = tmp_path / 'site'
+    (site / 'my_flock').mkdir(parents=True)
+    (site / 'my_flock' / '__init__.py').write_text('')
+    (site / 'my_flock' / 'kinematic.py').write_text(plant_example())
+    info = site / 'my_flock-1.0.dist-info'
+    info.mkdir()
+    (info / 'METADATA').write_text('Metadata-Version: 2.1\nName: my-flock\nVersion: 1.0\n')
+    (info / 'entry_points.txt').write_text(
+        '[flock_swarm.plants]\nkinematic = my_flock.kinematic:Kinematic\n')
+    env = dict(os.environ, PYTHONPATH=str(site), ROS_DOMAIN_ID=str(ros_domain))
+
+    def command(name: str, *args) -> subprocess.CompletedProcess:
+        done = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{name}', *map(str, args)],
+                              env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT)
+        assert done.returncode == 0 and 'Traceback' not in done.stderr, done.stderr
+        return done
+
+    listed = command('sim', '--list').stdout.split('plant models (plant.model):')[1]
+    assert any('kinematic' in line and '[my-flock]' in line for line in listed.splitlines())
+    overrides = [arg for o in DEMO + ['plant={model: kinematic, max_speed: 1.5}']
+                 for arg in ('--set', o)]
+    command('sim', 'demo', *overrides, '--quiet', '--out', tmp_path / 'sim')
+    want, want_series = outputs(tmp_path / 'sim')
+    xs = want_series['plant_state']
+    assert xs.shape[1:] == (6, 4) and want['status'] == 'completed'
+    # The robots drive at their setpoints, within the limit, and the limit binds.
+    speeds = np.linalg.norm(xs[:, :, 2:], axis=2)
+    assert speeds.max() <= 1.5 + 1e-12 and speeds[1:].max() == pytest.approx(1.5)
+    command('swarm', 'demo', *overrides, '--no-plots', '--domain-id', ros_domain,
+            '--out', tmp_path / 'ros')
+    got, got_series = outputs(tmp_path / 'ros')
+    assert got['missed_commands'] == 0
+    want = {k: v for k, v in want.items() if k not in SIM_ONLY}
+    assert compare_runs(want, want_series, got, got_series, atol=0.0) == []
+    command('analyze', tmp_path / 'ros' / 'bag', '--out', tmp_path / 'analysis', '--verify',
+            '--quiet', '--no-anim')
+    ours, series = outputs(tmp_path / 'analysis')
+    assert ours['verify_passed'] is True
+    assert_array_equal(series['plant_state'], got_series['plant_state'])
+    # The bag needs the plugin: without it, analyze names it in one line.
+    del env['PYTHONPATH']
+    done = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze',
+                           str(tmp_path / 'ros' / 'bag'), '--out', str(tmp_path / 'bare')],
+                          env=env, capture_output=True, text=True, timeout=RUN_TIMEOUT)
+    assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
+    assert done.stderr.startswith("analyze: error: the bag was recorded with the plant model "
+                                  "'kinematic' (plant.model), which cannot be loaded here")

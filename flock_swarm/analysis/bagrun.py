@@ -253,9 +253,11 @@ def _id_list(ids: list[int]) -> str:
     return shown + (f' and {len(ids) - 8} more' if len(ids) > 8 else '')
 
 
-#: The scenario keys that name a plugin (a law or a leader model): a bag whose scenario fails
-#: on one of them was recorded with a plugin this installation does not have (or cannot load).
-PLUGIN_KEYS = ('protocol.name', 'leader.model', 'intrinsic.model')
+#: The scenario keys that name a plugin (a law, a leader model or a plant) and what each
+#: names: a bag whose scenario fails on one of them was recorded with a plugin this
+#: installation does not have (or cannot load).
+PLUGIN_KEYS = {'protocol.name': 'law', 'leader.model': 'leader model',
+               'intrinsic.model': 'leader model', 'plant.model': 'plant model'}
 
 
 def _stored_scenario(reader: BagReader, notes: list[str]
@@ -288,8 +290,7 @@ def _missing_plugin(data, exc: ScenarioError) -> str:
     """Return the one line naming the plugin a bag's scenario needs and why it is unusable."""
     section, _, field = exc.key.partition('.')
     name = data.get(section, {}).get(field) if isinstance(data.get(section), dict) else None
-    what = 'law' if section == 'protocol' else 'leader model'
-    return (f'the bag was recorded with the {what} {name!r} ({exc.key}), which cannot be '
+    return (f'the bag was recorded with the {PLUGIN_KEYS[exc.key]} {name!r} ({exc.key}), which cannot be '
             f'loaded here ({exc.reason}): install the package that provides it')
 
 
