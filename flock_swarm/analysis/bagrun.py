@@ -290,8 +290,8 @@ def _missing_plugin(data, exc: ScenarioError) -> str:
     """Return the one line naming the plugin a bag's scenario needs and why it is unusable."""
     section, _, field = exc.key.partition('.')
     name = data.get(section, {}).get(field) if isinstance(data.get(section), dict) else None
-    return (f'the bag was recorded with the {PLUGIN_KEYS[exc.key]} {name!r} ({exc.key}), which cannot be '
-            f'loaded here ({exc.reason}): install the package that provides it')
+    return (f'the bag was recorded with the {PLUGIN_KEYS[exc.key]} {name!r} ({exc.key}), '
+            f'which cannot be loaded here ({exc.reason}): install the package that provides it')
 
 
 def _scenario_topic(reader: BagReader, notes: list[str]) -> dict[str, str] | None:
