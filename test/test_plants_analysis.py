@@ -161,3 +161,46 @@ def test_the_plant_plugin_of_the_docs_flies_in_sim_swarm_and_analyze(tmp_path, r
     assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
     assert done.stderr.startswith("analyze: error: the bag was recorded with the plant model "
                                   "'kinematic' (plant.model), which cannot be loaded here")
+
+
+def test_realtime_a_stale_twist_is_a_missed_command_and_stops_the_robot(caplog):
+    """Realtime, velocity commands: a Twist older than the staleness counts as the missing
+    command and its robot gets a zero Twist for the step (its ``u`` zero), as a stale
+    acceleration is zeroed; a fresh one drives on."""
+    import logging
+
+    from flock_swarm.nodes.stepper import WorldSettings, WorldStepper
+    from test_stepper import LOG, small
+    sc = small("plant={model: unicycle, ell: 0.3, max_speed: 1.5, max_yaw_rate: 2.0}")
+    st = WorldStepper(sc, WorldSettings(lockstep=False, staleness=0.5), LOG, now=0.0)
+    assert st.velocity
+    st.realtime_begin(1.0)
+    obs = st.realtime_close(1.0, 1.01)
+    assert obs.missing == []
+    for i in range(4):
+        st.twist(i, [0.4, 0.0, 0.0], [0.0, 0.0, 0.5], 1.0)
+        st.command(i, 0, np.array([0.25, 0.5]), 1.0)
+    assert st.advance(obs.u)
+    assert_array_equal(st.x[:, 4:], [[0.4, 0.5]] * 4)
+    # Agent 2 goes on sending; the others fall silent beyond the staleness.
+    st.twist(2, [0.2, 0.0, 0.0], [0.0, 0.0, -0.5], 1.55)
+    st.command(2, 1, np.array([0.1, 0.2]), 1.55)
+    with caplog.at_level(logging.INFO, logger=LOG.name):
+        st.realtime_begin(1.6)
+        obs = st.realtime_close(1.6, 1.61)
+    assert obs.missing == [0, 1, 3] and st.missed.tolist() == [1, 1, 0, 1]
+    assert_array_equal(obs.u, [[0, 0], [0, 0], [0.1, 0.2], [0, 0]])
+    assert caplog.text.count('sent no command for 0.5 s') == 3
+    before = st.x.copy()
+    assert st.advance(obs.u)
+    # The silent robots stopped where they were; agent 2 drives its own Twist.
+    assert_array_equal(st.x[[0, 1, 3], 4:], np.zeros((3, 2)))
+    assert_array_equal(st.x[[0, 1, 3], :4], before[[0, 1, 3], :4])
+    assert_array_equal(st.x[2, 4:], [0.2, -0.5])
+    # A Twist again: that robot drives on (no longer missing).
+    st.twist(0, [0.3, 0.0, 0.0], [0.0, 0.0, 0.0], 1.7)
+    st.realtime_begin(1.7)
+    obs = st.realtime_close(1.7, 1.71)
+    assert obs.missing == [1, 3]
+    assert st.advance(obs.u)
+    assert_array_equal(st.x[:, 4], [0.3, 0.0, 0.2, 0.0])
