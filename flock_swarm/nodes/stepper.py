@@ -733,8 +733,9 @@ class WorldStepper:
 
     def plant_command(self, u: np.ndarray) -> np.ndarray:
         """Return the command every plant executes this step: the agents' Twists (a missing
-        or, realtime, stale one: stop), or the conversion of their accelerations ``u``, exactly as ``sim``'s
-        (:meth:`~flock_swarm.core.plants.base.Plant.command` over the step)."""
+        or, realtime, stale one: stop), or the conversion of their accelerations ``u``,
+        exactly as ``sim``'s (:meth:`~flock_swarm.core.plants.base.Plant.command` over the
+        step)."""
         if not self.velocity:
             return self.plant.command(self.x, u, self.scenario.dt)
         if self.lockstep:
