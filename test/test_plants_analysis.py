@@ -204,3 +204,21 @@ def test_realtime_a_stale_twist_is_a_missed_command_and_stops_the_robot(caplog):
     assert obs.missing == [1, 3]
     assert st.advance(obs.u)
     assert_array_equal(st.x[:, 4], [0.3, 0.0, 0.2, 0.0])
+
+
+@pytest.mark.ros
+def test_analyze_of_a_realtime_robot_bag_has_the_worlds_states(tmp_path, ros_domain):
+    """Realtime: the world's odometry is its state, so the analysis has the world's plant
+    states, headings and law points at every recorded instant."""
+    from flock_swarm.analysis import load_run
+    from flock_swarm.analysis.recompute import recompute
+    from flock_swarm.testing import run_swarm
+    run = run_swarm('demo', tmp_path / 'run', DEMO[:-1] + ['duration=0.6', UNICYCLE],
+                    domain_id=ros_domain, timeout=RUN_TIMEOUT, mode='realtime')
+    assert run.summary['status'] == 'completed'
+    world = run.timeseries()
+    bag = load_run(run.out / 'bag')
+    assert bag.plant_state.shape == (len(bag.steps), 6, 6)
+    series, _ = recompute(bag)
+    for name in ('t', 'plant_state', 'heading', 'q', 'p'):
+        assert_array_equal(series[name], world[name], err_msg=name)
