@@ -39,6 +39,9 @@ ODOMETRY = contract.ODOMETRY_TYPE
 ACCEL = contract.ACCEL_TYPE
 DIAGNOSTICS = contract.METRICS_TYPE
 STATE = contract.STATE_TYPE
+#: Columns of an agent's odometry as read: position, linear velocity (3 each), orientation
+#: (x, y, z, w), angular velocity.
+ODOM_COLUMNS = 13
 #: The type of each kind of agent topic.
 _AGENT_TYPES = {'odom': ODOMETRY, 'cmd_accel': ACCEL, 'state': STATE}
 _AGENT_TOPIC = contract.AGENT_TOPIC
@@ -134,6 +137,11 @@ class RunData:
     #: The network statistics ``/swarm/metrics`` told, by step (``{}``: none), each of the
     #: steps since the message before (a realtime run's: the world measured them).
     network_at: dict[int, dict[str, float]] = field(default_factory=dict)
+    #: A robot plant's state per step, ``(K, N, S)``, rebuilt from the odometry
+    #: (:meth:`~flock_swarm.core.plants.base.Plant.from_odometry`; ``q`` and ``p`` are then
+    #: its :meth:`~flock_swarm.core.plants.base.Plant.law_state`); ``None`` for the double
+    #: integrator and for bags without a scenario.
+    plant_state: np.ndarray | None = None
 
     @property
     def n_agents(self) -> int:
@@ -245,9 +253,11 @@ def _id_list(ids: list[int]) -> str:
     return shown + (f' and {len(ids) - 8} more' if len(ids) > 8 else '')
 
 
-#: The scenario keys that name a plugin (a law or a leader model): a bag whose scenario fails
-#: on one of them was recorded with a plugin this installation does not have (or cannot load).
-PLUGIN_KEYS = ('protocol.name', 'leader.model', 'intrinsic.model')
+#: The scenario keys that name a plugin (a law, a leader model or a plant) and what each
+#: names: a bag whose scenario fails on one of them was recorded with a plugin this
+#: installation does not have (or cannot load).
+PLUGIN_KEYS = {'protocol.name': 'law', 'leader.model': 'leader model',
+               'intrinsic.model': 'leader model', 'plant.model': 'plant model'}
 
 
 def _stored_scenario(reader: BagReader, notes: list[str]
@@ -280,9 +290,8 @@ def _missing_plugin(data, exc: ScenarioError) -> str:
     """Return the one line naming the plugin a bag's scenario needs and why it is unusable."""
     section, _, field = exc.key.partition('.')
     name = data.get(section, {}).get(field) if isinstance(data.get(section), dict) else None
-    what = 'law' if section == 'protocol' else 'leader model'
-    return (f'the bag was recorded with the {what} {name!r} ({exc.key}), which cannot be '
-            f'loaded here ({exc.reason}): install the package that provides it')
+    return (f'the bag was recorded with the {PLUGIN_KEYS[exc.key]} {name!r} ({exc.key}), '
+            f'which cannot be loaded here ({exc.reason}): install the package that provides it')
 
 
 def _scenario_topic(reader: BagReader, notes: list[str]) -> dict[str, str] | None:
@@ -325,7 +334,8 @@ def load_run(bag: Path | str, *, radius: float | None = None,
     """Read a bag and rebuild the state of every complete step.
 
     Messages are grouped into steps by their header stamps (``t_k = k dt``): odometry gives
-    ``q`` and ``p``; the command stamped ``t_k`` is ``u`` at step ``k`` (zero where the world
+    ``q`` and ``p`` (for a robot plant the plant state, and ``q``, ``p`` what the law saw of
+    it); the command stamped ``t_k`` is ``u`` at step ``k`` (zero where the world
     reported it missing on ``/swarm/metrics``). In realtime mode the world applies whichever
     command arrived last: ``u_k = (p_{k+1} - p_k) / dt`` for double integrators, otherwise the
     latest command of an earlier step. The leader's odometry and acceleration give
@@ -385,7 +395,8 @@ def load_run(bag: Path | str, *, radius: float | None = None,
 class _Messages:
     """The messages of a swarm, keyed by header stamp [ns]."""
 
-    # stamp -> (N x 6 positions and velocities, N presence flags)
+    # stamp -> (N x ODOM_COLUMNS: position, linear velocity, orientation (x, y, z, w),
+    # angular velocity; N presence flags)
     odom: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     # (stamp, agent, acceleration), in bag order
     cmd: list[tuple[int, int, tuple[float, float, float]]] = field(default_factory=list)
@@ -426,14 +437,18 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
         stamp = _stamp_ns(msg.header.stamp)
         if kind == 'odom' or kind == 'leader_odom':
             pos, vel = msg.pose.pose.position, msg.twist.twist.linear
-            state = (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z)
             if kind == 'leader_odom':
-                out.leader_odom[stamp] = state
+                out.leader_odom[stamp] = (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z)
             else:
+                # The whole odometry: a robot plant's state needs the heading and the yaw
+                # rate besides (Plant.from_odometry).
+                turn, spin = msg.pose.pose.orientation, msg.twist.twist.angular
                 entry = out.odom.get(stamp)
                 if entry is None:
-                    entry = out.odom[stamp] = (np.zeros((n, 6)), np.zeros(n, dtype=bool))
-                entry[0][i] = state
+                    entry = out.odom[stamp] = (np.zeros((n, ODOM_COLUMNS)),
+                                               np.zeros(n, dtype=bool))
+                entry[0][i] = (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z, turn.x, turn.y,
+                               turn.z, turn.w, spin.x, spin.y, spin.z)
                 entry[1][i] = True
         elif kind == 'cmd' or kind == 'leader_accel':
             lin = msg.accel.linear
@@ -492,6 +507,9 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         t = (np.array(stamps, dtype=np.int64) - origin) * 1e-9
     q = states[:, :, :dim].copy()
     p = states[:, :, 3:3 + dim].copy()
+    plant_state = None
+    if sc is not None and not sc.plant.default:
+        plant_state, q, p = _plant_states(sc, states)
     if incomplete:
         notes.append(f'{incomplete} step(s) without every agent\'s odometry skipped')
 
@@ -502,9 +520,10 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
     if any('non_finite_this_step' in values for _, values in raw.metrics):
         non_finite = _agents_by_step(raw.metrics, 'non_finite_this_step', index, n, step_of)
     u = _commands(raw.cmd, steps, index, missed, n, dim, step_of, mode == 'realtime')
-    if mode == 'realtime' and sc is not None and sc.intrinsic is None:
+    if mode == 'realtime' and sc is not None and sc.intrinsic is None and sc.plant.default:
         # Which held command the world applied is not in the bag, but the double integrator
-        # gives it back from the next state: p_{k+1} = p_k + u_k dt.
+        # gives it back from the next state: p_{k+1} = p_k + u_k dt (a robot plant does not:
+        # its velocity is not p + u dt).
         follows = np.flatnonzero(np.diff(steps) == 1)
         u[follows] = (p[follows + 1] - p[follows]) / dt
     per_agent = np.zeros(n, dtype=int)
@@ -550,7 +569,25 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         non_finite_at=non_finite,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
-        informed_known=informed_known, network_at=network_at)
+        informed_known=informed_known, network_at=network_at, plant_state=plant_state)
+
+
+def _plant_states(sc: Scenario, states: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return a robot plant's states ``(K, N, S)`` of the odometry read (``(K, N,``
+    :data:`ODOM_COLUMNS` ``)``) and what the law saw of them, ``q`` and ``p`` ``(K, N, dim)``.
+
+    The world's odometry carries the plant state (:meth:`Plant.odometry`; for the unicycle
+    the axle, its heading and its body twist), which :meth:`Plant.from_odometry` gives back
+    exactly; the law's point and its velocity are :meth:`Plant.law_state` of it, as ``sim``
+    and the world compute them (element-wise arithmetic: bit for bit over any rows).
+    """
+    plant, dim = sc.plant.model, sc.dim
+    k, n = states.shape[:2]
+    rows = states.reshape(k * n, ODOM_COLUMNS)
+    x = plant.from_odometry(rows[:, 0:3], rows[:, 6:10], rows[:, 3:6], rows[:, 10:13], dim)
+    q, p = plant.law_state(x)
+    return x.reshape(k, n, -1), q.reshape(k, n, dim), p.reshape(k, n, dim)
 
 
 def _number(text: str) -> float:

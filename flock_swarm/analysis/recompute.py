@@ -27,7 +27,8 @@ def recompute(run: RunData, record_every: int | None = None,
     without a scenario) (:meth:`RunMetrics.update_from_edges`: minimum distance, collision
     pairs); every ``record_every``-th step and the last are recorded with
     :func:`step_metrics`, with the law's adaptive state, exactly as in
-    ``WorldStepper.observe`` (and ``sim``). With a ``network:`` section the statistics of
+    ``WorldStepper.observe`` (and ``sim``), a robot plant's recorded state with them
+    (``plant_state``, the unicycle's ``heading``). With a ``network:`` section the statistics of
     the agents' links are recorded too: recounted as the world counts them for a lockstep
     run (:class:`~flock_swarm.core.run.LinkObserver`, ``sim``'s), and for a realtime run
     taken from ``/swarm/metrics`` (the world measured them: each recorded instant has the
@@ -70,6 +71,9 @@ def recompute(run: RunData, record_every: int | None = None,
                 nan = dict.fromkeys(STATISTICS, np.nan)
                 extra.update(tally.take(run.dt) if observer is not None else told or nan)
                 told = None
+        if run.plant_state is not None and (k % log.every == 0 or row == last):
+            # The plant's state as sim and the world record it (the unicycle's heading too).
+            extra.update(sc.plant.model.recorded(run.plant_state[row]))
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
                     covered, radius, row == last, **extra)
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')

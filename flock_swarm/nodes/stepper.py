@@ -263,6 +263,10 @@ class WorldStepper:
         # realtime: the latest of every agent (zero: stop, before the first).
         self.twists: dict[int, np.ndarray] = {}
         self.held_twist = np.zeros((sc.n_agents, 6))
+        # Realtime: when each agent's held Twist came, and the robots stopped this step (their
+        # Twist older than the staleness: a zero Twist applied instead).
+        self.held_twist_at = np.full(sc.n_agents, -np.inf)
+        self.stopped = np.zeros(sc.n_agents, dtype=bool)
         self.intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
         n = sc.n_agents
         self.k = 0
@@ -366,16 +370,18 @@ class WorldStepper:
             self.command_rows = u
             self.heard[:] = True
 
-    def twist(self, i: int, linear: Sequence[float], angular: Sequence[float]) -> None:
-        """Take agent ``i``'s (checked) velocity command.
+    def twist(self, i: int, linear: Sequence[float], angular: Sequence[float],
+              now: float) -> None:
+        """Take agent ``i``'s (checked) velocity command, arrived at ``now``.
 
         ``Twist`` carries no stamp: in lockstep it answers the open step (an agent sends one
         per step, after the step's odometry, and never again for a step offered again);
-        in realtime it is held until the next.
+        in realtime it is held until the next, for at most the staleness.
         """
         row = np.concatenate([linear, angular]).astype(float)
         if not self.lockstep:
             self.held_twist[i] = row
+            self.held_twist_at[i] = now
         elif self.started and not self.done:
             self.twists[i] = row
 
@@ -617,12 +623,18 @@ class WorldStepper:
         if not self.started:
             # Staleness counts from the first step, not from the node's construction.
             self.held_at[:] = now
+            self.held_twist_at[:] = now
             self.leader.seen_at = max(self.leader.seen_at, now)
         if self.leader.silent_for(now) > self.settings.staleness:
             self.lose_leader()
 
     def realtime_close(self, now: float, published: float) -> Observation:
         """Realtime: observe the step with the held commands (a stale one zeroed).
+
+        With velocity commands the world applies the agents' Twists: one older than the
+        staleness is the missing command (counted, logged), and that robot stops for the step
+        (a zero Twist, :meth:`plant_command`; its ``u`` recorded as zero), as a stale
+        acceleration is zeroed. Otherwise the held accelerations are the commands.
 
         :param now: the time the step began (:meth:`realtime_begin`).
         :param published: the time its odometry went out.
@@ -631,7 +643,13 @@ class WorldStepper:
         self.published_at[k] = published
         self.published_at.pop(k - PUBLISHED_KEEP, None)
         u = self.held.copy()
-        stale = np.flatnonzero(now - self.held_at > self.settings.staleness)
+        old = now - self.held_at > self.settings.staleness
+        if self.velocity:
+            self.stopped = now - self.held_twist_at > self.settings.staleness
+            u[old | self.stopped] = 0.0
+            stale = np.flatnonzero(self.stopped)
+        else:
+            stale = np.flatnonzero(old)
         u[stale] = 0.0
         self.missed[stale] += 1
         self._note_stale({int(i) for i in stale})
@@ -715,8 +733,9 @@ class WorldStepper:
 
     def plant_command(self, u: np.ndarray) -> np.ndarray:
         """Return the command every plant executes this step: the agents' Twists (a missing
-        one: stop), or the conversion of their accelerations ``u``, exactly as ``sim``'s
-        (:meth:`~flock_swarm.core.plants.base.Plant.command` over the step)."""
+        or, realtime, stale one: stop), or the conversion of their accelerations ``u``,
+        exactly as ``sim``'s (:meth:`~flock_swarm.core.plants.base.Plant.command` over the
+        step)."""
         if not self.velocity:
             return self.plant.command(self.x, u, self.scenario.dt)
         if self.lockstep:
@@ -724,7 +743,8 @@ class WorldStepper:
             for i, row in self.twists.items():
                 rows[i] = row
         else:
-            rows = self.held_twist
+            rows = self.held_twist.copy()
+            rows[self.stopped] = 0.0
         return self.plant.from_twist(self.x, rows[:, :3], rows[:, 3:], self.scenario.plant.frame)
 
     def advance(self, u: np.ndarray) -> bool:

@@ -312,7 +312,7 @@ class WorldNode(RecordedNode):
             self.guard.reject(topic, 'non_finite', f'a non-finite velocity command at step '
                               f'{self.k}')
             return
-        self.stepper.twist(i, linear, angular)
+        self.stepper.twist(i, linear, angular, time.monotonic())
         self._maybe_finish()
 
     def check_labelled(self, topic: str, msg: tuple, expected: tuple[str, ...],
