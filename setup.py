@@ -42,7 +42,7 @@ setup(
             'sweep = flock_swarm.cli.sweep:main',
             'foxglove_server = flock_swarm.nodes.foxglove_server:main',
         ],
-        # The built-in laws and leader models, registered exactly as a user's package
+        # The built-in laws, leader models and plants, registered exactly as a user's package
         # registers its own (docs/extending.md): one registry, one code path.
         'flock_swarm.laws': [
             'olfati_saber_2006 = flock_swarm.core.laws.su2009:OlfatiSaber2006',
@@ -62,6 +62,11 @@ setup(
             'lu = flock_swarm.core.leaders.models:Lu',
             'linear = flock_swarm.core.leaders.models:Linear',
             'sink = flock_swarm.core.leaders.models:Sink',
+        ],
+        'flock_swarm.plants': [
+            'double_integrator = flock_swarm.core.plants.models:DoubleIntegrator',
+            'velocity_lag = flock_swarm.core.plants.models:VelocityLag',
+            'unicycle = flock_swarm.core.plants.models:Unicycle',
         ],
         # The launch-free testing API's fixtures (ros_domain, flock_swarm_run...) for every
         # pytest run in an environment holding flock_swarm.

@@ -19,6 +19,9 @@ FRAME = 'world'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
 ACCEL_TYPE = 'geometry_msgs/msg/AccelStamped'
+#: A robot's velocity command (``cmd_vel``): the robots' convention, unstamped; body frame
+#: for a unicycle, world frame for a holonomic robot (REP 103/105, docs/plants.md).
+TWIST_TYPE = 'geometry_msgs/msg/Twist'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 METRICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 STATUS_TYPE = 'std_msgs/msg/String'
@@ -63,6 +66,15 @@ def odom_topic(i: int) -> str:
 def cmd_topic(i: int) -> str:
     """Return the command topic of agent ``i`` (relative: namespaces apply)."""
     return f'agent_{i}/cmd_accel'
+
+
+def cmd_vel_topic(i: int) -> str:
+    """Return the velocity-command topic of agent ``i`` (relative: namespaces apply).
+
+    Only the agents of a robot plant commanded by velocity (``plant.command: cmd_vel``)
+    publish it, beside ``cmd_accel`` (the law's acceleration, recorded).
+    """
+    return f'agent_{i}/cmd_vel'
 
 
 def state_topic(i: int) -> str:
@@ -174,13 +186,14 @@ class Topic:
     publisher: str
 
 
-def contract(n_agents: int, state: bool = False) -> list[Topic]:
+def contract(n_agents: int, state: bool = False, velocity: bool = False) -> list[Topic]:
     """Return every topic of the contract for ``n_agents`` agents, ``/clock`` first.
 
     The recorded topics of a bag, in the order the live view advertises them.
 
     :param n_agents: the number of agents.
     :param state: whether the law has adaptive state (the agents publish it then).
+    :param velocity: whether the agents publish velocity commands (``cmd_vel``).
     """
     topics = [Topic(CLOCK, CLOCK_TYPE, CLOCK_QOS, 'world'),
               Topic(LEADER_ODOM, ODOMETRY_TYPE, LOCKSTEP_QOS, 'leader'),
@@ -190,6 +203,8 @@ def contract(n_agents: int, state: bool = False) -> list[Topic]:
                    Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, f'agent_{i}')]
         if state:
             topics.append(Topic(state_topic(i), STATE_TYPE, LOCKSTEP_QOS, f'agent_{i}'))
+        if velocity:
+            topics.append(Topic(cmd_vel_topic(i), TWIST_TYPE, LOCKSTEP_QOS, f'agent_{i}'))
     topics += [Topic(MARKERS, MARKERS_TYPE, TELEMETRY_QOS, 'world'),
                Topic(METRICS, METRICS_TYPE, TELEMETRY_QOS, 'world')]
     return topics

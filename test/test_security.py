@@ -36,6 +36,8 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     cmds = {contract.cmd_topic(i) for i in range(n)}
     # Each agent's adaptive state (a topic only for a law with one): to the world.
     states = {contract.state_topic(i) for i in range(n)}
+    # A robot plant's velocity commands (docs/plants.md): to the world.
+    twists = {contract.cmd_vel_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
     status = {contract.STATUS}  # the world announces the end of its run to the others
     # The world also publishes the run's scenario (latched, recorded at t = 0).
@@ -43,10 +45,11 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     faults = {contract.FAULTS}
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
                        | odom | status,
-                       cmds | states | leader | faults),
+                       cmds | states | twists | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
-        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i)} | faults,
+        nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i),
+                                contract.cmd_vel_topic(i)} | faults,
                                odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}

@@ -53,7 +53,8 @@ def listing() -> str:
     lines = ['presets (sim NAME):']
     lines += [f'  {name}' for name in preset_names()]
     for title, group in (('laws (protocol.name):', registry.LAW_GROUP),
-                         ('leader models (leader.model):', registry.LEADER_GROUP)):
+                         ('leader models (leader.model):', registry.LEADER_GROUP),
+                         ('plant models (plant.model):', registry.PLANT_GROUP)):
         found = registry.status(group)
         width = max((len(name) for name in found), default=0)
         lines += ['', title]

@@ -1,9 +1,10 @@
-"""The registry of laws and leader models: Python entry points, read once per process.
+"""The registry of laws, leader models and plants: Python entry points, read once per process.
 
 Laws are registered in the entry-point group ``flock_swarm.laws``, leader models in
-``flock_swarm.leaders``, by this package (setup.py) and by any other installed package, in
-the same way: ``name = module:Class``. One registry, one code path: the built-in laws are
-looked up exactly as a user's. docs/extending.md walks through writing and registering one.
+``flock_swarm.leaders``, plant models in ``flock_swarm.plants``, by this package (setup.py)
+and by any other installed package, in the same way: ``name = module:Class``. One registry,
+one code path: the built-in laws are looked up exactly as a user's. docs/extending.md walks
+through writing and registering one.
 
 A plugin that cannot be imported, is not a subclass of the base class, lacks a method,
 names itself differently from its entry point, or whose name another package registers too,
@@ -22,15 +23,22 @@ from importlib import metadata
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core.laws.base import Law, accepted
 from flock_swarm.core.leaders.base import LeaderModel
+from flock_swarm.core.plants.base import Plant
 
 #: Entry-point group of the laws (``protocol.name``).
 LAW_GROUP = 'flock_swarm.laws'
 #: Entry-point group of the leader models (``leader.model``, ``intrinsic.model``).
 LEADER_GROUP = 'flock_swarm.leaders'
+#: Entry-point group of the plant models (``plant.model``).
+PLANT_GROUP = 'flock_swarm.plants'
 
-_BASES = {LAW_GROUP: Law, LEADER_GROUP: LeaderModel}
+_BASES = {LAW_GROUP: Law, LEADER_GROUP: LeaderModel, PLANT_GROUP: Plant}
 #: What a plugin class must define itself (not inherit from the base class).
-_REQUIRED = {LAW_GROUP: ('radius', 'pair', 'combine'), LEADER_GROUP: ('acceleration',)}
+_REQUIRED = {LAW_GROUP: ('radius', 'pair', 'combine'), LEADER_GROUP: ('acceleration',),
+             PLANT_GROUP: ('state_names', 'command_names', 'initial_state', 'law_state',
+                           'command', 'step')}
+#: The scenario key naming a plugin of each group.
+_KEYS = {LAW_GROUP: 'protocol.name', LEADER_GROUP: 'leader.model', PLANT_GROUP: 'plant.model'}
 #: Law hooks that took the whole scenario before they took a
 #: :class:`~flock_swarm.core.laws.base.LawSetup`: ``{hook: (old signature, what to read)}``.
 _SETUP_HOOKS = {'agent_data': ('agent_data(self, sc, informed)',
@@ -84,7 +92,7 @@ def entries(group: str) -> dict[str, Entry]:
 
 
 def _key(group: str) -> str:
-    return 'protocol.name' if group == LAW_GROUP else 'leader.model'
+    return _KEYS[group]
 
 
 @lru_cache(maxsize=None)
@@ -204,6 +212,11 @@ def leader_class(name: str, key: str = 'leader.model') -> type[LeaderModel]:
     return _lookup(LEADER_GROUP, name, key, 'leader model')
 
 
+def plant_class(name: str) -> type[Plant]:
+    """Return the plant model registered as ``name`` (``plant.model``)."""
+    return _lookup(PLANT_GROUP, name, 'plant.model', 'plant model')
+
+
 def _lookup(group: str, name, key: str, what: str) -> type:
     known = names(group)
     if not isinstance(name, str) or name not in known:
@@ -220,3 +233,8 @@ def laws() -> dict[str, type[Law]]:
 def leader_models() -> dict[str, type[LeaderModel]]:
     """Return every registered leader model by name (each imported and checked)."""
     return {name: leader_class(name) for name in names(LEADER_GROUP)}
+
+
+def plants() -> dict[str, type[Plant]]:
+    """Return every registered plant model by name (each imported and checked)."""
+    return {name: plant_class(name) for name in names(PLANT_GROUP)}

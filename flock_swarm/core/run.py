@@ -369,7 +369,8 @@ def stack_mismatch(scenarios: list[Scenario]) -> str | None:
                 'leader': sc.leader.model == first.leader.model
                 and np.array_equal(sc.leader.position, first.leader.position)
                 and np.array_equal(sc.leader.velocity, first.leader.velocity),
-                'observers': bool(sc.observers) == bool(first.observers)}
+                'observers': bool(sc.observers) == bool(first.observers),
+                'plant': sc.plant == first.plant}
         differ = [key for key, ok in same.items() if not ok]
         if differ:
             return f'{sc.name} (seed {sc.seed}) differs in {", ".join(differ)}'
@@ -396,6 +397,13 @@ class _Stack:
         self.active = list(range(len(scenarios)))
         self.q = np.concatenate([r.q0 for r in reals])
         self.p = np.concatenate([r.p0 for r in reals])
+        #: The plant (``plant:``), ``None`` for the double integrator: today's exact path.
+        self.plant = None if sc.plant.default else sc.plant.model
+        #: The plant's state; ``q``, ``p`` are what the law sees of it.
+        self.x: np.ndarray | None = None
+        if self.plant is not None:
+            self.x = self.plant.initial_state(self.q, self.p)
+            self.q, self.p = self.plant.law_state(self.x)
         self.agents = stack_agents([r.agents for r in reals])
         self.reselector = Reselector(sc.law) if sc.informed.reselect and static is None \
             else None
@@ -444,6 +452,8 @@ class _Stack:
                 self.failures[g] = failures[b]
         self.active = [g for g, out in zip(self.active, gone.tolist()) if not out]
         self.q, self.p = self.q[keep], self.p[keep]
+        if self.x is not None:
+            self.x = self.x[keep]
         self.agents = self.agents.subset(keep)
         self.graph = self._new_graph()
         return keep
@@ -500,8 +510,22 @@ class _Stack:
         return u if self.active else None
 
     def extra(self, rows: slice) -> dict:
-        """Return the per-agent protocol state to record for some rows."""
-        return {key: value[rows] for key, value in self.agents.state.items()}
+        """Return the per-agent protocol state (and the plant's state) to record for some rows."""
+        plant = {} if self.plant is None else self.plant.recorded(self.x[rows])
+        return {**{key: value[rows] for key, value in self.agents.state.items()}, **plant}
+
+    def advance(self, u: np.ndarray, dt: float, intrinsic) -> None:
+        """Advance every agent one step under the law's commands ``u``.
+
+        The double integrator (no ``plant:``) integrates exactly as ever
+        (:func:`step_agents`); another plant turns ``u`` into its command and steps itself
+        (:mod:`flock_swarm.core.plants`), the law seeing its new ``law_state``.
+        """
+        if self.plant is None:
+            self.q, self.p = step_agents(self.q, self.p, u, dt, intrinsic)
+            return
+        self.x = self.plant.step(self.x, self.plant.command(self.x, u, dt), dt)
+        self.q, self.p = self.plant.law_state(self.x)
 
 
 def stack_agents(parts: list[AgentData]) -> AgentData:
@@ -561,7 +585,7 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             else:
                 evaluate_state(law, step, range(m), lambda: stack.net.advance_state(
                     None, q, p, stack.agents, dt, step * dt))
-            stack.q, stack.p = step_agents(q, p, u, dt, intrinsic)
+            stack.advance(u, dt, intrinsic)
             advance_leader(leader, dt, step, sc.dim)
             now = time.monotonic()
             if progress is not None and now - last >= progress_every:

@@ -25,11 +25,12 @@ from flock_swarm.core.laws.base import (AgentData, Law, LawContext, LawSetup, Ob
                                         antisymmetry_problem)
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.network import NetworkSpec, parse_network
+from flock_swarm.core.plants.spec import PlantSpec, parse_plant
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders
 
 TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
             'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
-            'intrinsic', 'metrics', 'network')
+            'intrinsic', 'metrics', 'network', 'plant')
 #: ``intrinsic.model`` values besides the registered autonomous leader models.
 INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
@@ -117,6 +118,8 @@ class Scenario:
     headline: Headline = Headline()
     #: The ``network:`` section (``docs/network.md``); inactive when absent or all zero.
     network: NetworkSpec = NetworkSpec()
+    #: The ``plant:`` section (``docs/plants.md``); the double integrator when absent.
+    plant: PlantSpec = PlantSpec()
 
     @property
     def steps(self) -> int:
@@ -209,11 +212,15 @@ def parse_scenario(data: Any) -> Scenario:
     eta_tol = positive(metrics.get('eta_tolerance', law.eta_tolerance), 'metrics.eta_tolerance')
     coll = positive(metrics.get('collision_distance', 0.1), 'metrics.collision_distance')
     network = parse_network(data.get('network'), dt)
+    plant = parse_plant(data.get('plant'), dim, registry.plant_class)
+    if intrinsic is not None and not plant.default:
+        raise ScenarioError('plant.model', f'the {plant.model.name} plant has no intrinsic '
+                            'dynamics: give intrinsic.model: none, or the double_integrator')
     return Scenario(name, text(data.get('description'), 'description', ''),
                     text(data.get('reference'), 'reference', ''),
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
-                    intrinsic, eta_tol, coll, data, parse_headline(metrics), network)
+                    intrinsic, eta_tol, coll, data, parse_headline(metrics), network, plant)
 
 
 def _parse_law(section: dict, ctx: LawContext) -> Law:

@@ -20,6 +20,12 @@ robot's own process) or many (``ros2 run flock_swarm agents``, a container): the
 agents share one subscription per odometry topic and one evaluation of the law per step, so
 a step costs ``N`` odometry deliveries per container instead of ``N`` per agent. Each hosted
 agent still publishes on its own ``agent_<i>/cmd_accel``.
+
+A robot plant (``plant:``, docs/plants.md) commanded by velocity (``cmd_vel``, the scenario's
+``plant.command`` or the node's ``command`` parameter) also publishes its velocity command,
+converted from the law's acceleration by the plant's own ``command`` and ``twist`` (the
+core's, as in ``sim``), as ``geometry_msgs/Twist`` on ``agent_<i>/cmd_vel``: once per step,
+never repeated (it carries no stamp: the world takes it as the open step's).
 """
 
 import dataclasses
@@ -28,14 +34,16 @@ import sys
 import time
 
 import numpy as np
-from geometry_msgs.msg import AccelStamped
+from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
-                                  odom_topic, qos_profile, state_topic)
+                                  cmd_vel_topic, odom_topic, qos_profile, state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
+from flock_swarm.core.plants.base import COMMANDS
+from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, AgentController,
                                           OdometryInbox, parse_agent_ids)
@@ -46,7 +54,7 @@ from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParam
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, StateEncoder, decode_accel,
-                                    decode_odometry)
+                                    decode_heading, decode_odometry, encode_twist)
 
 
 def _timeout(name: str, default: float, description: str) -> Param:
@@ -74,6 +82,9 @@ AGENT_PARAMS = COMMON_PARAMS + (
           'publishes a zero command instead and goes on (counted, reported)',
           lambda v: v in (NON_FINITE_FAIL, NON_FINITE_ZERO),
           "must be 'fail' or 'zero', got {value!r}"),
+    Param('command', '', "the command interface: '' (the scenario's plant.command), accel "
+          '(cmd_accel only) or cmd_vel (a robot plant: Twist on cmd_vel too)',
+          lambda v: v in ('', *COMMANDS), "must be '', 'accel' or 'cmd_vel', got {value!r}"),
 ) + LIMIT_PARAMS + (KEEP_RUNNING,)
 
 
@@ -112,8 +123,16 @@ class AgentNode(Node):
         self.state_pubs = [self.create_publisher(JointState, state_topic(int(i)), qos)
                            for i in self.controller.ids] if self.controller.state else []
         self.state_encoder = StateEncoder(self.controller.state_labels)
-        # What publish_commands sends on: the commands (row i: hosted agent i), then states.
-        self.pubs = self.cmd_pubs + self.state_pubs
+        # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
+        self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
+        self.twist_pubs = [self.create_publisher(Twist, cmd_vel_topic(int(i)), qos)
+                           for i in self.controller.ids] if self.velocity else []
+        # The hosted agents' odometry carries a heading (an oriented plant's).
+        plant = self.controller.plant
+        self.oriented = plant is not None and plant.oriented
+        # What publish_commands sends on: the commands (row i: hosted agent i), then states,
+        # then velocity commands.
+        self.pubs = self.cmd_pubs + self.state_pubs + self.twist_pubs
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
         self.children = [f'agent_{j}' for j in range(sc.n_agents)]
@@ -164,7 +183,8 @@ class AgentNode(Node):
 
     def on_one_odom(self, j: int, data: bytes) -> None:
         """Check and store agent ``j``'s odometry (serialised) for its step."""
-        checked = self.check_odometry(self.odom_topics[j], data, self.children[j])
+        checked = self.check_odometry(self.odom_topics[j], data, self.children[j],
+                                      self.oriented)
         if checked is None:
             return
         k, state = checked
@@ -172,11 +192,13 @@ class AgentNode(Node):
         self.controller.latest_step = k
         self.stash(k, lambda box: box.put(j, state), self.odom_topics[j])
 
-    def check_odometry(self, topic: str, data: bytes,
-                       child: str) -> tuple[int, tuple[tuple, tuple]] | None:
-        """Return the step and ``(q, p)`` of an acceptable odometry message, or ``None``."""
+    def check_odometry(self, topic: str, data: bytes, child: str,
+                       oriented: bool = False) -> tuple[int, tuple] | None:
+        """Return the step and ``(q, p)`` of an acceptable odometry message (``oriented``:
+        with ``(qz, qw)`` and ``(yaw rate, 0)``), or ``None``."""
         try:
             ns, frame, child_id, pos, vel = decode_odometry(data)
+            heading = decode_heading(data) if oriented else ()
         except MalformedMessage as exc:
             self.guard.reject(topic, 'malformed', str(exc))
             return None
@@ -186,7 +208,7 @@ class AgentNode(Node):
         if k is None:
             return None
         dim = self.scenario.dim
-        return k, (pos[:dim], vel[:dim])
+        return k, (pos[:dim], vel[:dim], *heading)
 
     def on_leader_odom(self, data: bytes) -> None:
         """Check and store the leader's position and velocity (serialised) for its step."""
@@ -282,6 +304,12 @@ class AgentNode(Node):
                     for row, values in enumerate(self.controller.state_values().tolist())]
         self.sent = sent + [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
         self.outbox.extend(self.sent)
+        if self.velocity:
+            # Not in self.sent: an unstamped command is never repeated (see the module).
+            linear, angular = self.controller.velocity_commands(u, self.scenario.plant.frame)
+            first = len(self.cmd_pubs) + len(self.state_pubs)
+            self.outbox.extend((first + row, encode_twist(lin, ang)) for row, (lin, ang)
+                               in enumerate(zip(linear.tolist(), angular.tolist())))
         self.flush()
 
     def flush(self) -> None:

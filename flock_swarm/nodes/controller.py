@@ -15,7 +15,7 @@ import re
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
-from flock_swarm.nodes.wire import OdometryBatch
+from flock_swarm.nodes.wire import OdometryBatch, plant_states
 
 #: Steps an agent buffers inputs for at once (lockstep needs two: the open step and the next).
 MAX_PENDING = 8
@@ -45,9 +45,12 @@ NON_FINITE_FAIL, NON_FINITE_ZERO = 'fail', 'zero'
 class StepInputs:
     """What the hosted agents have received for one step.
 
-    :ivar odom: agent ``j``'s ``(position, velocity)`` by ``j``, as messages came one by one.
-    :ivar qp: every agent's state at once, shape ``(N, 2, dim)`` (positions, velocities), when
-        a whole step's odometry came in one pass (:meth:`put_all`); ``None`` before.
+    :ivar odom: agent ``j``'s ``(position, velocity)`` by ``j``, as messages came one by one
+        (an oriented plant's odometry adds ``(qz, qw)`` and ``(yaw rate, 0)``:
+        :func:`~flock_swarm.nodes.wire.odometry_rows`).
+    :ivar qp: every agent's state at once, shape ``(N, 2, dim)`` (positions, velocities;
+        ``(N, 4, dim)`` for an oriented plant), when a whole step's odometry came in one
+        pass (:meth:`put_all`); ``None`` before.
     """
 
     odom: dict = field(default_factory=dict)
@@ -77,8 +80,13 @@ class StepInputs:
         """Return whether the leader's state (odometry and acceleration) is in."""
         return self.leader_odom is not None and self.leader_accel is not None
 
-    def swarm(self, n_agents: int) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
-        """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in)."""
+    def swarm(self, n_agents: int, view: Callable[[np.ndarray], tuple] | None = None
+              ) -> tuple[np.ndarray, np.ndarray, LeaderState | None]:
+        """Return ``(q, p, leader)`` (``leader`` ``None`` when it is not in).
+
+        :param view: turns the odometry vectors ``(N, K, dim)`` into what the law sees,
+            ``(q, p)``; ``None``: they are positions and velocities.
+        """
         if self.qp is not None:
             qp = self.qp
         else:
@@ -86,7 +94,8 @@ class StepInputs:
             qp = np.array([odom[j] for j in range(n_agents)])
         leader = LeaderState(np.array(self.leader_odom[0]), np.array(self.leader_odom[1]),
                              np.array(self.leader_accel)) if self.has_leader else None
-        return qp[:, 0], qp[:, 1], leader
+        q, p = (qp[:, 0], qp[:, 1]) if view is None else view(qp)
+        return q, p, leader
 
 
 def parse_agent_ids(spec: Any, agent_id: int, n_agents: int) -> np.ndarray:
@@ -196,6 +205,24 @@ class AgentController:
         shapes = {key: value.shape[1:] for key, value in self.state.items()}
         #: The labels of one agent's state (:func:`flock_swarm.contract.state_labels`).
         self.state_labels = state_labels(shapes)
+        #: The plant (``None``: the double integrator, whose odometry is what the law sees)
+        #: and the whole swarm's plant state of the step answered last (:meth:`law_view`).
+        self.plant = None if sc.plant.default else sc.plant.model
+        self.view = None if self.plant is None else self.law_view
+        self.x: np.ndarray | None = None
+
+    def law_view(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return what the law sees, ``(q, p)``, of every agent's odometry vectors; keep the
+        plant states in :attr:`x` (the hosted agents' commands are converted from them)."""
+        self.x = plant_states(self.plant, rows, self.sc.dim)
+        return self.plant.law_state(self.x)
+
+    def velocity_commands(self, u: np.ndarray, frame: str) -> tuple[np.ndarray, np.ndarray]:
+        """Return the hosted agents' velocity commands for their accelerations ``u``: the
+        plant's conversion from their state of the step answered (exactly what ``sim`` and
+        the world compute), as ``Twist`` vectors ``(linear (m, 3), angular (m, 3))``."""
+        own = self.x[self.ids]
+        return self.plant.twist(own, self.plant.command(own, u, self.sc.dt), frame)
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered).
@@ -274,7 +301,7 @@ class AgentController:
         for old in [s for s in self.pending if s < k]:
             del self.pending[old]
         self.answered = k
-        return self.command(*box.swarm(self.sc.n_agents), k=k)
+        return self.command(*box.swarm(self.sc.n_agents, self.view), k=k)
 
     def realtime_answer(self, now: float) -> np.ndarray | None:
         """Realtime: return the commands for the latest known states (``None`` before every
@@ -282,7 +309,7 @@ class AgentController:
         latest = self.latest
         if not latest.has_odometry(self.sc.n_agents):
             return None
-        q, p, leader = latest.swarm(self.sc.n_agents)
+        q, p, leader = latest.swarm(self.sc.n_agents, self.view)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
         return self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
@@ -365,7 +392,9 @@ class OdometryInbox(StepInbox):
         :param children: every agent's ``child_frame_id``, by agent.
         """
         n = controller.sc.n_agents
-        super().__init__(n, OdometryBatch(children))
+        plant = controller.plant
+        super().__init__(n, OdometryBatch(children,
+                                          oriented=plant is not None and plant.oriented))
         self.controller, self.guard, self.topics = controller, guard, topics
 
     def put(self, sender: int, data: bytes) -> bool:

@@ -16,7 +16,7 @@ from typing import Callable, Protocol
 import yaml
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import AccelStamped
+from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -109,7 +109,7 @@ class BagSink:
             raise ScenarioError('out_dir', f'{path} already holds a bag; choose another out_dir')
         # Every schema is found before the bag file exists: a failure leaves nothing behind.
         # The agents' adaptive state is a topic only for a law that has one.
-        types = (Clock, Odometry, AccelStamped, MarkerArray, DiagnosticArray) \
+        types = (Clock, Odometry, AccelStamped, Twist, MarkerArray, DiagnosticArray) \
             + ((JointState,) if real.agents.state else ())
         for msg_type in types:
             try:

@@ -29,6 +29,8 @@ from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.network import NetworkState, neighbourhood_of
+from flock_swarm.core.plants.base import COMMANDS
+from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
                                   interaction_graph, observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
@@ -122,6 +124,8 @@ class WorldSettings:
         many steps in a row ends the run as ``failed`` (0: never, it is zeroed to the end).
     :ivar peer_timeout: seconds an agent's host or the leader may be gone from the ROS graph
         (it answered before) before the run ends as ``failed`` (0: never).
+    :ivar command: the command interface the world applies: ``''`` (the scenario's
+        ``plant.command``), ``accel`` or ``cmd_vel``.
     """
 
     lockstep: bool = True
@@ -132,6 +136,7 @@ class WorldSettings:
     metrics_every: int = 10
     max_missed_steps: int = 3
     peer_timeout: float = 6.0
+    command: str = ''
 
     @classmethod
     def from_parameters(cls, values: dict, lockstep: bool) -> 'WorldSettings':
@@ -167,6 +172,9 @@ SETTING_PARAMS = (
     _setting('peer_timeout', 'seconds an agent\'s node or the leader may be gone from the ROS '
              'graph (it had answered before) before the run ends as failed; 0: never',
              lambda v: 0 <= v < float('inf')),
+    _setting('command', "the agents' command interface the world applies: '' (the scenario's "
+             'plant.command), accel (cmd_accel) or cmd_vel (Twist on cmd_vel)',
+             lambda v: v in ('', *COMMANDS)),
 )
 
 
@@ -224,6 +232,20 @@ class WorldStepper:
         self.real = realize(sc)
         self.static = static_graph(sc, self.real)
         self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
+        #: The plant (``plant:``; ``None``: the double integrator, today's exact path), its
+        #: state (``q``, ``p`` are what the law sees of it), and the command interface the
+        #: world applies (:attr:`velocity`: the agents' Twists, else their accelerations).
+        self.plant = None if sc.plant.default else sc.plant.model
+        self.x: np.ndarray | None = None
+        if self.plant is not None:
+            self.x = self.plant.initial_state(self.q, self.p)
+            self.q, self.p = self.plant.law_state(self.x)
+        #: Whether the world applies the agents' velocity commands (``cmd_vel``).
+        self.velocity = command_interface(sc, settings.command) == 'cmd_vel'
+        # The open step's velocity commands by agent, (linear, angular) rows of 3 (lockstep);
+        # realtime: the latest of every agent (zero: stop, before the first).
+        self.twists: dict[int, np.ndarray] = {}
+        self.held_twist = np.zeros((sc.n_agents, 6))
         self.intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
         n = sc.n_agents
         self.k = 0
@@ -321,6 +343,19 @@ class WorldStepper:
             self.command_rows = u
             self.heard[:] = True
 
+    def twist(self, i: int, linear: Sequence[float], angular: Sequence[float]) -> None:
+        """Take agent ``i``'s (checked) velocity command.
+
+        ``Twist`` carries no stamp: in lockstep it answers the open step (an agent sends one
+        per step, after the step's odometry, and never again for a step offered again);
+        in realtime it is held until the next.
+        """
+        row = np.concatenate([linear, angular]).astype(float)
+        if not self.lockstep:
+            self.held_twist[i] = row
+        elif self.started and not self.done:
+            self.twists[i] = row
+
     def agent_state(self, i: int, k: int, values: Sequence[float]) -> None:
         """Take agent ``i``'s (checked) adaptive state of step ``k``: the values of
         :attr:`state_labels`, in order.
@@ -389,6 +424,7 @@ class WorldStepper:
         """Open the current step: no command yet, its timeout and first resend ahead."""
         self.commands = {}
         self.command_rows = None
+        self.twists = {}
         self.state_in = set()
         self.step_began = now
         self.deadline = now + self.settings.step_timeout
@@ -424,6 +460,7 @@ class WorldStepper:
         n = self.scenario.n_agents
         return (self.lockstep and self.started and not self.done
                 and len(self.commands) == n and (not self.state or len(self.state_in) == n)
+                and (not self.velocity or len(self.twists) == n)
                 and (self.leader.lost
                      or (self.k in self.leader_odom and self.k in self.leader_accel)))
 
@@ -443,6 +480,10 @@ class WorldStepper:
             missing = [i for i in range(n) if i not in self.commands]
             for i, ui in self.commands.items():
                 u[i] = ui
+        if self.velocity:
+            # A velocity command missing: the robot stops (a zero Twist), as robots do when
+            # their cmd_vel goes silent.
+            missing = sorted(set(missing) | {i for i in range(n) if i not in self.twists})
         leader_missing = k not in self.leader_odom or k not in self.leader_accel
         if missing:
             self.missed[missing] += 1
@@ -604,7 +645,7 @@ class WorldStepper:
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
                                    non_finite_commands=self.non_finite.copy(), **self.state,
-                                   **net)
+                                   **net, **self.plant_recorded())
         if now is not None:
             self.metrics_now = now
         events = self.leader.events
@@ -629,10 +670,32 @@ class WorldStepper:
         return Observation(k, self.q, self.p, u, leader, edges, missing,
                            k % st.marker_every == 0 or last, values, problems, last)
 
+    def plant_recorded(self) -> dict:
+        """Return the plant's state to record (none for the double integrator)."""
+        return {} if self.plant is None else self.plant.recorded(self.x)
+
+    def plant_command(self, u: np.ndarray) -> np.ndarray:
+        """Return the command every plant executes this step: the agents' Twists (a missing
+        one: stop), or the conversion of their accelerations ``u``, exactly as ``sim``'s
+        (:meth:`~flock_swarm.core.plants.base.Plant.command` over the step)."""
+        if not self.velocity:
+            return self.plant.command(self.x, u, self.scenario.dt)
+        if self.lockstep:
+            rows = np.zeros((self.scenario.n_agents, 6))
+            for i, row in self.twists.items():
+                rows[i] = row
+        else:
+            rows = self.held_twist
+        return self.plant.from_twist(self.x, rows[:, :3], rows[:, 3:], self.scenario.plant.frame)
+
     def advance(self, u: np.ndarray) -> bool:
-        """Integrate every agent over one step with ``u`` held; return whether the state is
-        still finite."""
-        self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
+        """Integrate every agent over one step with ``u`` held (the plant under its command,
+        :meth:`plant_command`); return whether the state is still finite."""
+        if self.plant is None:
+            self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
+        else:
+            self.x = self.plant.step(self.x, self.plant_command(u), self.scenario.dt)
+            self.q, self.p = self.plant.law_state(self.x)
         self.k += 1
         return bool(np.isfinite(self.q).all() and np.isfinite(self.p).all())
 

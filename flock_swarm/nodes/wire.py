@@ -1,5 +1,5 @@
 """CDR encoding and decoding of the messages every step carries: Odometry, AccelStamped, Clock,
-and the agents' adaptive state (JointState).
+Twist (velocity commands of robot plants), and the agents' adaptive state (JointState).
 
 A lockstep step moves ``N`` odometry messages to every agent host and ``N`` commands back.
 Through rclpy's typed API each of them is built as nested Python message objects and
@@ -34,8 +34,13 @@ CDR_LE = b'\x00\x01\x00\x00'
 #: ``TwistWithCovariance`` (linear, angular, covariance).
 POSE_BYTES = (3 + 4 + 36) * 8
 TWIST_BYTES = (3 + 3 + 36) * 8
-#: Bytes of ``Accel`` (linear, angular).
-ACCEL_BYTES = (3 + 3) * 8
+#: Bytes of ``Accel`` (linear, angular), and of ``Twist``.
+ACCEL_BYTES = TWIST_VECTORS_BYTES = (3 + 3) * 8
+#: Offsets in an Odometry's pose of the orientation's ``z, w`` and, from the twist, of the
+#: angular velocity's ``z``: what a heading adds (:data:`ORIENTED`), read as 2-float vectors
+#: (the second of the angular one is the covariance's first value, zero).
+HEADING_AT = 5 * 8
+YAW_RATE_AT = POSE_BYTES + 5 * 8
 NS_PER_S = 1_000_000_000
 
 
@@ -109,6 +114,36 @@ def decode_odometry(data: bytes) -> tuple[int, str, str, tuple, tuple]:
     _need(data, pose + POSE_BYTES + TWIST_BYTES, 'Odometry')
     return (ns, frame, child, lay.vec3.unpack_from(data, pose),
             lay.vec3.unpack_from(data, pose + POSE_BYTES))
+
+
+def decode_heading(data: bytes) -> tuple[tuple, tuple]:
+    """Return ``((qz, qw), (yaw rate, 0))`` of a serialised ``nav_msgs/Odometry``: what the
+    odometry of an oriented plant adds to :func:`decode_odometry`'s (see :data:`HEADING_AT`).
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay = _layout(data)
+    _, _, end = _header(data, lay)
+    _, end = _string(data, _align(end, 4), lay)
+    pose = _align(end, 8)
+    _need(data, pose + POSE_BYTES + TWIST_BYTES, 'Odometry')
+    heading = lay.vec3.unpack_from(data, pose + HEADING_AT)[:2]
+    return heading, (lay.vec3.unpack_from(data, pose + YAW_RATE_AT)[0], 0.0)
+
+
+def decode_twist(data: bytes) -> tuple[tuple, tuple]:
+    """Return ``(linear, angular)`` (3 floats each) of a serialised ``geometry_msgs/Twist``.
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay = _layout(data)
+    _need(data, 4 + TWIST_VECTORS_BYTES, 'Twist')
+    return lay.vec3.unpack_from(data, 4), lay.vec3.unpack_from(data, 28)
+
+
+def encode_twist(linear: Sequence[float], angular: Sequence[float]) -> bytes:
+    """Return a serialised ``geometry_msgs/Twist`` (3 floats each)."""
+    return CDR_LE + _LE.vec3.pack(*linear) + _LE.vec3.pack(*angular)
 
 
 def decode_accel(data: bytes) -> tuple[int, str, tuple]:
@@ -204,12 +239,14 @@ class _Encoder:
 
 class OdometryEncoder(_Encoder):
     """Serialised ``nav_msgs/Odometry`` in frame ``world`` for one ``child_frame_id``:
-    ``encode(ns, position, velocity)`` (identity orientation, zero covariances)."""
+    ``encode(ns, position, velocity)`` (identity orientation, zero covariances); when
+    ``oriented``, ``encode(ns, position, velocity, (qz, qw), (yaw rate, 0))``."""
 
-    def __init__(self, child: str, frame: str = FRAME) -> None:
+    def __init__(self, child: str, frame: str = FRAME, oriented: bool = False) -> None:
         """Create the encoder of ``child``'s odometry."""
         # Quaternion (x, y, z, w) follows the position: w = 1, rclpy's default.
-        super().__init__((frame, child), POSE_BYTES + TWIST_BYTES, (0, POSE_BYTES),
+        super().__init__((frame, child), POSE_BYTES + TWIST_BYTES,
+                         (0, POSE_BYTES) + ((HEADING_AT, YAW_RATE_AT) if oriented else ()),
                          constants=((6 * 8, 1.0),))
 
 
@@ -311,8 +348,12 @@ class OdometryBatch(_MessageBatch):
     writes (:class:`OdometryEncoder`: little-endian, frame ``world``, child ``agent_<j>``):
     :meth:`decode` gives the states, shape ``(N, 2, 3)`` (positions, velocities)."""
 
-    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
-        """Prepare the indices for the agents ``children`` (``agent_<j>`` at index ``j``)."""
+    def __init__(self, children: Sequence[str], frame: str = FRAME,
+                 oriented: bool = False) -> None:
+        """Prepare the indices for the agents ``children`` (``agent_<j>`` at index ``j``);
+        ``oriented``: :meth:`decode` gives ``(N, 4, 3)``, the heading's vectors after the
+        velocity (:data:`HEADING_AT`)."""
+        extra = (HEADING_AT, YAW_RATE_AT) if oriented else ()
         layouts = []
         for child in children:
             strings = _strings_end(frame)
@@ -322,7 +363,7 @@ class OdometryBatch(_MessageBatch):
             # padding between them is not checked (rclpy leaves it uninitialised).
             layouts.append((bytes(OdometryEncoder(child, frame).buf),
                             ((0, 2), (12, strings), (child_at, child_at + 4 + len(child) + 1)),
-                            (pose, pose + POSE_BYTES)))
+                            (pose, pose + POSE_BYTES, *(pose + at for at in extra))))
         super().__init__(layouts)
 
 
@@ -344,9 +385,11 @@ class OdometryBatchEncoder:
     :class:`OdometryEncoder` per child, from one template of the step's buffers joined, into
     which the stamps and the vectors are written with one NumPy scatter each."""
 
-    def __init__(self, children: Sequence[str], frame: str = FRAME) -> None:
-        """Prepare the template of the agents ``children`` (agent ``j``'s message at ``j``)."""
-        encoders = [OdometryEncoder(child, frame) for child in children]
+    def __init__(self, children: Sequence[str], frame: str = FRAME,
+                 oriented: bool = False) -> None:
+        """Prepare the template of the agents ``children`` (agent ``j``'s message at ``j``);
+        ``oriented``: :meth:`encode` takes the heading's vectors too."""
+        encoders = [OdometryEncoder(child, frame, oriented) for child in children]
         joined = b''.join(bytes(enc.buf) for enc in encoders)
         self.template = np.frombuffer(joined, dtype=np.uint8).copy()
         starts = np.cumsum([0] + [len(enc.buf) for enc in encoders])
@@ -357,19 +400,21 @@ class OdometryBatchEncoder:
             + starts[:-1, None]
         self._scatter: dict[int, np.ndarray] = {}
 
-    def encode(self, ns: int, q: np.ndarray, p: np.ndarray) -> list[bytes]:
+    def encode(self, ns: int, q: np.ndarray, p: np.ndarray, *heading: np.ndarray) -> list[bytes]:
         """Return every agent's message stamped ``ns`` [ns] with positions ``q`` and
-        velocities ``p`` (``(N, dim)``, dim 2 or 3; 2-D: z stays 0)."""
+        velocities ``p`` (``(N, dim)``, dim 2 or 3; 2-D: z stays 0); an oriented encoder
+        takes ``(qz, qw)`` and ``(yaw rate, 0)`` rows too (``(N, 2)`` each, 2-D)."""
         dim = q.shape[1]
         scatter = self._scatter.get(dim)
         if scatter is None:
-            # Bytes of (position, velocity), dim doubles each, in the order of
-            # np.stack((q, p), axis=1).
+            # Bytes of (position, velocity[, heading, yaw rate]), dim doubles each, in the
+            # order of np.stack((q, p, ...), axis=1).
             scatter = self._scatter[dim] = (self.vectors[:, :, None]
                                             + np.arange(8 * dim)).reshape(len(q), -1)
         buf = self.template
         buf[self.stamps] = np.frombuffer(_LE.time.pack(*divmod(ns, NS_PER_S)), dtype=np.uint8)
-        buf[scatter] = np.stack((q, p), axis=1).astype('<f8').view(np.uint8).reshape(len(q), -1)
+        buf[scatter] = np.stack((q, p, *heading), axis=1).astype('<f8').view(np.uint8) \
+            .reshape(len(q), -1)
         blob = buf.tobytes()
         return [blob[lo:hi] for lo, hi in self.bounds]
 
@@ -418,3 +463,38 @@ class CdrWriter:
     def getvalue(self) -> bytes:
         """Return the message."""
         return bytes(self.buf)
+
+
+def odometry_rows(plant, x: np.ndarray, dim: int) -> list[np.ndarray]:
+    """Return the vectors the odometry of plant states ``x`` carries, ``(N, dim)`` each:
+    position and velocity, and for an oriented plant ``(qz, qw)`` and ``(yaw rate, 0)``
+    (:class:`OdometryBatchEncoder`'s order; :meth:`~flock_swarm.core.plants.base.Plant.odometry`
+    says what they are).
+
+    :param plant: the plant model.
+    :param x: the states ``(N, S)``.
+    :param dim: the scenario's dimension (2 for an oriented plant).
+    """
+    position, orientation, linear, angular = plant.odometry(x)
+    rows = [position[:, :dim], linear[:, :dim]]
+    if plant.oriented:
+        rows += [orientation[:, 2:4], np.column_stack([angular[:, 2], np.zeros(len(x))])]
+    return rows
+
+
+def plant_states(plant, rows: np.ndarray, dim: int) -> np.ndarray:
+    """Return the plant states of decoded odometry vectors: :func:`odometry_rows`' inverse.
+
+    :param plant: the plant model.
+    :param rows: ``(N, 2 or 4, dim)``: position, velocity[, (qz, qw), (yaw rate, 0)].
+    :param dim: the scenario's dimension.
+    """
+    n = rows.shape[0]
+    position, linear = np.zeros((n, 3)), np.zeros((n, 3))
+    position[:, :dim], linear[:, :dim] = rows[:, 0], rows[:, 1]
+    orientation, angular = np.zeros((n, 4)), np.zeros((n, 3))
+    if plant.oriented:
+        orientation[:, 2:4], angular[:, 2] = rows[:, 2], rows[:, 3, 0]
+    else:
+        orientation[:, 3] = 1.0
+    return plant.from_odometry(position, orientation, linear, angular, dim)

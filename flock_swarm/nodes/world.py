@@ -30,7 +30,7 @@ from typing import Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import AccelStamped
+from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
@@ -39,8 +39,8 @@ from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
                                   LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
-                                  STATUS, STATUS_QOS, cmd_topic, odom_topic, qos_profile,
-                                  state_topic)
+                                  STATUS, STATUS_QOS, cmd_topic, cmd_vel_topic, odom_topic,
+                                  qos_profile, state_topic)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
@@ -55,8 +55,9 @@ from flock_swarm.nodes.recording import BagSink, RecordedNode, provenance, prove
 from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.stepper import (SETTING_PARAMS, CommandInbox, Observation,
                                        WorldSettings, WorldStepper)
-from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, decode_odometry,
-                                    decode_state, encode_clock)
+from flock_swarm.nodes.wire import (MalformedMessage, OdometryBatchEncoder, decode_accel,
+                                    decode_odometry, decode_state, decode_twist, encode_clock,
+                                    odometry_rows)
 from flock_swarm.outputs import (SpooledRecorder, json_text, write_error, write_outputs,
                                  write_text)
 
@@ -175,7 +176,9 @@ class WorldNode(RecordedNode):
         self.clock_pub = self.recorded_publisher(Clock, CLOCK, qos_profile(CLOCK_QOS))
         self.odom_pubs = [self.recorded_publisher(Odometry, odom_topic(i), lockstep_qos)
                           for i in range(sc.n_agents)]
-        self.odom_encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)])
+        plant = self.stepper.plant
+        self.odom_encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)],
+                                                 oriented=plant is not None and plant.oriented)
         self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
         # The current step's serialised /clock and odometry, offered again if it stalls.
         self.step_bytes: list[tuple] = []
@@ -194,6 +197,10 @@ class WorldNode(RecordedNode):
                                              lambda msg, i=i: self.on_agent_state(i, msg))
                                    for i in range(sc.n_agents)] \
             if self.stepper.state else []
+        # A robot plant's velocity commands (cmd_vel): unstamped, recorded at the open step.
+        self.twist_topics = [subscribe(Twist, cmd_vel_topic(i), decode_twist, None,
+                                       lambda data, i=i: self.on_twist(i, data))
+                             for i in range(sc.n_agents)] if self.stepper.velocity else []
         # Lockstep: a step's commands are queued as bytes and taken at once (take_commands).
         self.inbox = CommandInbox(self.stepper, self.guard, self.cmd_topics)
         wall_timer(self, 1.0, self.check_claims)
@@ -258,6 +265,23 @@ class WorldNode(RecordedNode):
             return
         if self.stepper.command(i, k, lin[:self.scenario.dim], time.monotonic()):
             self.guard.reject(topic, 'late', f'a command for step {k} at step {self.k}')
+        self._maybe_finish()
+
+    def on_twist(self, i: int, data: bytes) -> None:
+        """Record agent ``i``'s velocity command (serialised) at the open step; a finite one
+        goes to the stepper (:meth:`WorldStepper.twist`)."""
+        topic = self.twist_topics[i]
+        self.record_message(topic, data, self.clock.ns(self.k))
+        try:
+            linear, angular = decode_twist(data)
+        except MalformedMessage as exc:
+            self.guard.reject(topic, 'malformed', str(exc))
+            return
+        if not np.isfinite(linear + angular).all():
+            self.guard.reject(topic, 'non_finite', f'a non-finite velocity command at step '
+                              f'{self.k}')
+            return
+        self.stepper.twist(i, linear, angular)
         self._maybe_finish()
 
     def on_agent_state(self, i: int, msg: tuple) -> None:
@@ -332,7 +356,9 @@ class WorldNode(RecordedNode):
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
         st = self.stepper
         sent = [(self.clock_pub, encode_clock(t_ns))]
-        sent += zip(self.odom_pubs, self.odom_encoder.encode(t_ns, st.q, st.p))
+        rows = (st.q, st.p) if st.plant is None else odometry_rows(st.plant, st.x,
+                                                                   self.scenario.dim)
+        sent += zip(self.odom_pubs, self.odom_encoder.encode(t_ns, *rows))
         for pub, data in sent:
             pub.publish(data)
         for sink in self.sinks:

@@ -1,0 +1,1 @@
+"""Plant models: what the agents physically are (double integrator, velocity lag, unicycle)."""

@@ -1,0 +1,306 @@
+"""The built-in plant models: double integrator, velocity lag, unicycle.
+
+Each is registered under its ``name`` in the entry-point group ``flock_swarm.plants``
+(setup.py), exactly as a user's plant would be. docs/plants.md gives the equations.
+"""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from flock_swarm.core.dynamics import step_double_integrator
+from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.plants.base import Plant, pad3
+
+
+@dataclass(frozen=True)
+class DoubleIntegrator(Plant):
+    """The papers' agent ``q' = p, p' = u`` under a zero-order hold ([Su09] eq. (1)).
+
+    Its state is ``(q, p)``, its command the acceleration ``u`` itself. A run with this plant
+    takes today's code path (:func:`~flock_swarm.core.dynamics.step_agents`): the methods
+    here serve callers that treat every plant alike.
+    """
+
+    name: ClassVar[str] = 'double_integrator'
+    citation: ClassVar[str] = "Su, Wang, Lin 2009, eq. (1): q' = p, p' = u, exact zero-order hold"
+
+    def state_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``q_x.., p_x..``."""
+        axes = 'xyz'[:dim]
+        return (*(f'q_{a}' for a in axes), *(f'p_{a}' for a in axes))
+
+    def command_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``u_x..``."""
+        return tuple(f'u_{a}' for a in 'xyz'[:dim])
+
+    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """Return ``[q0, p0]``."""
+        return np.concatenate([q0, p0], axis=1)
+
+    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(q, p)``."""
+        d = x.shape[1] // 2
+        return x[:, :d], x[:, d:]
+
+    def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
+        """Return ``u`` (a copy): the double integrator executes the acceleration."""
+        return np.array(u, dtype=float)
+
+    def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
+        """Advance exactly (:func:`~flock_swarm.core.dynamics.step_double_integrator`)."""
+        q, p = self.law_state(x)
+        return np.concatenate(step_double_integrator(q, p, cmd, dt), axis=1)
+
+
+@dataclass(frozen=True)
+class VelocityLag(Plant):
+    """A robot under a velocity controller: first-order tracking of a velocity setpoint.
+
+    ``q' = v``, ``v' = (v_sp - v) / tau``, the setpoint ``v_sp`` held over a step and
+    discretised exactly (the lag is linear). The command is ``v_sp = p + u T`` (the law's
+    acceleration integrated from the measured velocity over the command period ``T``),
+    its norm saturated at ``max_speed``, then its distance from ``p`` at ``tau max_accel``:
+    the lag's acceleration ``(v_sp - v) / tau`` is largest at the start of a step, so it never
+    exceeds ``max_accel``. Ground robots (2-D) and multirotors under a velocity controller
+    (3-D).
+    """
+
+    name: ClassVar[str] = 'velocity_lag'
+    citation: ClassVar[str] = ("first-order lag v' = (v_sp - v) / tau, exact discretisation; "
+                               'speed and acceleration limits')
+    commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
+    frames: ClassVar[tuple[str, ...]] = ('world',)
+
+    #: Time constant of the velocity controller [s].
+    tau: float = 0.1
+    #: Largest speed [m/s] (``None``: unlimited).
+    max_speed: float | None = None
+    #: Largest acceleration [m/s^2] (``None``: unlimited).
+    max_accel: float | None = None
+
+    def state_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``q_x.., v_x..``."""
+        axes = 'xyz'[:dim]
+        return (*(f'q_{a}' for a in axes), *(f'v_{a}' for a in axes))
+
+    def command_names(self, dim: int) -> tuple[str, ...]:
+        """Return the setpoint's ``v_sp_x..``."""
+        return tuple(f'v_sp_{a}' for a in 'xyz'[:dim])
+
+    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """Return ``[q0, p0]``: the robots start moving with the scenario's velocities."""
+        return np.concatenate([q0, p0], axis=1)
+
+    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(q, v)``."""
+        d = x.shape[1] // 2
+        return x[:, :d], x[:, d:]
+
+    def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
+        """Return the saturated setpoint ``v_sp`` (see the class)."""
+        p = x[:, x.shape[1] // 2:]
+        v_sp = p + u * period
+        if self.max_speed is not None:
+            v_sp = v_sp * _shrink(np.linalg.norm(v_sp, axis=1), self.max_speed)[:, None]
+        if self.max_accel is not None:
+            change = v_sp - p
+            v_sp = p + change * _shrink(np.linalg.norm(change, axis=1),
+                                        self.tau * self.max_accel)[:, None]
+        return v_sp
+
+    def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
+        """Advance exactly: ``v = v_sp + (v - v_sp) e``, ``q += v_sp dt + (v - v_sp) tau (1 - e)``
+        with ``e = exp(-dt / tau)``."""
+        q, v = self.law_state(x)
+        gap = v - cmd
+        rest = -np.expm1(-dt / self.tau)
+        return np.concatenate([q + cmd * dt + gap * (self.tau * rest), cmd + gap * (1.0 - rest)],
+                              axis=1)
+
+    def twist(self, x: np.ndarray, cmd: np.ndarray,
+              frame: str) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(v_sp, 0)`` in the world frame (the robot has no heading here)."""
+        _frame(self, frame)
+        return pad3(cmd), np.zeros((cmd.shape[0], 3))
+
+    def from_twist(self, x: np.ndarray, linear: np.ndarray, angular: np.ndarray,
+                   frame: str) -> np.ndarray:
+        """Return ``v_sp`` from a world-frame ``Twist``."""
+        _frame(self, frame)
+        return np.array(linear[:, :x.shape[1] // 2], dtype=float)
+
+
+@dataclass(frozen=True)
+class Unicycle(Plant):
+    """A differential-drive robot steered through the point at distance ``ell`` ahead of the
+    axle (the near-identity diffeomorphism).
+
+    Kinematics: ``x' = v cos(theta)``, ``y' = v sin(theta)``, ``theta' = omega``, inputs the
+    forward speed ``v`` and yaw rate ``omega``, held over a step and integrated exactly.
+    The law sees the point ``q = (x, y) + ell (cos theta, sin theta)`` and its velocity
+    ``p = R(theta) (v, ell omega)`` (Lawton, Beard, Young 2003, Sec. II, the "hand
+    position"; Olfati-Saber 2002, near-identity diffeomorphisms for SE(2) vehicles). The
+    command inverts that map at the desired velocity ``p + u T``:
+    ``v = c pd_x + s pd_y``, ``omega = (-s pd_x + c pd_y) / ell``, then saturates (the
+    accelerations first, from the executed ``v``, ``omega``; then ``max_speed`` and
+    ``max_yaw_rate``).
+
+    The heading is held as the unit quaternion ``(qz, qw) = (sin(theta / 2), cos(theta / 2))``
+    of a yaw rotation: exactly what ``nav_msgs/Odometry`` carries, so an agent rebuilds the
+    world's state bit for bit; ``theta`` is recorded beside it (``heading``).
+    """
+
+    name: ClassVar[str] = 'unicycle'
+    citation: ClassVar[str] = ('Lawton, Beard, Young 2003 Sec. II / Olfati-Saber 2002: unicycle '
+                               'steered by the point ell ahead of the axle')
+    dims: ClassVar[tuple[int, ...]] = (2,)
+    commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
+    frames: ClassVar[tuple[str, ...]] = ('body', 'world')
+    oriented: ClassVar[bool] = True
+
+    #: Distance of the steered point ahead of the axle [m].
+    ell: float = 0.1
+    #: Largest forward speed [m/s] (``None``: unlimited).
+    max_speed: float | None = None
+    #: Largest yaw rate [rad/s] (``None``: unlimited).
+    max_yaw_rate: float | None = None
+    #: Largest forward acceleration [m/s^2] (``None``: unlimited).
+    max_accel: float | None = None
+    #: Largest yaw acceleration [rad/s^2] (``None``: unlimited).
+    max_yaw_accel: float | None = None
+
+    def state_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``x, y, qz, qw, v, omega`` (heading as a yaw quaternion)."""
+        return ('x', 'y', 'qz', 'qw', 'v', 'omega')
+
+    def command_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``v, omega``."""
+        return ('v', 'omega')
+
+    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """Return robots at ``q0`` heading along ``p0`` (``theta = 0`` where it is zero), driving
+        at ``|p0|`` (saturated) with no yaw rate."""
+        theta = np.arctan2(p0[:, 1], p0[:, 0])
+        v = np.linalg.norm(p0, axis=1)
+        if self.max_speed is not None:
+            v = np.minimum(v, self.max_speed)
+        n = q0.shape[0]
+        return np.column_stack([q0[:, 0], q0[:, 1], np.sin(0.5 * theta), np.cos(0.5 * theta),
+                                v, np.zeros(n)])
+
+    def heading(self, x: np.ndarray) -> np.ndarray:
+        """Return ``theta`` in ``(-pi, pi]`` of states ``x``."""
+        c, s = self._cos_sin(x)
+        return np.arctan2(s, c)
+
+    def _cos_sin(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        qz, qw = x[:, 2], x[:, 3]
+        return qw * qw - qz * qz, 2.0 * qz * qw
+
+    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the point ahead of the axle and its velocity ``R(theta) (v, ell omega)``."""
+        c, s = self._cos_sin(x)
+        v, w = x[:, 4], x[:, 5] * self.ell
+        q = np.column_stack([x[:, 0] + self.ell * c, x[:, 1] + self.ell * s])
+        p = np.column_stack([v * c - w * s, v * s + w * c])
+        return q, p
+
+    def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
+        """Return ``(v, omega)`` steering the point to ``p + u T`` (see the class)."""
+        _, p = self.law_state(x)
+        wanted = p + u * period
+        c, s = self._cos_sin(x)
+        v = c * wanted[:, 0] + s * wanted[:, 1]
+        w = (c * wanted[:, 1] - s * wanted[:, 0]) / self.ell
+        if self.max_accel is not None:
+            v = np.clip(v, x[:, 4] - self.max_accel * period, x[:, 4] + self.max_accel * period)
+        if self.max_yaw_accel is not None:
+            w = np.clip(w, x[:, 5] - self.max_yaw_accel * period,
+                        x[:, 5] + self.max_yaw_accel * period)
+        if self.max_speed is not None:
+            v = np.clip(v, -self.max_speed, self.max_speed)
+        if self.max_yaw_rate is not None:
+            w = np.clip(w, -self.max_yaw_rate, self.max_yaw_rate)
+        return np.column_stack([v, w])
+
+    def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
+        """Advance exactly with ``(v, omega)`` held: the arc
+        ``(x, y) += v dt sinc(omega dt / 2) (cos, sin)(theta + omega dt / 2)``, the heading
+        rotated by ``omega dt`` (quaternion product, renormalised)."""
+        v, w = cmd[:, 0], cmd[:, 1]
+        half = 0.5 * w * dt
+        # A yaw rotation by half the turn is the quaternion (sin, cos) of a quarter of it.
+        ch, sh = np.cos(0.5 * half), np.sin(0.5 * half)
+        qz, qw = x[:, 2], x[:, 3]
+        # The mid-step heading: the current one rotated by half the turn.
+        mz, mw = qz * ch + qw * sh, qw * ch - qz * sh
+        cm, sm = mw * mw - mz * mz, 2.0 * mz * mw
+        # np.sinc is sin(pi a) / (pi a): finite at a straight drive (omega = 0).
+        arc = v * dt * np.sinc(half / np.pi)
+        nz, nw = mz * ch + mw * sh, mw * ch - mz * sh
+        norm = np.hypot(nz, nw)
+        return np.column_stack([x[:, 0] + arc * cm, x[:, 1] + arc * sm, nz / norm, nw / norm,
+                                v, w])
+
+    def twist(self, x: np.ndarray, cmd: np.ndarray,
+              frame: str) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``((v, 0, 0), (0, 0, omega))`` in the body frame, or the linear part
+        ``v (cos theta, sin theta, 0)`` in the world frame."""
+        _frame(self, frame)
+        n = cmd.shape[0]
+        angular = np.zeros((n, 3))
+        angular[:, 2] = cmd[:, 1]
+        if frame == 'body':
+            return pad3(cmd[:, :1]), angular
+        c, s = self._cos_sin(x)
+        return pad3(np.column_stack([cmd[:, 0] * c, cmd[:, 0] * s])), angular
+
+    def from_twist(self, x: np.ndarray, linear: np.ndarray, angular: np.ndarray,
+                   frame: str) -> np.ndarray:
+        """Return ``(v, omega)``: ``linear.x`` in the body frame (exact), the projection of
+        ``linear`` on the heading in the world frame (to rounding)."""
+        _frame(self, frame)
+        if frame == 'body':
+            v = linear[:, 0]
+        else:
+            c, s = self._cos_sin(x)
+            v = c * linear[:, 0] + s * linear[:, 1]
+        return np.column_stack([v, angular[:, 2]]).astype(float)
+
+    def odometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Return the axle's position, the heading as orientation, and the body-frame twist
+        ``(v, 0, 0)``, ``(0, 0, omega)`` (REP 105: an odometry's twist is in its child frame).
+        """
+        n = x.shape[0]
+        orientation = np.zeros((n, 4))
+        orientation[:, 2:] = x[:, 2:4]
+        angular = np.zeros((n, 3))
+        angular[:, 2] = x[:, 5]
+        return pad3(x[:, :2]), orientation, pad3(x[:, 4:5]), angular
+
+    def from_odometry(self, position: np.ndarray, orientation: np.ndarray, linear: np.ndarray,
+                      angular: np.ndarray, dim: int) -> np.ndarray:
+        """Return the states of odometry fields (:meth:`odometry`'s inverse, exact).
+
+        A yaw-only orientation is assumed (a ground robot); its ``z``, ``w`` are the heading.
+        """
+        return np.column_stack([position[:, 0], position[:, 1], orientation[:, 2],
+                                orientation[:, 3], linear[:, 0], angular[:, 2]]).astype(float)
+
+    def recorded(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Return the state and the heading ``theta`` (``heading``, ``(n,)``)."""
+        return {'plant_state': x, 'heading': self.heading(x)}
+
+
+def _shrink(norm: np.ndarray, bound: float) -> np.ndarray:
+    """Return the factor bringing vectors of ``norm`` inside ``bound`` (1 when inside)."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.where(norm > bound, bound / norm, 1.0)
+
+
+def _frame(plant: Plant, frame: str) -> None:
+    if frame not in plant.frames:
+        raise ScenarioError('plant.frame', f'the {plant.name} plant takes '
+                            f'{" or ".join(plant.frames)} frame velocity commands, got {frame!r}')
