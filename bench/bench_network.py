@@ -17,16 +17,14 @@ loss, ``sim``'s time per step within 2 times that without the model.
 """
 
 import argparse
-import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_sim import fig3_scenario, verdict  # noqa: E402
+from bench_sim import fig3_scenario, finish, verdict  # noqa: E402
 
 from flock_swarm.core.run import simulate  # noqa: E402
 from flock_swarm.core.scenario import Scenario  # noqa: E402
@@ -103,13 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     results = {'machine': host, 'n': args.n, 'steps': steps, 'delay_steps': args.delay_steps,
                'loss': args.loss, 'step_s': times, 'best_step_s': best,
                'target': {'measured': ratio['cpu'], 'measured_wall': ratio['wall'],
-                          'target': RATIO_MAX, 'pass': ok},
-               'load_average_end': list(os.getloadavg())}
-    print(f'# load average at the end: '
-          f'{" ".join(f"{x:.2f}" for x in results["load_average_end"])}')
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + '\n')
+                          'target': RATIO_MAX, 'pass': ok}}
+    finish(results, args.json)
     return 0
 
 
