@@ -1,10 +1,11 @@
-"""The reproduction's studies beyond the papers (issue 25): Su 2009 Fig. 2 under delay and
-loss, and the critical delay of the linear law.
+"""The reproduction's studies beyond the papers (issues 25, 26): Su 2009 Fig. 2 under delay
+and loss and on other plants, and the critical delay of the linear law.
 
 The ideal-network point of each Fig. 2 study is the Fig. 2 study itself, seed for seed (read
-from the committed caches: the zero network model changes nothing); the critical-delay
-experiment's analysis, on real runs, finds the disagreement decaying below tau* and growing
-above it at the rate of the sampled system.
+from the committed caches: the zero network model changes nothing); the plant study's runs
+are the Fig. 2 draws with other outcomes; the critical-delay experiment's analysis, on real
+runs, finds the disagreement decaying below tau* and growing above it at the rate of the
+sampled system.
 """
 
 from pathlib import Path
@@ -13,7 +14,8 @@ import numpy as np
 import pytest
 
 from flock_swarm.core.run import simulate
-from flock_swarm.presets import prepare
+from flock_swarm.core.scenario import realize
+from flock_swarm.presets import load, prepare
 from flock_swarm.reproduce.catalogue import experiment
 from flock_swarm.reproduce.experiments.linear_critical_delay import study_overrides
 from flock_swarm.reproduce.seeds import SEEDS_CACHE
@@ -54,3 +56,22 @@ def test_the_critical_delay_runs_move_at_the_sampled_systems_rate(delay, sign):
     assert m['tau_ratio'] == pytest.approx(delay / m['tau_star'])
     assert np.sign(m['growth_rate']) == sign
     assert m['growth_rate'] == pytest.approx(m['growth_rate_sampled'], rel=0.05)
+
+
+def test_the_plant_study_flies_the_fig2_draws_on_other_plants():
+    """Its first set-up is the Fig. 2 study itself; each plant's runs are the same seeds'
+    draws (the same informed agents) with other dynamics: other outcomes."""
+    exp = experiment('su2009_fig2_plants')
+    assert exp.setups[0].name == 'reproduce_su2009_fig2'
+    fig2 = {r['seed']: r['metrics']
+            for r in read_cache(CACHE / 'reproduce_su2009_fig2.jsonl').values()}
+    records = list(read_cache(CACHE / f'{exp.setups[1].name}.jsonl').values())
+    assert records
+    for rec in records:
+        assert rec['point']['plant']['model'] in ('velocity_lag', 'unicycle')
+        assert rec['metrics']['n_agents'] == fig2[rec['seed']]['n_agents'] == 100
+        assert rec['metrics'] != fig2[rec['seed']], rec['point']
+    ideal = realize(load('su2009_fig2', seed=1))
+    robot = realize(load('su2009_fig2', ['plant={model: unicycle, ell: 0.1}'], seed=1))
+    np.testing.assert_array_equal(robot.agents.informed, ideal.agents.informed)
+    np.testing.assert_array_equal(robot.q0, ideal.q0)
