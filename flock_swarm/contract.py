@@ -85,6 +85,16 @@ def state_topic(i: int) -> str:
     return f'agent_{i}/state'
 
 
+def network_topic(i: int) -> str:
+    """Return the topic of agent ``i``'s network report (relative: namespaces apply).
+
+    Optional: published in realtime mode with an active ``network:`` section only, type
+    :data:`STATE_TYPE`, one message per command, stamped like it, its names
+    :data:`flock_swarm.core.network.USAGE_LABELS` (``docs/network.md``).
+    """
+    return f'agent_{i}/network'
+
+
 def state_slices(shapes: Mapping[str, tuple[int, ...]]
                  ) -> tuple[tuple[str, tuple[int, ...], slice], ...]:
     """Return where each adaptive state is among one agent's values (:func:`state_labels`).

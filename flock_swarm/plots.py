@@ -19,7 +19,8 @@ from flock_swarm.core.graphs import disk_graph
 
 
 def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str) -> list[Path]:
-    """Write ``trajectories.png`` and ``metrics.png`` for a recorded run.
+    """Write ``trajectories.png`` and ``metrics.png`` (and ``network.png`` for a run with a
+    ``network:`` section) for a recorded run.
 
     :param series: the arrays of ``timeseries.npz``.
     :param out: the output directory.
@@ -65,6 +66,8 @@ def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str) -> lis
     paths.append(out / 'metrics.png')
     fig.savefig(paths[1], dpi=110)
     plt.close(fig)
+    if 'network_delivered' in series:
+        paths.append(plot_network(series, out, title=title))
     return paths
 
 
@@ -542,6 +545,45 @@ def plot_eta(series: dict[str, np.ndarray], out: Path, *, title: str = '',
     return save_figure(fig, Path(out) / filename)
 
 
+def plot_network(series: dict[str, np.ndarray], out: Path, *, title: str = '',
+                 filename: str = 'network.png') -> Path:
+    """Plot the network statistics of a run with a ``network:`` section (``docs/network.md``).
+
+    Two panels over time: the fraction of the agents' messages delivered, and the mean and
+    largest age of the neighbour states the law used. Each recorded instant holds the steps
+    since the one before; instants without a value (NaN: no link used, or, from a realtime
+    bag, no ``/swarm/metrics`` since) are left out.
+
+    :param series: the time series (``t``, ``network_delivered``, ``network_age_mean``,
+        ``network_age_max``).
+    :param out: the output directory.
+    :param title: the run's name, for the title.
+    :param filename: the file name in ``out``.
+    :return: the written path.
+    """
+    plt = pyplot()
+    t = series['t']
+    fig, axes = plt.subplots(2, 1, figsize=(7.5, 5.2), sharex=True)
+    panels = ((axes[0], (('network_delivered', 'delivered', AGENT_COLOR),)),
+              (axes[1], (('network_age_mean', 'mean age', AGENT_COLOR),
+                         ('network_age_max', 'largest age', INFORMED_COLOR))))
+    for ax, lines in panels:
+        for key, label, color in lines:
+            values = np.asarray(series[key], dtype=float)
+            shown = np.isfinite(values)
+            ax.plot(t[shown], values[shown], lw=1.2, marker='.', ms=3, color=color,
+                    label=label)
+        _time_axis(ax, t)
+    axes[0].set_ylim(-0.03, 1.03)
+    axes[0].set_ylabel('messages delivered')
+    axes[1].set_ylabel('age of the states used [s]')
+    axes[1].legend(loc='upper right', fontsize=8)
+    axes[1].set_xlabel('t [s]')
+    axes[0].set_title(f'{title}: the network between the agents'.lstrip(': '))
+    fig.tight_layout()
+    return save_figure(fig, Path(out) / filename)
+
+
 def animate_flock(series: dict[str, np.ndarray], out: Path, *, radius: float,
                   strict: bool = True, title: str = '',
                   informed: Sequence[int] | np.ndarray | None = None,
@@ -625,8 +667,9 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
     """Write every figure of ``analyze`` for one run (and ``flock.gif`` unless told not to).
 
     Files: ``trajectories.png``, ``snapshots.png``, ``velocity_mismatch.png``,
-    ``com_error.png``, ``min_distance.png``, ``components.png``, ``eta.png``, ``flock.gif``
-    (and ``flock.mp4`` when ffmpeg is on ``PATH``).
+    ``com_error.png``, ``min_distance.png``, ``components.png``, ``eta.png``, with a
+    ``network:`` section ``network.png``, ``flock.gif`` (and ``flock.mp4`` when ffmpeg is on
+    ``PATH``).
 
     :param series: the time series (the arrays of ``timeseries.npz``).
     :param out: the output directory (it must exist).
@@ -653,6 +696,8 @@ def plot_analysis(series: dict[str, np.ndarray], out: Path, *, radius: float,
         lambda: plot_components(series, out, title=title, radius=radius),
         lambda: plot_eta(series, out, title=title, eta_tolerance=eta_tolerance),
     ]
+    if 'network_delivered' in series:
+        jobs.append(lambda: plot_network(series, out, title=title))
     if animate:
         jobs.append(lambda: animate_flock(series, out, radius=radius, strict=strict,
                                           title=title, informed=mask))

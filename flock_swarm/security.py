@@ -13,8 +13,8 @@ import sys
 from xml.sax.saxutils import escape
 
 from flock_swarm.contract import (CLOCK, FAULTS, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
-                                  SCENARIO, STATUS, cmd_topic, cmd_vel_topic, odom_topic,
-                                  state_topic)
+                                  SCENARIO, STATUS, cmd_topic, cmd_vel_topic, network_topic,
+                                  odom_topic, state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -30,8 +30,9 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     """Return ``{node: (published, subscribed)}`` topics of the swarm's own traffic.
 
     Each agent may publish its adaptive state (``agent_<i>/state``, a topic only for a law
-    with one) and its velocity command (``agent_<i>/cmd_vel``, only for a robot plant
-    commanded by velocity): the policy does not depend on the law or the plant.
+    with one), its network report (``agent_<i>/network``, realtime mode with a ``network:``
+    section only) and its velocity command (``agent_<i>/cmd_vel``, only for a robot plant
+    commanded by velocity): the policy depends neither on the law, the mode nor the plant.
 
     :param n_agents: the swarm's size.
     :return: the world's, the leader's and each ``agent_<i>``'s topics.
@@ -41,12 +42,14 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
         'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO],
                   [*(cmd_topic(i) for i in range(n_agents)),
                    *(state_topic(i) for i in range(n_agents)),
+                   *(network_topic(i) for i in range(n_agents)),
                    *(cmd_vel_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL,
                    FAULTS]),
         'leader': ([LEADER_ODOM, LEADER_ACCEL, FAULTS], [CLOCK, STATUS]),
     }
     for i in range(n_agents):
-        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i), cmd_vel_topic(i), FAULTS],
+        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i), network_topic(i),
+                              cmd_vel_topic(i), FAULTS],
                              [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 

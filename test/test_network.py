@@ -359,17 +359,6 @@ def test_without_delay_the_linear_law_tracks_the_leader():
     np.testing.assert_allclose(q, np.broadcast_to(lq, q.shape), atol=1e-2)
 
 
-def test_the_ros_front_ends_refuse_an_active_section_in_realtime_in_one_line(tmp_path):
-    """Realtime does not apply the model (lockstep does: test_network_ros.py): a realtime run
-    must not silently ignore it."""
-    from flock_swarm.nodes.harness import resolve_scenario
-    with pytest.raises(ScenarioError, match='network: not applied in realtime mode yet'):
-        resolve_scenario('demo', ['network={delay: 0.04}'], None, tmp_path, mode='realtime')
-    assert not parse_network({'delay': 0}, DT).active
-    resolve_scenario('demo', ['network={delay: 0}'], None, tmp_path, mode='realtime')
-    assert (tmp_path / 'scenario.yaml').is_file()
-
-
 def test_a_sweep_may_vary_every_network_key_and_collect_its_statistics():
     from flock_swarm.study.spec import parse_spec, plan_runs
     parsed = parse_spec({

@@ -78,3 +78,39 @@ def test_the_unicycle_commanded_by_acceleration_matches_sim_per_agent_process(tm
                        DEMO + [UNICYCLE.replace('model: unicycle', 'model: unicycle, '
                                                 'command: accel')],
                        domain_id=ros_domain, atol=0, timeout=RUN_TIMEOUT, processes=True)
+
+
+@pytest.mark.ros
+def test_realtime_robots_follow_their_twists(tmp_path, ros_domain):
+    """Realtime: the world holds each robot's latest Twist (zero-order hold) on its timer."""
+    from flock_swarm.testing import run_swarm
+    run = run_swarm('demo', tmp_path / 'run', DEMO[:-1] + ['duration=1.0', UNICYCLE],
+                    domain_id=ros_domain, timeout=RUN_TIMEOUT, mode='realtime')
+    assert run.summary['status'] == 'completed' and run.summary['mode'] == 'realtime'
+    series = run.timeseries()
+    xs = series['plant_state']
+    assert np.isfinite(xs).all()
+    # The robots drove under their limits, and turned.
+    assert 0 < np.abs(xs[1:, :, 4]).max() <= 1.5
+    assert np.abs(xs[1:, :, 5]).max() <= 2.0
+    assert np.ptp(series['heading'], axis=0).max() > 0
+    counts = run.bag().message_counts()
+    assert all(counts[f'/agent_{i}/cmd_vel'] > 0 for i in range(6))
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('node, value, line', [
+    ('agent', 'cmd_vel', "agent: error: command: the double_integrator plant takes accel "
+     "commands, got 'cmd_vel'"),
+    ('world', 'twist', "world: error: command: invalid value 'twist'")])
+def test_a_command_interface_the_plant_does_not_take_is_one_line(ros_domain, monkeypatch,
+                                                                 capfd, node, value, line):
+    import importlib
+    main = importlib.import_module(f'flock_swarm.nodes.{node}').main
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+    status = main([node, '--ros-args', '-p', 'scenario:=demo', '-p', f'command:={value}',
+                   '-p', 'record:=false'] if node == 'world' else
+                  [node, '--ros-args', '-p', 'scenario:=demo', '-p', f'command:={value}'])
+    out, err = capfd.readouterr()
+    assert status == 2 and out == ''
+    assert err == line + '\n'

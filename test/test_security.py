@@ -36,6 +36,8 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     cmds = {contract.cmd_topic(i) for i in range(n)}
     # Each agent's adaptive state (a topic only for a law with one): to the world.
     states = {contract.state_topic(i) for i in range(n)}
+    # Each agent's network report (realtime with a network: section only): to the world.
+    reports = {contract.network_topic(i) for i in range(n)}
     # A robot plant's velocity commands (docs/plants.md): to the world.
     twists = {contract.cmd_vel_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
@@ -45,11 +47,11 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     faults = {contract.FAULTS}
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO}
                        | odom | status,
-                       cmds | states | twists | leader | faults),
+                       cmds | states | reports | twists | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
         nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i),
-                                contract.cmd_vel_topic(i)} | faults,
+                                contract.network_topic(i), contract.cmd_vel_topic(i)} | faults,
                                odom | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
@@ -117,8 +119,12 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     context = Context()
     rclpy.init(context=context, domain_id=ros_domain)
     base = [Parameter('scenario', value=scenario)]
-    optional = set() if adaptive else {absolute(contract.state_topic(i))
-                                       for i in range(N_AGENTS)}
+    # A lockstep run has no network reports (realtime with a network: section only).
+    optional = {absolute(contract.network_topic(i)) for i in range(N_AGENTS)}
+    # Nor velocity commands (a robot plant commanded by velocity only, docs/plants.md).
+    optional |= {absolute(contract.cmd_vel_topic(i)) for i in range(N_AGENTS)}
+    if not adaptive:
+        optional |= {absolute(contract.state_topic(i)) for i in range(N_AGENTS)}
     nodes = []
     try:
         nodes.append(WorldNode(context=context, parameter_overrides=base + [

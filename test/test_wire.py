@@ -334,3 +334,37 @@ def test_large_swarm_dds_profile_holds_a_step_of_1000_odometries():
     used = [t.text for t in root.iterfind('f:participant/f:rtps/f:userTransports/'
                                           'f:transport_id', ns)]
     assert shm[0].findtext('f:transport_id', namespaces=ns) in used
+
+
+def test_twist_both_directions_against_rclpy():
+    """A robot plant's velocity command (cmd_vel) as rclpy serialises it."""
+    from geometry_msgs.msg import Twist, Vector3
+    from flock_swarm.nodes.wire import decode_twist, encode_twist
+    linear, angular = (0.22, -1e-300, 3.5), (0.0, -0.0, 2.84)
+    msg = Twist(linear=Vector3(x=linear[0], y=linear[1], z=linear[2]),
+                angular=Vector3(x=angular[0], y=angular[1], z=angular[2]))
+    assert encode_twist(linear, angular) == serialize_message(msg)
+    assert decode_twist(serialize_message(msg)) == (linear, angular)
+    with pytest.raises(MalformedMessage):
+        decode_twist(serialize_message(msg)[:40])
+
+
+def test_oriented_odometry_carries_the_heading_against_rclpy():
+    """An oriented plant's odometry (the unicycle's): orientation z, w and the yaw rate
+    written where rclpy puts them, read back one by one and in a batch."""
+    from flock_swarm.nodes.wire import OdometryBatchEncoder, decode_heading
+    children = ['agent_0', 'agent_1']
+    q, v = np.array([[1.0, 2.0], [-3.0, 0.5]]), np.array([[0.2, 0.0], [-0.1, 0.0]])
+    heading = np.array([[0.6, 0.8], [-1.0, 0.0]])
+    yaw_rate = np.array([[1.5, 0.0], [-2.0, 0.0]])
+    blobs = OdometryBatchEncoder(children, oriented=True).encode(7, q, v, heading, yaw_rate)
+    for j, data in enumerate(blobs):
+        msg = deserialize_message(data, Odometry)
+        o = msg.pose.pose.orientation
+        assert (o.x, o.y, o.z, o.w) == (0.0, 0.0, *heading[j])
+        assert msg.twist.twist.angular.z == yaw_rate[j, 0]
+        assert (msg.twist.twist.linear.x, msg.pose.pose.position.y) == (v[j, 0], q[j, 1])
+        assert decode_heading(data) == (tuple(heading[j]), (yaw_rate[j, 0], 0.0))
+        assert data == serialize_message(msg)
+    _, states = OdometryBatch(children, oriented=True).decode(blobs)
+    np.testing.assert_array_equal(states[:, :, :2], np.stack([q, v, heading, yaw_rate], axis=1))

@@ -20,6 +20,7 @@ import yaml
 from flock_swarm import contract
 from flock_swarm.bag import BagError, BagReader
 from flock_swarm.core.errors import ScenarioError, one_line
+from flock_swarm.core.network import STATISTICS
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
 from flock_swarm.scenario_yaml import parse_yaml
 
@@ -130,6 +131,9 @@ class RunData:
     #: The law's adaptive state per step, ``{key: (K, N, ...)}`` as ``sim`` records it (empty
     #: for a law without, or a bag without ``/agent_<i>/state``).
     state: dict[str, np.ndarray] = field(default_factory=dict)
+    #: The network statistics ``/swarm/metrics`` told, by step (``{}``: none), each of the
+    #: steps since the message before (a realtime run's: the world measured them).
+    network_at: dict[int, dict[str, float]] = field(default_factory=dict)
 
     @property
     def n_agents(self) -> int:
@@ -533,6 +537,9 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
     informed = np.zeros(n, dtype=bool)
     informed[[int(i) for i in ids]] = True
     state = _states(raw.state, sc, steps, index, n, step_of, mode == 'realtime', notes)
+    network_at = {step_of(stamp): {key: _number(values[key]) for key in STATISTICS}
+                  for stamp, values in raw.metrics
+                  if step_of(stamp) in index and all(key in values for key in STATISTICS)}
     return RunData(
         bag=reader.path, steps=steps, t=t, q=q, p=p, u=u, leader_q=leader[0],
         leader_p=leader[1], leader_a=leader[2], informed=informed, dt=dt, radius=float(radius),
@@ -543,7 +550,15 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         non_finite_at=non_finite,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
-        informed_known=informed_known)
+        informed_known=informed_known, network_at=network_at)
+
+
+def _number(text: str) -> float:
+    """Return a ``/swarm/metrics`` value as a float (NaN when it is none)."""
+    try:
+        return float(text)
+    except ValueError:
+        return float('nan')
 
 
 def _agents_by_step(metrics: list, key: str, index: dict[int, int], n: int,

@@ -12,7 +12,8 @@ from flock_swarm.analysis.bagrun import Progress, RunData, Ticker
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import RunMetrics
-from flock_swarm.core.run import RunLog, observed_pairs, run_facts, static_graph
+from flock_swarm.core.network import STATISTICS, Tally
+from flock_swarm.core.run import LinkObserver, RunLog, observed_pairs, run_facts, static_graph
 from flock_swarm.core.scenario import realize
 from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of
 
@@ -26,7 +27,11 @@ def recompute(run: RunData, record_every: int | None = None,
     without a scenario) (:meth:`RunMetrics.update_from_edges`: minimum distance, collision
     pairs); every ``record_every``-th step and the last are recorded with
     :func:`step_metrics`, with the law's adaptive state, exactly as in
-    ``WorldStepper.observe`` (and ``sim``).
+    ``WorldStepper.observe`` (and ``sim``). With a ``network:`` section the statistics of
+    the agents' links are recorded too: recounted as the world counts them for a lockstep
+    run (:class:`~flock_swarm.core.run.LinkObserver`, ``sim``'s), and for a realtime run
+    taken from ``/swarm/metrics`` (the world measured them: each recorded instant has the
+    latest message's since the one recorded before, NaN without one).
 
     :param run: the run.
     :param record_every: subsampling of the series (default: the scenario's).
@@ -42,6 +47,9 @@ def recompute(run: RunData, record_every: int | None = None,
     static = static_graph(sc, real) if sc is not None else None
     # The non-finite commands counted so far, per agent, recorded as the world records them.
     non_finite = None if run.non_finite_at is None else np.zeros(run.n_agents, dtype=int)
+    network = sc is not None and sc.network.active
+    observer = LinkObserver(sc, real, static) if network and run.mode != 'realtime' else None
+    tally, told = Tally(), None
     for row, k in enumerate(run.steps):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
@@ -52,6 +60,14 @@ def recompute(run: RunData, record_every: int | None = None,
         if non_finite is not None:
             non_finite[run.non_finite_at.get(int(k), [])] += 1
             extra['non_finite_commands'] = non_finite.copy()
+        if network:
+            if observer is not None:
+                tally.add(observer.step(int(k), q, p))
+            told = run.network_at.get(int(k), told)
+            if k % log.every == 0 or row == last:
+                nan = dict.fromkeys(STATISTICS, np.nan)
+                extra.update(tally.take(run.dt) if observer is not None else told or nan)
+                told = None
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
                     covered, radius, row == last, **extra)
         tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')

@@ -116,7 +116,7 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
             raise ScenarioError('--out', f'{out / "bag"} already holds a bag; choose another '
                                 '--out')
         scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out,
-                                    args.allow_unstable, args.mode)
+                                    args.allow_unstable)
         # Bound before the nodes start, so a port in use is a usage error, not a failed run.
         live = (None if args.foxglove is None
                 else start_live(args.foxglove_host, args.foxglove, '--foxglove'))

@@ -362,22 +362,6 @@ def parse_network(value, dt: float) -> NetworkSpec:
     return NetworkSpec(agents, leader, model, max_age)
 
 
-def refuse_in_ros(spec: NetworkSpec, mode: str = 'lockstep') -> None:
-    """Refuse an active section in a realtime ROS run: the nodes apply the model in lockstep
-    only (there it equals ``sim``; realtime's semantics on top of a real transport are not
-    done).
-
-    A realtime run would otherwise ignore the section and differ without a word.
-
-    :param spec: the scenario's ``network:`` section.
-    :param mode: the run's mode, ``lockstep`` or ``realtime``.
-    :raises ScenarioError: naming ``network`` when it is active in realtime mode.
-    """
-    if spec.active and mode == 'realtime':
-        raise ScenarioError('network', 'not applied in realtime mode yet: run it in lockstep '
-                            'mode or with sim (docs/network.md)')
-
-
 # --------------------------------------------------------------------------------------------
 # A run's messages
 
@@ -628,9 +612,12 @@ class NetworkState:
         self.own_q, self.own_p = np.zeros(own), np.zeros(own)
         self.step = -1
         self.leader_now: LeaderState | None = None
-        # Since the last recorded instant: messages delivered and sent, ages summed, their
-        # count and largest (a record every few steps would otherwise alias with a period).
-        self._tally = [0, 0, 0, 0, -1]
+        # Since the last recorded instant (a record every few steps would otherwise alias
+        # with a period).
+        self.tally = Tally()
+        #: The counts of the last step (:class:`Tally`'s order), as :meth:`control` or
+        #: :meth:`observe` counted them.
+        self.counts = [0, 0, 0, 0, -1]
 
     def send(self, k: int, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
              edges: EdgeList, informed: np.ndarray, receivers: np.ndarray | None = None) -> None:
@@ -738,15 +725,12 @@ class NetworkState:
         """Fold a step's deliveries and ``ages`` (of the messages used) into the tally;
         return the step's statistics."""
         got, total = self.links.delivered(hosted)
-        tally = self._tally
-        if self.step % self.spec.agents.period == 0:
-            tally[0] += got
-            tally[1] += total
-        tally[2] += int(ages.sum())
-        tally[3] += ages.size
-        tally[4] = max(tally[4], int(ages.max()) if ages.size else -1)
-        return _statistics([got, total, int(ages.sum()), ages.size,
-                            int(ages.max()) if ages.size else -1], dt)
+        age_sum, age_max = int(ages.sum()), int(ages.max()) if ages.size else -1
+        sending = self.step % self.spec.agents.period == 0
+        self.counts = [got if sending else 0, total if sending else 0, age_sum, ages.size,
+                       age_max]
+        self.tally.add(self.counts)
+        return _statistics([got, total, age_sum, ages.size, age_max], dt)
 
     def recorded(self, dt: float) -> dict:
         """Return the statistics of the steps since the last call, and start anew.
@@ -755,8 +739,40 @@ class NetworkState:
         ``network_age_mean`` and ``network_age_max``: the mean and largest age [s] of the
         neighbour states the law used at those steps (NaN when none).
         """
-        out = _statistics(self._tally, dt)
-        self._tally = [0, 0, 0, 0, -1]
+        return self.tally.take(dt)
+
+    def usage(self, ids: np.ndarray, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Return, per agent of ``ids``, what :meth:`control` used at the current step.
+
+        Realtime mode: each agent reports it with its command (``docs/network.md``), and
+        the world adds the real transport's age to the ages.
+
+        :param ids: the agents (ascending), as given to :meth:`control`.
+        :param q: true positions of every agent at the current step (as for :meth:`control`).
+        :param p: true velocities of every agent.
+        :return: shape ``(m, 5)``, the columns of :data:`USAGE_LABELS`: messages of the
+            current step to the agent delivered and sent (0 at a step that sends none), the
+            sum of the ages [steps] of the neighbour states used, their number, and the
+            largest (-1 when none).
+        """
+        ids = np.asarray(ids)
+        hosted = self._mask(ids)
+        row = np.full(self.n, -1, dtype=np.int64)
+        row[ids] = np.arange(ids.size)
+        held, _, _, use, _ = self._used(hosted, q, p)
+        at, ages = row[held.receiver[use]], held.age[use]
+        out = np.zeros((ids.size, len(USAGE_LABELS)))
+        out[:, 4] = -1.0
+        out[:, 2] = np.bincount(at, weights=ages, minlength=ids.size)
+        out[:, 3] = np.bincount(at, minlength=ids.size)
+        np.maximum.at(out[:, 4], at, ages)
+        sent = self.links.sent[-1] if self.links.sent else None
+        if sent is not None and sent.step == self.step:
+            mine = hosted[sent.receiver]
+            to = row[sent.receiver[mine]]
+            got = sent.arrival[mine] != np.iinfo(np.int64).max
+            out[:, 0] = np.bincount(to, weights=got, minlength=ids.size)
+            out[:, 1] = np.bincount(to, minlength=ids.size)
         return out
 
     def advance_state(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
@@ -835,6 +851,85 @@ class NetworkState:
         mask = np.zeros(self.n, dtype=bool)
         mask[ids] = True
         return mask
+
+
+#: The recorded statistics (time series, ``summary.json``, ``/swarm/metrics``).
+STATISTICS = ('network_delivered', 'network_age_mean', 'network_age_max')
+#: What an agent reports with each command in realtime mode (:meth:`NetworkState.usage`).
+USAGE_LABELS = ('delivered', 'sent', 'age_sum', 'links', 'age_max')
+
+
+class Tally:
+    """A network statistic folded over steps: ``[delivered, sent, age sum, ages, age max]``
+    (messages not lost, messages sent, the ages [steps] of the neighbour states used summed,
+    their number, the largest or -1)."""
+
+    def __init__(self) -> None:
+        """Create an empty tally."""
+        self.values = [0, 0, 0, 0, -1]
+
+    def add(self, counts: list) -> None:
+        """Fold one step's counts in."""
+        v = self.values
+        for c in range(4):
+            v[c] += counts[c]
+        v[4] = max(v[4], counts[4])
+
+    def take(self, dt: float) -> dict:
+        """Return ``network_delivered``, ``network_age_mean``, ``network_age_max`` [s] of the
+        steps folded in (NaN where nothing was), and start anew."""
+        out = _statistics(self.values, dt)
+        self.values = [0, 0, 0, 0, -1]
+        return out
+
+
+class ReportedUse:
+    """Realtime mode: the age of the information the agents' applied commands used.
+
+    Each agent reports with its command (stamped with the step ``k_i`` of the odometry it
+    answers) what it used (:meth:`NetworkState.usage`: the modelled ages). The world applies
+    a held command at its step ``K >= k_i``: each neighbour state the command used is then
+    ``K - k_i`` steps older still (the real transport, the agents' timers, the hold). The
+    deliveries of a report count once, at the first step its command is applied.
+    """
+
+    def __init__(self, n: int, keep: int = 100) -> None:
+        """Create the bookkeeping of ``n`` agents, keeping ``keep`` steps of reports."""
+        self.reports: list[dict[int, np.ndarray]] = [{} for _ in range(n)]
+        self.counted = np.full(n, -1, dtype=np.int64)
+        self.keep = keep
+
+    def report(self, i: int, k: int, values) -> None:
+        """Take agent ``i``'s report (:data:`USAGE_LABELS`) of its command of step ``k``."""
+        held = self.reports[i]
+        held[k] = np.asarray(values, dtype=float)
+        for old in [s for s in held if s < k - self.keep]:
+            del held[old]
+
+    def step(self, k: int, applied: np.ndarray) -> list:
+        """Return the step's counts (:class:`Tally`'s order) of the commands applied at ``k``.
+
+        :param k: the world's step.
+        :param applied: per agent, the step its applied command answers (-1: none applied,
+            a zero command).
+        """
+        counts = [0, 0, 0, 0, -1]
+        for i in np.flatnonzero(applied >= 0).tolist():
+            answered = int(applied[i])
+            row = self.reports[i].get(answered)
+            if row is None:
+                continue
+            got, sent, age_sum, links, age_max = (int(round(x)) for x in row)
+            extra = k - answered
+            counts[2] += age_sum + links * extra
+            counts[3] += links
+            if links:
+                counts[4] = max(counts[4], age_max + extra)
+            if self.counted[i] != answered:
+                self.counted[i] = answered
+                counts[0] += got
+                counts[1] += sent
+        return counts
 
 
 def _statistics(tally: list[int], dt: float) -> dict:

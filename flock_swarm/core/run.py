@@ -153,6 +153,38 @@ def interaction_graph(sc: Scenario, real: Realization, q: np.ndarray,
     return disk_graph(q, sc.law.radius, sc.law.strict_radius)
 
 
+class LinkObserver:
+    """The network statistics of a run's agent links, counted without evaluating the law.
+
+    An observer of a lockstep run (the world node, ``analyze`` on a bag) sends, step by
+    step, the messages between the agents ``sim`` sends (nobody informed: the statistics are
+    of the agents' links) and counts what the agents use
+    (:meth:`~flock_swarm.core.network.NetworkState.observe`): the statistics ``sim`` records.
+    """
+
+    def __init__(self, sc: Scenario, real: Realization, static: EdgeList | None) -> None:
+        """Create the observer of a run of ``sc`` (its ``network:`` section active)."""
+        self.sc, self.real, self.static = sc, real, static
+        self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
+                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
+                                sc.law.coupling_weight)
+        self.nobody = np.zeros(sc.n_agents, dtype=bool)
+
+    def step(self, k: int, q: np.ndarray, p: np.ndarray) -> list[int]:
+        """Send step ``k``'s messages and return its counts
+        (:class:`~flock_swarm.core.network.Tally`'s order).
+
+        :param k: the step (every step, in order).
+        :param q: the agents' positions at ``k``.
+        :param p: their velocities.
+        """
+        sc = self.sc
+        self.net.send(k, q, p, None, interaction_graph(sc, self.real, q, self.static),
+                      self.nobody)
+        self.net.observe(q, p, sc.dt)
+        return self.net.counts
+
+
 def whole_run_pairs(sc: Scenario, q: np.ndarray, static: EdgeList | None,
                     edges: EdgeList) -> tuple[EdgeList, float]:
     """Return the pairs a step's whole-run metrics are folded from, and the radius they cover

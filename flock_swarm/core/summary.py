@@ -228,14 +228,15 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('network_delivered', WHOLE_RUN, 'with a `network:` section: the fraction of the '
        'agents\' messages not lost (each recorded instant\'s, of the steps since the one '
        'before, averaged)', _network('network_delivered', 'mean'), sweep=True,
-       series='network_delivered', writers=(SIM,)),
+       series='network_delivered', writers=(SIM, WORLD, ANALYZE)),
     _K('network_age_mean', WHOLE_RUN, 'with a `network:` section: the mean age [s] of the '
        'neighbour states the law used (each recorded instant\'s, of the steps since the one '
-       'before, averaged)', _network('network_age_mean', 'mean'), sweep=True,
-       series='network_age_mean', writers=(SIM,)),
+       'before, averaged; in realtime mode the real transport\'s age included: '
+       'docs/network.md)', _network('network_age_mean', 'mean'), sweep=True,
+       series='network_age_mean', writers=(SIM, WORLD, ANALYZE)),
     _K('network_age_max', WHOLE_RUN, 'with a `network:` section: the largest age [s] of a '
        'neighbour state the law used over the whole run', _network('network_age_max', 'max'),
-       sweep=True, series='network_age_max', writers=(SIM,)),
+       sweep=True, series='network_age_max', writers=(SIM, WORLD, ANALYZE)),
     _K('mode', BOOKKEEPING, '`lockstep` or `realtime`', writers=(WORLD, ANALYZE)),
     _K('missed_commands', BOOKKEEPING, 'commands that did not come in time (a zero command '
        'was applied)', writers=(WORLD, ANALYZE)),

@@ -13,7 +13,10 @@ status 1. With ``non_finite:=zero`` a non-finite command is published as zero in
 (counted, logged, reported to the world, which counts it per agent). For a
 law with adaptive state, each agent publishes the state its command was computed with on
 ``agent_<i>/state`` (``sensor_msgs/JointState``, stamped like the command and sent before it),
-so the world records what ``sim`` records.
+so the world records what ``sim`` records. In realtime mode with a ``network:`` section each
+agent also reports, before each command, what the command used on ``agent_<i>/network``
+(``sensor_msgs/JointState``, stamped like the command, names
+:data:`~flock_swarm.core.network.USAGE_LABELS`): the world adds the real transport's age.
 
 One node hosts one agent (``ros2 run flock_swarm agent --ros-args -p agent_id:=3``, the
 robot's own process) or many (``ros2 run flock_swarm agents``, a container): the hosted
@@ -40,8 +43,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
-                                  cmd_vel_topic, odom_topic, qos_profile, state_topic)
+                                  cmd_vel_topic, network_topic, odom_topic, qos_profile,
+                                  state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
+from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.plants.base import COMMANDS
 from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.nodes.clock import StepClock
@@ -123,6 +128,11 @@ class AgentNode(Node):
         self.state_pubs = [self.create_publisher(JointState, state_topic(int(i)), qos)
                            for i in self.controller.ids] if self.controller.state else []
         self.state_encoder = StateEncoder(self.controller.state_labels)
+        # Realtime with the network model: what each command used (docs/network.md).
+        self.usage_pubs = [self.create_publisher(JointState, network_topic(int(i)), qos)
+                           for i in self.controller.ids] \
+            if self.controller.net is not None and not self.lockstep else []
+        self.usage_encoder = StateEncoder(USAGE_LABELS)
         # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
         self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
         self.twist_pubs = [self.create_publisher(Twist, cmd_vel_topic(int(i)), qos)
@@ -130,9 +140,9 @@ class AgentNode(Node):
         # The hosted agents' odometry carries a heading (an oriented plant's).
         plant = self.controller.plant
         self.oriented = plant is not None and plant.oriented
-        # What publish_commands sends on: the commands (row i: hosted agent i), then states,
-        # then velocity commands.
-        self.pubs = self.cmd_pubs + self.state_pubs + self.twist_pubs
+        # What publish_commands sends on: the commands (row i: hosted agent i), states, usage,
+        # velocity commands.
+        self.pubs = self.cmd_pubs + self.state_pubs + self.usage_pubs + self.twist_pubs
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
         self.children = [f'agent_{j}' for j in range(sc.n_agents)]
@@ -302,12 +312,19 @@ class AgentNode(Node):
             m, encode_state = len(self.cmd_pubs), self.state_encoder.encode
             sent = [(m + row, encode_state(stamp_ns, values))
                     for row, values in enumerate(self.controller.state_values().tolist())]
+        usage = self.controller.usage
+        if self.usage_pubs and usage is not None:
+            # Before the commands too: the world pairs each command with its report.
+            first, encode_usage = len(self.cmd_pubs) + len(self.state_pubs), \
+                self.usage_encoder.encode
+            sent += [(first + row, encode_usage(stamp_ns, values))
+                     for row, values in enumerate(usage.tolist())]
         self.sent = sent + [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
         self.outbox.extend(self.sent)
         if self.velocity:
             # Not in self.sent: an unstamped command is never repeated (see the module).
             linear, angular = self.controller.velocity_commands(u, self.scenario.plant.frame)
-            first = len(self.cmd_pubs) + len(self.state_pubs)
+            first = len(self.pubs) - len(self.twist_pubs)
             self.outbox.extend((first + row, encode_twist(lin, ang)) for row, (lin, ang)
                                in enumerate(zip(linear.tolist(), angular.tolist())))
         self.flush()

@@ -193,12 +193,16 @@ class AgentController:
         self.latest = StepInputs()
         self.latest_step: int | None = None
         self.non_finite: Counter = Counter()
-        # The messages between the agents (``network:``, lockstep only): every agent's
-        # odometry reaches every host, so each host sends the whole swarm's messages as sim
-        # does and evaluates its own agents on them (the draws are keyed by the link).
+        # The messages between the agents (``network:``): every agent's odometry reaches
+        # every host, so each host sends the whole swarm's messages as sim does and evaluates
+        # its own agents on them (the draws are keyed by the link). In realtime the sending
+        # step is the stamp of the latest odometry (steps the host did not see send nothing).
         self.net = NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
                                 neighbourhood_of(sc.graph_type, sc.law.all_pairs),
                                 sc.law.coupling_weight) if sc.network.active else None
+        #: Realtime with the network model: what each hosted agent's last command used
+        #: (:meth:`NetworkState.usage`, one row per hosted agent), reported with it.
+        self.usage: np.ndarray | None = None
         self.non_finite_policy = non_finite
         self.zeroed: list[int] = []
         self.state = self.swarm.subset(self.ids).state
@@ -312,7 +316,10 @@ class AgentController:
         q, p, leader = latest.swarm(self.sc.n_agents, self.view)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
-        return self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
+        u = self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
+        if self.net is not None:
+            self.usage = self.net.usage(self.ids, q, p)
+        return u
 
     def command(self, q: np.ndarray, p: np.ndarray, leader: LeaderState | None,
                 k: int = 0) -> np.ndarray:
@@ -338,7 +345,10 @@ class AgentController:
                              lambda: group_control(law, ids, q, p, edges, leader, group, dt, t),
                              alone)
         else:
-            net.send(k, q, p, leader, edges, self.swarm.informed)
+            if k > net.step:
+                # Realtime answers the same step again until newer odometry comes: its
+                # messages were sent the first time.
+                net.send(k, q, p, leader, edges, self.swarm.informed)
             u = evaluate_law(law, k, ids, self.sc.dim,
                              lambda: net.control(ids, q, p, group, dt, t)[0])
         if group.state:

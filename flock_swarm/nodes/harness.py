@@ -116,7 +116,7 @@ def _hold(domain: int) -> bool:
 
 
 def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out: Path,
-                     allow_unstable: bool = False, mode: str = 'lockstep') -> Path:
+                     allow_unstable: bool = False) -> Path:
     """Prepare the scenario as ``sim`` does and write it to ``out/scenario.yaml``.
 
     The one preparation of every front end (:func:`flock_swarm.presets.prepare`): overrides,
@@ -129,19 +129,16 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
     :param seed: seed replacing the scenario's, or ``None``.
     :param out: the output directory (created).
     :param allow_unstable: accept a ``dt`` beyond a stability bound (``--allow-unstable``).
-    :param mode: the run's mode (a ``network:`` section is refused in ``realtime``).
     :return: the path every node is started with.
     :raises ScenarioError: on invalid input.
     """
     import yaml
 
-    from flock_swarm.core.network import refuse_in_ros
     from flock_swarm.presets import prepare
 
     if seed is not None and seed < 0:
         raise ScenarioError('--seed', f'must be >= 0, got {seed}')
     sc, _ = prepare(name, overrides, seed, allow_unstable=allow_unstable)
-    refuse_in_ros(sc.network, mode)
     out.mkdir(parents=True, exist_ok=True)
     path = out / 'scenario.yaml'
     path.write_text(yaml.safe_dump(sc.raw, sort_keys=False))
@@ -262,7 +259,7 @@ class InProcessSwarm:
         self.domain_id = unique_domain() if domain_id is None else domain_id
         #: The resolved scenario file every node runs on.
         self.scenario_path = resolve_scenario(str(scenario), list(overrides), seed, self.out,
-                                              allow_unstable, mode)
+                                              allow_unstable)
         self.scenario = read_scenario(self.scenario_path)
         self.base = node_parameters(self.scenario_path, mode, realtime_factor, allow_unstable)
         self.closed = False

@@ -30,7 +30,6 @@ import numpy as np
 import yaml
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.network import refuse_in_ros
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.scenario_yaml import parse_yaml
 from flock_swarm.presets import load_mapping, prepare
@@ -328,7 +327,6 @@ class NodeParameters:
         sc, _ = prepare(base, seed=None if seed == -1 else seed,
                         extra=scenario_overrides(self.given, self.table, base),
                         allow_unstable=self.values['allow_unstable'])
-        refuse_in_ros(sc.network, self.values['mode'])
         self.values['seed'] = sc.seed
         self.scenario = sc
         return sc

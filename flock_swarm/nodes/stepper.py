@@ -28,11 +28,11 @@ from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
-from flock_swarm.core.network import NetworkState, neighbourhood_of
+from flock_swarm.core.network import ReportedUse, Tally
 from flock_swarm.core.plants.base import COMMANDS
 from flock_swarm.core.plants.spec import command_interface
-from flock_swarm.core.run import (Recorder, RunLog, SimResult, build_summary,
-                                  interaction_graph, observed_pairs, static_graph)
+from flock_swarm.core.run import (LinkObserver, Recorder, RunLog, SimResult, build_summary,
+                                  observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.core.summary import with_failure
 from flock_swarm.core.faults import agents_text
@@ -285,13 +285,18 @@ class WorldStepper:
         self.published_at: dict[int, float] = {}
         self.latency = LatencyHistogram()
         self.run_log = RunLog.for_scenario(sc, recorder)
-        # The messages between the agents (``network:``, lockstep only), kept as the agents
-        # keep them, to record the statistics sim records (the agents' links only: no
-        # leader messages, nobody informed).
-        self.net = NetworkState(sc.network, sc.seed, n, sc.dim, sc.law,
-                                neighbourhood_of(sc.graph_type, sc.law.all_pairs),
-                                sc.law.coupling_weight) \
+        # The messages between the agents (``network:``), lockstep: kept as the agents keep
+        # them, to record the statistics sim records (the agents' links only: no leader
+        # messages, nobody informed). Realtime: the agents report what each command used,
+        # the world adds the age the command had when applied (docs/network.md).
+        self.net = LinkObserver(sc, self.real, self.static) \
             if sc.network.active and self.lockstep else None
+        self.used = ReportedUse(n, PUBLISHED_KEEP) \
+            if sc.network.active and not self.lockstep else None
+        #: Realtime: the step each agent's held command answers (-1: none yet).
+        self.held_step = np.full(n, -1, dtype=np.int64)
+        # The statistics since the last recorded instant, and since the last /swarm/metrics.
+        self.net_record, self.net_metrics = Tally(), Tally()
         self.metrics_now: dict = {}
         self.done = False
         self.started = False
@@ -323,6 +328,7 @@ class WorldStepper:
         if not self.lockstep:
             self.held[i] = u
             self.held_at[i] = now
+            self.held_step[i] = k
             sent = self.published_at.get(k)
             if sent is not None:
                 self.latency.add(now - sent)
@@ -371,6 +377,12 @@ class WorldStepper:
         row = np.asarray(values, dtype=float)
         for key, shape, part in self.state_layout:
             self.state[key][i] = row[part].reshape(shape)
+
+    def network_report(self, i: int, k: int, values: Sequence[float]) -> None:
+        """Realtime: take agent ``i``'s (checked) report of what its command of step ``k``
+        used (:data:`~flock_swarm.core.network.USAGE_LABELS`)."""
+        if self.used is not None:
+            self.used.report(i, k, values)
 
     def leader_state(self, k: int, now: float, q: np.ndarray | None = None,
                      p: np.ndarray | None = None, a: np.ndarray | None = None) -> None:
@@ -634,14 +646,18 @@ class WorldStepper:
         edges = disk_graph(self.q, law.radius, law.strict_radius)
         last = k >= sc.steps
         covered, radius = observed_pairs(sc, self.real, self.q, self.static, edges)
-        net = {}
+        net, counts = {}, None
         if self.net is not None:
-            self.net.send(k, self.q, self.p, leader,
-                          interaction_graph(sc, self.real, self.q, self.static),
-                          np.zeros(sc.n_agents, dtype=bool))
-            self.net.observe(self.q, self.p, sc.dt)
+            counts = self.net.step(k, self.q, self.p)
+        elif self.used is not None:
+            applied = self.held_step.copy()
+            applied[missing] = -1
+            counts = self.used.step(k, applied)
+        if counts is not None:
+            self.net_record.add(counts)
+            self.net_metrics.add(counts)
             if k % sc.record_every == 0 or last:
-                net = self.net.recorded(sc.dt)
+                net = self.net_record.take(sc.dt)
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
                                    non_finite_commands=self.non_finite.copy(), **self.state,
@@ -664,6 +680,9 @@ class WorldStepper:
                           non_finite_this_step=json.dumps(non_finite),
                           leader_missed=self.leader_missed,
                           leader='lost' if self.leader.lost else 'ok')
+            if counts is not None:
+                # Of the steps since the previous message (docs/network.md).
+                values.update(self.net_metrics.take(sc.dt))
             problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
                 + ([f'{len(non_finite)} non-finite command(s)'] if non_finite else []) \
                 + (['leader lost'] if self.leader.lost else [])

@@ -107,13 +107,20 @@ def decode_odometry(data: bytes) -> tuple[int, str, str, tuple, tuple]:
 
     :raises MalformedMessage: when ``data`` is not one.
     """
+    lay, ns, frame, child, pose = _odometry(data)
+    return (ns, frame, child, lay.vec3.unpack_from(data, pose),
+            lay.vec3.unpack_from(data, pose + POSE_BYTES))
+
+
+def _odometry(data: bytes) -> tuple[_Layout, int, str, str, int]:
+    """Return ``(layout, stamp_ns, frame_id, child_frame_id, offset of the pose)`` of a
+    serialised ``nav_msgs/Odometry``, checked long enough for its pose and twist."""
     lay = _layout(data)
     ns, frame, end = _header(data, lay)
     child, end = _string(data, _align(end, 4), lay)
     pose = _align(end, 8)
     _need(data, pose + POSE_BYTES + TWIST_BYTES, 'Odometry')
-    return (ns, frame, child, lay.vec3.unpack_from(data, pose),
-            lay.vec3.unpack_from(data, pose + POSE_BYTES))
+    return lay, ns, frame, child, pose
 
 
 def decode_heading(data: bytes) -> tuple[tuple, tuple]:
@@ -122,11 +129,7 @@ def decode_heading(data: bytes) -> tuple[tuple, tuple]:
 
     :raises MalformedMessage: when ``data`` is not one.
     """
-    lay = _layout(data)
-    _, _, end = _header(data, lay)
-    _, end = _string(data, _align(end, 4), lay)
-    pose = _align(end, 8)
-    _need(data, pose + POSE_BYTES + TWIST_BYTES, 'Odometry')
+    lay, _, _, _, pose = _odometry(data)
     heading = lay.vec3.unpack_from(data, pose + HEADING_AT)[:2]
     return heading, (lay.vec3.unpack_from(data, pose + YAW_RATE_AT)[0], 0.0)
 

@@ -39,11 +39,12 @@ from std_msgs.msg import String
 
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, LEADER_ACCEL,
                                   LEADER_ODOM, LOCKSTEP_QOS, RUNNING, SCENARIO, SCENARIO_QOS,
-                                  STATUS, STATUS_QOS, cmd_topic, cmd_vel_topic, odom_topic,
-                                  qos_profile, state_topic)
+                                  STATUS, STATUS_QOS, cmd_topic, cmd_vel_topic, network_topic,
+                                  odom_topic, qos_profile, state_topic)
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
+from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReport
@@ -197,6 +198,11 @@ class WorldNode(RecordedNode):
                                              lambda msg, i=i: self.on_agent_state(i, msg))
                                    for i in range(sc.n_agents)] \
             if self.stepper.state else []
+        # Realtime with the network model: what each command used, recorded like the state.
+        self.network_topics = [subscribe(JointState, network_topic(i), decode_state,
+                                         lambda msg, i=i: self.on_network_report(i, msg))
+                               for i in range(sc.n_agents)] \
+            if self.stepper.used is not None else []
         # A robot plant's velocity commands (cmd_vel): unstamped, recorded at the open step.
         self.twist_topics = [subscribe(Twist, cmd_vel_topic(i), decode_twist, None,
                                        lambda data, i=i: self.on_twist(i, data))
@@ -284,20 +290,38 @@ class WorldNode(RecordedNode):
         self.stepper.twist(i, linear, angular)
         self._maybe_finish()
 
+    def check_labelled(self, topic: str, msg: tuple, expected: tuple[str, ...],
+                       what: str) -> tuple[int, tuple[float, ...]] | None:
+        """Return the step and values of a labelled message ``(stamp_ns, frame_id, labels,
+        values)`` (a ``JointState``) whose labels are ``expected``, or ``None`` (rejected).
+
+        :param what: the labels' owner in the rejection (``"state"``: "not the law's").
+        """
+        ns, frame, labels, values = msg
+        if labels != expected:
+            whose = "the law's " if what == 'state' else ''
+            self.guard.reject(topic, 'malformed', f'{what} labels {list(labels)}, not '
+                              f'{whose}{list(expected)}')
+            return None
+        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
+                             window=self.stepper.window())
+        return None if k is None else (k, values)
+
     def on_agent_state(self, i: int, msg: tuple) -> None:
         """Check agent ``i``'s adaptive state ``(stamp_ns, frame_id, labels, values)`` and
         hand it on (its labels must be the law's)."""
-        ns, frame, labels, values = msg
-        topic, expected = self.agent_state_topics[i], self.stepper.state_labels
-        if labels != expected:
-            self.guard.reject(topic, 'malformed', f'state labels {list(labels)}, not the '
-                              f'law\'s {list(expected)}')
-            return
-        k = self.guard.check(topic, ns, frame, ((values, STATE_LIMIT),),
-                             window=self.stepper.window())
-        if k is not None:
-            self.stepper.agent_state(i, k, values)
+        checked = self.check_labelled(self.agent_state_topics[i], msg,
+                                      self.stepper.state_labels, 'state')
+        if checked is not None:
+            self.stepper.agent_state(i, *checked)
             self._maybe_finish()
+
+    def on_network_report(self, i: int, msg: tuple) -> None:
+        """Check agent ``i``'s report of what its command used ``(stamp_ns, frame_id,
+        labels, values)`` and hand it on (realtime with the network model)."""
+        checked = self.check_labelled(self.network_topics[i], msg, USAGE_LABELS, 'report')
+        if checked is not None:
+            self.stepper.network_report(i, *checked)
 
     def on_leader_odom(self, msg: tuple) -> None:
         """Check the leader's position and velocity of its step (``msg``: see

@@ -15,7 +15,33 @@ from flock_swarm.core.plants.base import Plant, pad3
 
 
 @dataclass(frozen=True)
-class DoubleIntegrator(Plant):
+class _Holonomic(Plant):
+    """A plant whose state is the law's ``(q, velocity)`` itself, ``dim`` columns each."""
+
+    #: The symbols of the velocity's and the command's columns.
+    symbols: ClassVar[tuple[str, str]] = ('p', 'u')
+
+    def state_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``q_x.., <velocity>_x..``."""
+        axes = 'xyz'[:dim]
+        return (*(f'q_{a}' for a in axes), *(f'{self.symbols[0]}_{a}' for a in axes))
+
+    def command_names(self, dim: int) -> tuple[str, ...]:
+        """Return ``<command>_x..``."""
+        return tuple(f'{self.symbols[1]}_{a}' for a in 'xyz'[:dim])
+
+    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
+        """Return ``[q0, p0]``: the agents start moving with the scenario's velocities."""
+        return np.concatenate([q0, p0], axis=1)
+
+    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(q, velocity)``."""
+        d = x.shape[1] // 2
+        return x[:, :d], x[:, d:]
+
+
+@dataclass(frozen=True)
+class DoubleIntegrator(_Holonomic):
     """The papers' agent ``q' = p, p' = u`` under a zero-order hold ([Su09] eq. (1)).
 
     Its state is ``(q, p)``, its command the acceleration ``u`` itself. A run with this plant
@@ -25,24 +51,6 @@ class DoubleIntegrator(Plant):
 
     name: ClassVar[str] = 'double_integrator'
     citation: ClassVar[str] = "Su, Wang, Lin 2009, eq. (1): q' = p, p' = u, exact zero-order hold"
-
-    def state_names(self, dim: int) -> tuple[str, ...]:
-        """Return ``q_x.., p_x..``."""
-        axes = 'xyz'[:dim]
-        return (*(f'q_{a}' for a in axes), *(f'p_{a}' for a in axes))
-
-    def command_names(self, dim: int) -> tuple[str, ...]:
-        """Return ``u_x..``."""
-        return tuple(f'u_{a}' for a in 'xyz'[:dim])
-
-    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
-        """Return ``[q0, p0]``."""
-        return np.concatenate([q0, p0], axis=1)
-
-    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(q, p)``."""
-        d = x.shape[1] // 2
-        return x[:, :d], x[:, d:]
 
     def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
         """Return ``u`` (a copy): the double integrator executes the acceleration."""
@@ -55,7 +63,7 @@ class DoubleIntegrator(Plant):
 
 
 @dataclass(frozen=True)
-class VelocityLag(Plant):
+class VelocityLag(_Holonomic):
     """A robot under a velocity controller: first-order tracking of a velocity setpoint.
 
     ``q' = v``, ``v' = (v_sp - v) / tau``, the setpoint ``v_sp`` held over a step and
@@ -72,6 +80,7 @@ class VelocityLag(Plant):
                                'speed and acceleration limits')
     commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
     frames: ClassVar[tuple[str, ...]] = ('world',)
+    symbols: ClassVar[tuple[str, str]] = ('v', 'v_sp')
 
     #: Time constant of the velocity controller [s].
     tau: float = 0.1
@@ -79,24 +88,6 @@ class VelocityLag(Plant):
     max_speed: float | None = None
     #: Largest acceleration [m/s^2] (``None``: unlimited).
     max_accel: float | None = None
-
-    def state_names(self, dim: int) -> tuple[str, ...]:
-        """Return ``q_x.., v_x..``."""
-        axes = 'xyz'[:dim]
-        return (*(f'q_{a}' for a in axes), *(f'v_{a}' for a in axes))
-
-    def command_names(self, dim: int) -> tuple[str, ...]:
-        """Return the setpoint's ``v_sp_x..``."""
-        return tuple(f'v_sp_{a}' for a in 'xyz'[:dim])
-
-    def initial_state(self, q0: np.ndarray, p0: np.ndarray) -> np.ndarray:
-        """Return ``[q0, p0]``: the robots start moving with the scenario's velocities."""
-        return np.concatenate([q0, p0], axis=1)
-
-    def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(q, v)``."""
-        d = x.shape[1] // 2
-        return x[:, :d], x[:, d:]
 
     def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
         """Return the saturated setpoint ``v_sp`` (see the class)."""
