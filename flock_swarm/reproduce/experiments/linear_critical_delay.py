@@ -182,6 +182,8 @@ class CriticalDelay(Experiment):
         sc = load(spec.scenario, [f'{k}={json.dumps(v)}' for k, v in spec.fixed])
         law, dt, lams = sc.law, sc.dt, laplacian_eigenvalues(sc)
         tau_star = points[0]['tau_star']
+        runs = max(sum(1 for p in points if p['delay_steps'] == d)
+                   for d in {p['delay_steps'] for p in points})
         top = max(p['delay_steps'] for p in points) + 4
         steps = np.arange(0, top + 1)
         rate = [max(math.log(sampled_delay_radius(lam, int(d), dt, law.k_p, law.k_v))
@@ -191,7 +193,7 @@ class CriticalDelay(Experiment):
         ax.plot(steps * dt / tau_star, rate, color='tab:gray', lw=1,
                 label='sampled system (dt = 0.01 s): ln(radius) / dt')
         ax.scatter([p['tau_ratio'] for p in points], [p['growth_rate'] for p in points],
-                   s=8, color='tab:blue', zorder=3, label='runs (10 seeds per delay)')
+                   s=8, color='tab:blue', zorder=3, label=f'runs ({runs} per delay at most)')
         ax.axvline(1.0, color='tab:red', ls='--', lw=1, label='tau* (continuous oracle)')
         ax.axhline(0.0, color='black', lw=0.5)
         ax.set_xlabel('tau / tau*')
