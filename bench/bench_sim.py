@@ -174,13 +174,18 @@ def main(argv: list[str] | None = None) -> int:
                                         'target': LINEAR_MAX, 'pass': ok}
         print(f'target: time per agent-step at N = {sizes[-1]} <= {LINEAR_MAX:g} x that at '
               f'N = {LINEAR_N}: {verdict(ok)} ({ratio:.2f})')
+    finish(results, args.json)
+    return 0
+
+
+def finish(results: dict, path: Path | None) -> None:
+    """Add and print the load average at the end; write ``results`` to ``path`` if given."""
     results['load_average_end'] = list(os.getloadavg())
     print(f'# load average at the end: '
           f'{" ".join(f"{x:.2f}" for x in results["load_average_end"])}')
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + '\n')
-    return 0
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=2) + '\n')
 
 
 if __name__ == '__main__':

@@ -9,6 +9,7 @@ import yaml
 
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
+from flock_swarm.core.laws import linear
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.network import (LEADER, NetworkState, neighbourhood_of, parse_network,
                                       uniforms)
@@ -285,37 +286,13 @@ K_P, K_V = 1.0, 1.0
 
 
 def critical_delay(lam):
-    """Return ``(tau*, omega)`` of the mode of Laplacian eigenvalue ``lam``.
-
-    The mode obeys ``s^2 + lam (k_v s + k_p) exp(-s tau) = 0`` (the law's position gain
-    ``k_p``, velocity gain ``k_v``; with both states delayed, the input delay model, the
-    whole coupling is delayed). A root crosses the imaginary axis at ``s = i w`` when
-    ``w^2 = lam (k_p + i k_v w) exp(-i w tau)``. Moduli: ``w^2 = lam sqrt(k_p^2 +
-    k_v^2 w^2)``, i.e. ``w^4 - lam^2 k_v^2 w^2 - lam^2 k_p^2 = 0``, so ``w^2 = (lam^2 k_v^2
-    + sqrt(lam^4 k_v^4 + 4 lam^2 k_p^2)) / 2``. Phases: ``w tau = arg(k_p + i k_v w)``
-    (mod 2 pi), the smallest positive ``tau* = atan2(k_v w, k_p) / w``. At ``tau = 0`` every
-    root is in the left half-plane (``lam > 0``), so the mode is stable for ``tau < tau*``
-    and has a root in the right half-plane just above it. ``tau*`` decreases with ``lam``:
-    the largest eigenvalue decides.
-    """
-    w = np.sqrt((lam ** 2 * K_V ** 2 + np.sqrt(lam ** 4 * K_V ** 4 + 4 * lam ** 2 * K_P ** 2))
-                / 2)
-    return np.arctan2(K_V * w, K_P) / w, w
+    """Return ``(tau*, omega)`` of the mode of eigenvalue ``lam`` at the test's gains."""
+    return linear.critical_delay(lam, K_P, K_V)
 
 
 def discrete_radius(lam, d, dt):
-    """Return the spectral radius of the sampled mode with an input delay of ``d`` steps.
-
-    ``x_{k+1} = A x_k + B u_k`` (the exact zero-order hold of the double integrator),
-    ``u_k = -lam (k_p q_{k-d} + k_v p_{k-d})``, stacked with the ``d`` past states.
-    """
-    size = 2 * (d + 1)
-    m = np.zeros((size, size))
-    m[:2, :2] = [[1.0, dt], [0.0, 1.0]]
-    m[:2, 2 * d:2 * d + 2] += np.outer([dt * dt / 2, dt], [-lam * K_P, -lam * K_V])
-    for s in range(1, d + 1):
-        m[2 * s:2 * s + 2, 2 * s - 2:2 * s] = np.eye(2)
-    return float(np.max(np.abs(np.linalg.eigvals(m))))
+    """Return the spectral radius of the sampled mode with an input delay of ``d`` steps."""
+    return linear.sampled_delay_radius(lam, d, dt, K_P, K_V)
 
 
 def oracle_scenario(delay_steps, dt, duration):

@@ -57,6 +57,11 @@ LEADER = 0xFFFFFFFF
 _DELAY, _LOSS, _GE_STEP, _GE_START, _NOISE = 1, 2, 3, 4, 16
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1, _MIX2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31 = np.uint64(30), np.uint64(27), np.uint64(31)
+_GOLDEN_INT, _MIX1_INT, _MIX2_INT = 0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB
+_MASK64 = (1 << 64) - 1
+#: The arrival of a lost message: never.
+_NEVER = np.iinfo(np.int64).max
 
 
 # --------------------------------------------------------------------------------------------
@@ -72,10 +77,22 @@ def splitmix64(x: np.ndarray) -> np.ndarray:
     :param x: ``uint64`` array.
     :return: ``uint64`` array of the same shape.
     """
+    # In place on one new array: the same integer arithmetic with a third of the temporaries.
     z = x + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
+    z ^= z >> _S30
+    z *= _MIX1
+    z ^= z >> _S27
+    z *= _MIX2
+    z ^= z >> _S31
+    return z
+
+
+def _splitmix64_int(x: int) -> int:
+    """Return :func:`splitmix64` of one integer, in Python's integers (a key's prefix)."""
+    z = (x + _GOLDEN_INT) & _MASK64
+    z = ((z ^ (z >> 30)) * _MIX1_INT) & _MASK64
+    z = ((z ^ (z >> 27)) * _MIX2_INT) & _MASK64
+    return z ^ (z >> 31)
 
 
 def uniforms(seed: int, stream: int, step, receiver: np.ndarray,
@@ -93,9 +110,14 @@ def uniforms(seed: int, stream: int, step, receiver: np.ndarray,
     :return: float array, the broadcast shape of ``step``, ``receiver`` and ``sender``.
     """
     with np.errstate(over='ignore'):
-        h = splitmix64(np.full(1, seed % (1 << 64), dtype=np.uint64))
-        h = splitmix64(h ^ np.uint64(stream))
-        h = splitmix64(h ^ np.asarray(step).astype(np.uint64))
+        if np.ndim(step) == 0:
+            # One step: the chain's scalar prefix in Python's integers (the same bits).
+            h = _splitmix64_int(_splitmix64_int(seed % (1 << 64)) ^ stream)
+            h = np.uint64(_splitmix64_int(h ^ (int(step) & _MASK64)))
+        else:
+            h = splitmix64(np.full(1, seed % (1 << 64), dtype=np.uint64))
+            h = splitmix64(h ^ np.uint64(stream))
+            h = splitmix64(h ^ np.asarray(step).astype(np.uint64))
         h = splitmix64(h ^ np.asarray(receiver).astype(np.uint64))
         h = splitmix64(h ^ np.asarray(sender).astype(np.uint64))
     return (h >> np.uint64(11)).astype(np.float64) * 2.0 ** -53
@@ -346,18 +368,31 @@ def parse_network(value, dt: float) -> NetworkSpec:
 
 @dataclass
 class _Sent:
-    """The messages of one sending step over one channel (directed links, sorted by key)."""
+    """The messages of one sending step over one channel (directed links, sorted by key).
+
+    The columns are packed in two arrays, so that a message is moved with two takes:
+    ``ints`` (key, sending step, receiver, sender) and ``floats`` (weight, position,
+    velocity and, on the leader's channel, acceleration). ``due`` maps an arrival step to
+    the rows arriving then (ascending); a step's entry is removed when it is taken in.
+    """
 
     step: int
-    key: np.ndarray
-    receiver: np.ndarray
-    sender: np.ndarray
+    ints: np.ndarray
+    floats: np.ndarray
     arrival: np.ndarray
-    weight: np.ndarray
-    q: np.ndarray
-    p: np.ndarray
-    a: np.ndarray | None
+    lost: int
     bad: np.ndarray | None
+    due: dict[int, np.ndarray]
+
+    @property
+    def key(self) -> np.ndarray:
+        """Return the links' keys (``receiver * 2**32 + sender``, ascending)."""
+        return self.ints[:, 0]
+
+    @property
+    def receiver(self) -> np.ndarray:
+        """Return the receivers."""
+        return self.ints[:, 2]
 
 
 @dataclass
@@ -383,40 +418,112 @@ class Held:
 
 
 class _Link:
-    """One channel's messages over the last ``max_age`` sending steps."""
+    """One channel's messages over the last ``max_age`` sending steps.
+
+    Besides the sending steps' records (``sent``: the messages in flight, the
+    Gilbert-Elliott chains, the delivered count), the link keeps a table of what is held:
+    per directed link, sorted by key, the newest message arrived so far (packed as in
+    :class:`_Sent`). Each step merges in only the messages arriving at it, so :meth:`held`
+    is a view of the table rather than a search through every sending step of the window
+    (measured at N = 1000: the search was most of the model's cost). The table's arrays are
+    replaced, never written in place, so a :class:`Held` handed out stays valid.
+    """
 
     def __init__(self, channel: Channel, seed: int, dim: int, window: int) -> None:
         self.channel, self.seed, self.dim, self.window = channel, seed, dim, window
         self.sent: deque[_Sent] = deque()
+        self.key = np.zeros(0, dtype=np.int64)
+        self.ints = np.zeros((0, 4), dtype=np.int64)
+        self.floats: np.ndarray | None = None
 
     def send(self, k: int, receiver: np.ndarray, sender: np.ndarray, weight: np.ndarray,
              q: np.ndarray, p: np.ndarray, a: np.ndarray | None = None) -> None:
-        """Send step ``k``'s messages (states already gathered per link, sender's values)."""
+        """Send step ``k``'s messages (states already gathered per link, sender's values),
+        then take in the messages arriving at ``k`` (called once per step, in order)."""
         while self.sent and self.sent[0].step < k - self.window:
             self.sent.popleft()
-        if k % self.channel.period:
-            return
-        ch, seed = self.channel, self.seed
-        key = receiver.astype(np.int64) * (LEADER + 1) + sender.astype(np.int64)
-        order = np.argsort(key, kind='stable')
-        key, receiver, sender = key[order], receiver[order], sender[order]
-        weight, q, p = weight[order], q[order], p[order]
-        a = a[order] if a is not None else None
+        if k % self.channel.period == 0:
+            self.sent.append(self._messages(k, receiver, sender, weight, q, p, a))
+        self._arrive(k)
+
+    def _messages(self, k, receiver, sender, weight, q, p, a) -> _Sent:
+        """Return step ``k``'s messages with their losses, delays and errors drawn."""
+        ch, seed, dim = self.channel, self.seed, self.dim
+        size = receiver.size
+        ints = np.empty((size, 4), dtype=np.int64)
+        ints[:, 0] = receiver.astype(np.int64) * (LEADER + 1) + sender.astype(np.int64)
+        ints[:, 1], ints[:, 2], ints[:, 3] = k, receiver, sender
+        floats = np.empty((size, 1 + (2 if a is None else 3) * dim))
+        floats[:, 0], floats[:, 1:1 + dim], floats[:, 1 + dim:1 + 2 * dim] = weight, q, p
+        if a is not None:
+            floats[:, 1 + 2 * dim:] = a
+        order = np.argsort(ints[:, 0], kind='stable')
+        # take(): the same rows as fancy indexing, several times faster on 2-D arrays.
+        ints, floats = ints.take(order, axis=0), floats.take(order, axis=0)
+        key, receiver, sender = ints[:, 0], ints[:, 2], ints[:, 3]
         lost, bad = self._lost(k, key, receiver, sender)
-        delay = ch.delay.draw(uniforms(seed, _DELAY, k, receiver, sender)) \
-            if ch.delay.high > 0 else np.zeros(key.size, dtype=np.int64)
-        arrival = np.where(lost, np.iinfo(np.int64).max, k + delay)
-        dim = q.shape[1]
-        if ch.noise_position > 0.0 or ch.noise_velocity > 0.0:
-            q, p = q.copy(), p.copy()
-            for c in range(dim):
-                if ch.noise_position > 0.0:
-                    q[:, c] += ch.noise_position * normals(seed, _NOISE + 2 * c, k,
-                                                           receiver, sender)
-                if ch.noise_velocity > 0.0:
-                    p[:, c] += ch.noise_velocity * normals(seed, _NOISE + 2 * (3 + c), k,
-                                                           receiver, sender)
-        self.sent.append(_Sent(k, key, receiver, sender, arrival, weight, q, p, a, bad))
+        if ch.delay.low == ch.delay.high:
+            # A fixed delay draws nothing (Delay.draw would return it for any uniform).
+            arrival = np.where(lost, _NEVER, k + ch.delay.low)
+        else:
+            delay = ch.delay.draw(uniforms(seed, _DELAY, k, receiver, sender))
+            arrival = np.where(lost, _NEVER, k + delay)
+        for c in range(dim):
+            if ch.noise_position > 0.0:
+                floats[:, 1 + c] += ch.noise_position * normals(seed, _NOISE + 2 * c, k,
+                                                                receiver, sender)
+            if ch.noise_velocity > 0.0:
+                floats[:, 1 + dim + c] += ch.noise_velocity * normals(
+                    seed, _NOISE + 2 * (3 + c), k, receiver, sender)
+        rows = np.flatnonzero(~lost)
+        if ch.delay.low == ch.delay.high:
+            due = {k + ch.delay.low: rows}
+        else:
+            # Stable: the rows arriving at one step stay ascending, i.e. sorted by key.
+            rows = rows[np.argsort(arrival[rows], kind='stable')]
+            steps, starts = np.unique(arrival[rows], return_index=True)
+            due = dict(zip(steps.tolist(), np.split(rows, starts[1:])))
+        return _Sent(k, ints, floats, arrival, size - rows.size, bad, due)
+
+    def _arrive(self, k: int) -> None:
+        """Merge the messages arriving at ``k`` into the table; drop what left the window."""
+        for sent in self.sent:
+            rows = sent.due.pop(k, None)
+            if rows is not None and rows.size:
+                self._merge(sent, rows)
+        step = self.ints[:, 1]
+        if step.size and step.min() < k - self.window:
+            keep = np.flatnonzero(step >= k - self.window)
+            self.key, self.ints, self.floats = \
+                self.key.take(keep), self.ints.take(keep, axis=0), self.floats.take(keep, axis=0)
+
+    def _merge(self, sent: _Sent, rows: np.ndarray) -> None:
+        """Put the messages ``rows`` of ``sent`` into the table where they are newer."""
+        key = sent.key.take(rows)
+        size = self.key.size
+        if size == 0:
+            self.key = key
+            self.ints, self.floats = sent.ints.take(rows, axis=0), sent.floats.take(rows, axis=0)
+            return
+        pos = np.searchsorted(self.key, key)
+        at = np.minimum(pos, size - 1)
+        found = self.key.take(at) == key
+        # A message sent earlier than the one held (random delays) does not replace it.
+        replace = np.flatnonzero(found & (self.ints[:, 1].take(at) < sent.step))
+        new = np.flatnonzero(~found)
+        # The merged table as rows of [table; sent]: a held row moves down by the new keys
+        # before it, the new ones go in between, a replaced one takes the message's row.
+        # (Row indices built in 1-D, the rows moved by one take: fancy assignment of 2-D rows
+        # is several times slower.)
+        before = pos.take(new)
+        source = np.empty(size + new.size, dtype=np.int64)
+        to_held = np.arange(size) + np.searchsorted(before, np.arange(size), side='right')
+        source[to_held] = np.arange(size)
+        source[before + np.arange(new.size)] = size + rows.take(new)
+        source[to_held.take(pos.take(replace))] = size + rows.take(replace)
+        ints = np.concatenate([self.ints, sent.ints]).take(source, axis=0)
+        self.floats = np.concatenate([self.floats, sent.floats]).take(source, axis=0)
+        self.ints, self.key = ints, ints[:, 0].copy()
 
     def _lost(self, k, key, receiver, sender) -> tuple[np.ndarray, np.ndarray | None]:
         loss, seed = self.channel.loss, self.seed
@@ -439,50 +546,34 @@ class _Link:
         return uniforms(seed, _LOSS, k, receiver, sender) < p_loss, bad
 
     def held(self, k: int, receivers: np.ndarray | None) -> Held:
-        """Return, per link, the most recent message arrived by ``k`` within the window."""
-        parts = []
-        for sent in reversed(self.sent):
-            if sent.step < k - self.window:
-                break
-            ok = sent.arrival <= k
-            if receivers is not None:
-                ok &= receivers[sent.receiver]
-            if ok.any():
-                parts.append((sent, np.flatnonzero(ok)))
-        dim = self.dim
-        if not parts:
+        """Return, per link, the most recent message arrived by ``k`` within the window.
+
+        :param k: the step last sent (:meth:`send` took in the arrivals up to it).
+        :param receivers: the receivers to return (``None``: all).
+        """
+        ints, floats, dim = self.ints, self.floats, self.dim
+        if floats is None or ints.shape[0] == 0:
             empty = np.zeros(0, dtype=np.int64)
             return Held(empty, empty, empty, np.zeros(0), np.zeros((0, dim)),
                         np.zeros((0, dim)), np.zeros((0, dim)))
-        keys = np.concatenate([s.key[idx] for s, idx in parts])
-        # Parts run from the newest sending step: the first occurrence of a key is its newest.
-        _, first = np.unique(keys, return_index=True)
-        part = np.concatenate([np.full(idx.size, n) for n, (_, idx) in enumerate(parts)])[first]
-        rows = np.concatenate([idx for _, idx in parts])[first]
-        # Only the chosen messages are gathered, each from its own sending step's record.
-        chosen = [(parts[n][0], part == n) for n in np.unique(part).tolist()]
-
-        def gather(name):
-            if getattr(parts[0][0], name) is None:
-                return None
-            like = getattr(parts[0][0], name)
-            out = np.empty((first.size, *like.shape[1:]), dtype=like.dtype)
-            for sent, mask in chosen:
-                out[mask] = getattr(sent, name)[rows[mask]]
-            return out
-        age = k - np.array([parts[n][0].step for n in range(len(parts))],
-                           dtype=np.int64)[part]
-        return Held(gather('receiver'), gather('sender'), age, gather('weight'),
-                    gather('q'), gather('p'), gather('a'))
+        if receivers is not None:
+            keep = receivers[ints[:, 2]]
+            if not keep.all():
+                keep = np.flatnonzero(keep)
+                ints, floats = ints.take(keep, axis=0), floats.take(keep, axis=0)
+        a = floats[:, 1 + 2 * dim:] if floats.shape[1] > 1 + 2 * dim else None
+        return Held(ints[:, 2], ints[:, 3], k - ints[:, 1], floats[:, 0],
+                    floats[:, 1:1 + dim], floats[:, 1 + dim:1 + 2 * dim], a)
 
     def delivered(self, receivers: np.ndarray | None) -> tuple[int, int]:
         """Return (messages not lost, messages) of the channel's latest sending step."""
         if not self.sent:
             return 0, 0
         sent = self.sent[-1]
-        mask = np.ones(sent.key.size, dtype=bool) if receivers is None \
-            else receivers[sent.receiver]
-        lost = sent.arrival == np.iinfo(np.int64).max
+        if receivers is None:
+            return sent.arrival.size - sent.lost, sent.arrival.size
+        mask = receivers[sent.receiver]
+        lost = sent.arrival == _NEVER
         return int((mask & ~lost).sum()), int(mask.sum())
 
 
@@ -516,9 +607,9 @@ class NetworkState:
         window = spec.max_age
         self.links = _Link(spec.agents, seed, dim, window)
         self.leader_links = _Link(spec.leader, seed, dim, window)
-        # The agents' own states over the window (the input delay model uses them).
-        self.own_q = np.zeros((window + 1, n, dim))
-        self.own_p = np.zeros((window + 1, n, dim))
+        # The agents' own states over the window (only the input delay model uses them).
+        own = (window + 1, n, dim) if spec.model == 'input' else (0, n, dim)
+        self.own_q, self.own_p = np.zeros(own), np.zeros(own)
         self.step = -1
         self.leader_now: LeaderState | None = None
         # Since the last recorded instant (a record every few steps would otherwise alias
@@ -541,15 +632,19 @@ class NetworkState:
         :param receivers: the agents whose incoming messages to keep (``None``: all).
         """
         self.step, self.leader_now = k, leader
-        w = self.spec.max_age + 1
-        self.own_q[k % w], self.own_p[k % w] = q, p
+        if self.spec.model == 'input':
+            w = self.spec.max_age + 1
+            self.own_q[k % w], self.own_p[k % w] = q, p
         rec = np.concatenate([edges.i, edges.j]).astype(np.int64)
         snd = np.concatenate([edges.j, edges.i]).astype(np.int64)
         weight = np.concatenate([edges.weight, edges.weight])
         if receivers is not None:
             keep = receivers[rec]
             rec, snd, weight = rec[keep], snd[keep], weight[keep]
-        self.links.send(k, rec, snd, weight, q[snd], p[snd])
+        self.links.send(k, rec, snd, weight, q.take(snd, axis=0), p.take(snd, axis=0))
+        if not self.spec.leader.active:
+            # Informed agents then use the leader's current state (_combine): nothing to send.
+            return
         lrec = np.flatnonzero(informed if receivers is None else informed & receivers)
         if leader is None:
             # A lost leader (an agent node past its timeout) sends nothing this step.
@@ -573,23 +668,29 @@ class NetworkState:
             'network_age_max'}`` of their incoming links (ages in seconds; NaN when none).
         """
         law = self.law
-        ids = np.arange(self.n) if ids is None else np.asarray(ids)
-        hosted = np.zeros(self.n, dtype=bool)
-        hosted[ids] = True
-        row = np.full(self.n, -1, dtype=np.int64)
-        row[ids] = np.arange(ids.size)
+        if ids is None:
+            # Every agent: no mask of the hosted ones, and a row is the agent's id.
+            ids, hosted = np.arange(self.n), None
+            row = ids
+        else:
+            ids = np.asarray(ids)
+            hosted = self._mask(ids)
+            row = np.full(self.n, -1, dtype=np.int64)
+            row[ids] = np.arange(ids.size)
         held, own_q, own_p, use, weight = self._used(hosted, q, p)
+        chosen = np.flatnonzero(use)
         # Column-major, as pair_sums hands them: the laws' per-component arithmetic then runs
-        # on contiguous memory (measured: 3x faster squared norms at N = 1000).
-        ends = [np.asfortranarray(x[use]) for x in (own_q, own_p, held.q, held.p)]
-        to_i = law.pair(*ends, weight[use])
-        at = row[held.receiver[use]]
+        # on contiguous memory (measured: 3x faster squared norms at N = 1000); gathered and
+        # laid out in one copy (take along the transposed rows).
+        ends = [np.take(x.T, chosen, axis=1).T for x in (own_q, own_p, held.q, held.p)]
+        to_i = law.pair(*ends, weight.take(chosen))
+        at = row.take(held.receiver.take(chosen))
         s = np.empty((ids.size, to_i.shape[1]))
         for col in range(to_i.shape[1]):
             s[:, col] = np.bincount(at, weights=to_i[:, col], minlength=ids.size)
         u = self._combine(ids, row, q, p, s, agents, dt,
                           lambda *args: control(law, *args, t=t))
-        return u, self._count(hosted, held.age[use], dt)
+        return u, self._count(hosted, held.age.take(chosen), dt)
 
     def observe(self, q: np.ndarray, p: np.ndarray, dt: float) -> dict:
         """Count the current step's statistics of every agent's links, as :meth:`control`
@@ -699,7 +800,7 @@ class NetworkState:
              p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return each receiver's own state: current, or at the message's sending step."""
         if self.spec.model == 'communication':
-            return q[receiver], p[receiver]
+            return q.take(receiver, axis=0), p.take(receiver, axis=0)
         slot = (self.step - age) % (self.spec.max_age + 1)
         return self.own_q[slot, receiver], self.own_p[slot, receiver]
 
