@@ -242,3 +242,28 @@ def test_an_interrupted_reproduction_keeps_its_runs_and_says_so_in_one_line(tmp_
     problems = []
     assert len(read_cache(cache, report=problems.append)) >= 1 and problems == []
     assert not (tmp_path / 'report.md').exists()
+
+
+def test_rekey_fig3_cache_covers_the_plan_with_the_committed_records(tmp_path):
+    """scripts/rekey_fig3_cache writes the committed linear 100 s records under the report's
+    digests: every planned run of the Fig. 3 sweep found, each record otherwise unchanged."""
+    from pathlib import Path
+
+    from flock_swarm.reproduce.experiments.su2009_fig3_sweep import fig3_tasks
+    from flock_swarm.reproduce.plan import Plan
+    root = Path(__file__).resolve().parent.parent
+    done = subprocess.run([sys.executable, str(root / 'scripts' / 'rekey_fig3_cache'),
+                           '--realisations', '2', '--out', str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert '0 planned runs not in the committed cache' in done.stdout
+    written = [json.loads(x) for x in (tmp_path / 'fig3_runs.jsonl').read_text().splitlines()]
+    planned = {run.digest for run in fig3_tasks(Plan.make(False, 2))}
+    assert {rec['digest'] for rec in written} == planned
+    source = root / 'docs' / 'reproduction' / 'runs' / 'reproduce_su2009_fig3_linear_100s.jsonl'
+    committed = {(r['n_agents'], r['delta'], r['seed']): r
+                 for r in map(json.loads, source.read_text().splitlines())}
+    for rec in written:
+        original = committed[(rec['n_agents'], rec['delta'], rec['seed'])]
+        assert {k: v for k, v in rec.items() if k != 'digest'} == \
+            {k: v for k, v in original.items() if k != 'digest'}
