@@ -19,6 +19,10 @@ Three ways in, one :class:`LiveServer` under each:
   subscribing to the contract topics with ``raw=True`` and forwarding the bytes
   (:mod:`flock_swarm.nodes.foxglove_server`).
 
+A latched topic (``/swarm/obstacles``, published once before the run) keeps its last
+message in the server, which sends it again when a client subscribes to it, so a viewer that
+connects after the start still draws the map (:meth:`LiveServer.latch`).
+
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
 bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
 when it is full, and the bridge subscribes best-effort, so it never holds a writer back.
@@ -90,13 +94,17 @@ class LiveServer:
         self.context = foxglove.Context()
         self.channels: dict[str, object] = {}
         self.time_ns = -1
+        #: The latched topics and their last message ``(bytes, t_ns)`` (None: none yet).
+        self.latched: dict[str, tuple[bytes, int] | None] = {}
         #: Set once a client has subscribed to a channel (:meth:`wait_for_viewer`).
         self.viewer = threading.Event()
         viewer = self.viewer
+        resend = self._resend
 
         class Listener(foxglove.ServerListener):
             def on_subscribe(self, client, channel) -> None:
                 viewer.set()
+                resend(channel.topic)
         try:
             self.server = foxglove.start_server(
                 name=SERVER_NAME, host=host, port=port, context=self.context,
@@ -139,6 +147,17 @@ class LiveServer:
         for topic, msg_type in topics:
             self.add_topic(topic, msg_type)
 
+    def latch(self, topic: str) -> None:
+        """Keep the last message of ``topic`` and send it to each client that subscribes.
+
+        As a ROS 2 transient-local publisher does for a late subscriber: the obstacle map is
+        published once, before any viewer is likely to be connected. A client subscribed
+        earlier receives the message again then (the same bytes at the same time).
+
+        :param topic: an advertised topic (:meth:`add_topic`).
+        """
+        self.latched.setdefault(topic, None)
+
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Send a message's CDR bytes, logged at ``t_ns``, to the clients subscribed to it.
 
@@ -150,7 +169,16 @@ class LiveServer:
         """
         channel = self.channels.get(topic)
         if channel is not None:
+            if topic in self.latched:
+                self.latched[topic] = (data, t_ns)
             channel.log(data, log_time=t_ns)
+
+    def _resend(self, topic: str) -> None:
+        """Send a latched topic's last message again (a client has just subscribed to it)."""
+        last = self.latched.get(topic)
+        channel = self.channels.get(topic)
+        if last is not None and channel is not None:
+            channel.log(last[0], log_time=last[1])
 
     def wait_for_viewer(self, timeout: float | None = None) -> bool:
         """Wait until a client has subscribed to a channel (``swarm --wait-for-viewer``).
@@ -213,8 +241,11 @@ class LiveSink:
         self.live = live
 
     def add_topic(self, name: str, msg_type, qos) -> None:
-        """Advertise a topic the world creates (a no-op for one already advertised)."""
+        """Advertise a topic the world creates (a no-op for one already advertised), latched
+        when its publisher is (transient local: ``/swarm/obstacles``)."""
         self.live.add_topic(name, msg_type)
+        if getattr(getattr(qos, 'durability', None), 'name', '') == 'TRANSIENT_LOCAL':
+            self.live.latch(name)
 
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Serve one message at simulation time ``t_ns``, the server's time from then on."""

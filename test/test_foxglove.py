@@ -477,3 +477,67 @@ def test_swarm_ends_within_the_close_bound_after_a_client_closed(tmp_path, ros_d
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+#: A sphere far from the demo's agents: the run has an obstacle map and flies as before.
+FAR_SPHERE = 'obstacles={spheres: [{centre: [500.0, 500.0], radius: 1.0}]}'
+
+
+def test_a_viewer_that_connects_after_the_start_gets_the_latched_obstacles(tmp_path, ros_domain):
+    """The world publishes ``/swarm/obstacles`` once, before the run and before any client
+    is connected: the server keeps it and sends it to the client when it subscribes."""
+    with start_live(port=0) as live:
+        def connect(swarm):
+            # The map was written at the world's start, with no client connected.
+            assert live.latched.get('/swarm/obstacles') is not None
+            client = subscribed_client(live.url, topics=[*CONTRACT, '/swarm/obstacles'])
+            client.pump_until(lambda: any(t == '/swarm/obstacles' for t, _, _ in
+                                          client.messages), TIMEOUT, 'the obstacle map')
+            return client
+        _, client, bag = fly(tmp_path, ros_domain, live, overrides=[FAR_SPHERE],
+                             connect=connect)
+    client.close()
+    recorded, schemas = bag_messages(bag)
+    channel = client.topics()['/swarm/obstacles']
+    assert (channel['encoding'], channel['schemaName']) == (
+        'cdr', 'visualization_msgs/msg/MarkerArray')
+    assert channel['schema'] == schemas['visualization_msgs/msg/MarkerArray']
+    maps = [(t, data) for topic, t, data in client.messages if topic == '/swarm/obstacles']
+    # Once, the bytes the bag recorded at t = 0: the map's sphere, as RViz draws it.
+    assert len(maps) == 1 and maps[0][0] == 0
+    assert maps[0][1] in recorded[('/swarm/obstacles', 0)]
+    decoded = DecoderFactory().decoder_for('cdr', Schema(
+        id=1, name=channel['schemaName'], encoding='ros2msg',
+        data=channel['schema'].encode()))(maps[0][1])
+    assert [(m.pose.position.x, m.pose.position.y, m.scale.x) for m in decoded.markers] == [
+        (500.0, 500.0, 2.0)]
+
+
+def test_the_bridge_serves_the_latched_obstacles_of_a_run_started_before_it(
+        tmp_path, ros_domain):
+    """``foxglove_server`` (here in a thread, as ``swarm --processes --foxglove`` runs it)
+    started after the world published the map: its transient-local subscription gets it,
+    and a client that subscribes after that gets it from the server."""
+    from flock_swarm.nodes.foxglove_server import BackgroundBridge
+    scenario = resolve_scenario('demo', [*RUN, FAR_SPHERE], None, tmp_path / 'bridge')
+    with start_live(port=0) as live:
+        bridges = []
+
+        def connect(swarm):
+            bridge = BackgroundBridge(live, ros_domain, {'scenario': str(scenario)})
+            bridges.append(bridge)
+            wait_for(lambda: bridge.node.counts['/swarm/obstacles'] == 1, TIMEOUT,
+                     'the bridge to receive the latched map')
+            client = subscribed_client(live.url, topics=['/swarm/obstacles'])
+            client.pump_until(lambda: client.messages, TIMEOUT, 'the obstacle map')
+            return client
+        try:
+            _, client, bag = fly(tmp_path, ros_domain, None, overrides=[FAR_SPHERE],
+                                 connect=connect)
+        finally:
+            for bridge in bridges:
+                bridge.close()
+    client.close()
+    recorded, _ = bag_messages(bag)
+    assert [(topic, t) for topic, t, _ in client.messages] == [('/swarm/obstacles', 0)]
+    assert unpadded(client.messages[0][2]) & recorded[('/swarm/obstacles', 0)]

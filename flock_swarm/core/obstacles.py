@@ -367,13 +367,19 @@ def _near(spec: ObstacleSpec, geo: Geometry) -> tuple[tuple, tuple]:
     """Return ``((k, i) of the spheres, (k, i) of the walls)`` within the sensing range,
     each obstacle-major (by obstacle, then agent: each agent's obstacles in order)."""
     spheres = walls = (np.zeros(0, dtype=np.intp),) * 2
+    # np.flatnonzero and a divmod, not np.nonzero on the (count, m) mask: the same indices in
+    # the same (row-major) order, at about a third of the cost (the 2-D nonzero is most of
+    # the fixed cost of finding a few pairs among thousands).
     if spec.spheres:
         outer, inner = spec.sensing_shell
-        near = geo.sq < outer[:, None]
-        near &= geo.sq > inner[:, None]
-        spheres = np.nonzero(near)
+        sq = geo.sq
+        k, i = np.divmod(np.flatnonzero(sq < outer[:, None]), sq.shape[1])
+        # The inner bound on the few candidates only (it rarely excludes any).
+        keep = sq[k, i] > inner[k]
+        spheres = (k[keep], i[keep])
     if spec.walls:
-        walls = np.nonzero(np.abs(geo.signed) < spec.r_beta)
+        signed = geo.signed
+        walls = np.divmod(np.flatnonzero(np.abs(signed) < spec.r_beta), signed.shape[1])
     return spheres, walls
 
 
@@ -446,10 +452,9 @@ def beta_term(spec: ObstacleSpec, q: np.ndarray, p: np.ndarray,
     # phi_beta n_ik = (phi_beta / sqrt(1 + eps ||dq||^2)) dq, n_ik = sigma_eps(qh_ik - q_i);
     # ph_ik - p_i the velocity relative to the beta-agent.
     term = dq * (spec.c1_beta * action / root)[:, None] + dp * (spec.c2_beta * b)[:, None]
-    for col in range(dim):
-        # bincount adds each agent's pairs in their order, from 0: the row depends on the
-        # agent's own pairs only.
-        out[:, col] = np.bincount(agent, weights=term[:, col], minlength=m)
+    # add.at adds each agent's pairs in their order, from 0: the row depends on the agent's
+    # own pairs only (one call for every component: bincount needs one a component).
+    np.add.at(out, agent, term)
     return out
 
 
@@ -517,6 +522,8 @@ class ObstacleMetrics:
     def __init__(self, spec: ObstacleSpec, collision_distance: float) -> None:
         """Create the metrics of a run with the obstacles ``spec``."""
         self.spec, self.collision_distance = spec, collision_distance
+        # (R_k + collision distance)^2: the squared centre distances of a collision.
+        self._shell = (spec.radii + collision_distance) ** 2
         self.clearance_min = float('inf')
         self.penetrations: set[tuple[int, int]] = set()
         self.collisions: set[tuple[int, int]] = set()
@@ -551,12 +558,14 @@ class ObstacleMetrics:
         self.clearance_min = min(self.clearance_min, now)
         if now < cd:
             keys, clear = [], []
+            # flatnonzero and a divmod: np.nonzero's indices, in its order, cheaper (_near).
             if sq is not None:
-                k, i = np.nonzero(sq < ((spec.radii + cd) ** 2)[:, None])
+                k, i = np.divmod(np.flatnonzero(sq < self._shell[:, None]),
+                                 sq.shape[1])
                 keys.append(i * spec.count + k)
                 clear.append(np.sqrt(sq[k, i]) - spec.radii[k])
             if signed is not None:
-                k, i = np.nonzero(signed < cd)
+                k, i = np.divmod(np.flatnonzero(signed < cd), signed.shape[1])
                 keys.append(i * spec.count + (k + n_s))
                 clear.append(signed[k, i])
             keys_all, clear_all = np.concatenate(keys), np.concatenate(clear)

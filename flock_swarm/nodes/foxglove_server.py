@@ -23,7 +23,8 @@ from rclpy.parameter import Parameter
 
 from flock_swarm import contract
 from flock_swarm.bag.msgdefs import message_class
-from flock_swarm.contract import CLOCK_TYPE, contract_topics, qos_profile
+from flock_swarm.contract import (CLOCK_TYPE, OBSTACLES, OBSTACLES_QOS, OBSTACLES_TYPE,
+                                  absolute, contract_topics, qos_profile)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.foxglove_ws import (DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
                                      message_stamp_ns, start_live)
@@ -77,6 +78,18 @@ class LiveBridge(Node):
             self.subscriptions_by_topic[sub.topic_name] = sub
             self.counts[sub.topic_name] = 0
             live.add_topic(sub.topic_name, type_name)
+        if sc.obstacles.active:
+            # The map is published once before the run, latched: a reliable, transient-local
+            # subscription gets it however late the bridge starts, and the server keeps it
+            # for the viewers that connect later still.
+            sub = self.create_subscription(
+                message_class(OBSTACLES_TYPE), OBSTACLES,
+                self._forward(absolute(OBSTACLES, self.get_namespace()), OBSTACLES_TYPE),
+                qos_profile(OBSTACLES_QOS), raw=True)
+            self.subscriptions_by_topic[sub.topic_name] = sub
+            self.counts[sub.topic_name] = 0
+            live.add_topic(sub.topic_name, OBSTACLES_TYPE)
+            live.latch(sub.topic_name)
 
     def unmatched(self, topics) -> list[str]:
         """Return those of ``topics`` that no publisher has matched yet."""

@@ -295,6 +295,14 @@ class InProcessSwarm:
         live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace(),
                                         bool(self.world.stepper.state)))
         self.world.sinks.append(LiveSink(live))
+        if self.world.obstacles_map is not None:
+            # Published at the world's start, before this sink: the server keeps the map
+            # (latched) for the viewers that subscribe later.
+            from flock_swarm.contract import OBSTACLES_TYPE
+            topic = self.world.obstacles_pub.topic_name
+            live.add_topic(topic, OBSTACLES_TYPE)
+            live.latch(topic)
+            live.write(topic, self.world.obstacles_map, 0)
 
     def parameters(self, **values) -> list:
         """Return the common node parameters plus ``values`` as rclpy parameters."""

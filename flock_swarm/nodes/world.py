@@ -33,6 +33,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -235,12 +236,16 @@ class WorldNode(RecordedNode):
         self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
         self.publish_recorded(self.scenario_pub, String(data=provenance_text(
             provenance(sc, self.stepper.real, self.mode))), 0)
+        #: The obstacle map's bytes as published (None without obstacles): a live view
+        #: served after the start sends them to its viewers (InProcessSwarm.serve).
+        self.obstacles_map: bytes | None = None
         if sc.obstacles.active:
             # The map for viewers, latched and recorded at t = 0 (docs/obstacles.md).
             self.obstacles_pub = self.recorded_publisher(MarkerArray, OBSTACLES,
                                                          qos_profile(OBSTACLES_QOS))
-            self.publish_recorded(self.obstacles_pub, obstacle_markers(
-                sc.obstacles, sc.dim, self.clock.stamp(0), FRAME), 0)
+            self.obstacles_map = serialize_message(obstacle_markers(
+                sc.obstacles, sc.dim, self.clock.stamp(0), FRAME))
+            self.publish_recorded(self.obstacles_pub, self.obstacles_map, 0)
         for sink in self.sinks:
             sink.flush()
         self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \

@@ -41,8 +41,13 @@ SOURCES = (
     '(`shared/papers/olfati_saber_2006_obstacles_notes.md`, marked there "to verify in the '
     'report") and the obstacle matrices and snapshot times those of an independent '
     'reproduction of the paper\'s figures (GitHub AIMSLab-IIITAllahabad/alpha-lattice-'
-    'flocking, `demo_squeezing.py`, `demo_algorithm3_obstacles.py`). Check them against '
-    'the report before relying on a number.')
+    'flocking, `demo_squeezing.py`, `demo_algorithm3_obstacles.py`). The paper gives no '
+    'number for the gains, only their order c_beta > c_gamma > c_alpha (so the notes and a '
+    'second reproduction, GitHub harveydevereux/Consensus, README): c1_gamma = 2, c1_beta = '
+    '1500 (c2 = 2 sqrt(c1) for both), the leader\'s start and speed and the initial box are '
+    'that reproduction\'s choices, taken as they are; its c1_alpha = 3 has no parameter in '
+    'our law (the alpha gains are 1) and its linear gamma term is our `_linear` variant. '
+    'Check them against the report before relying on a number.')
 
 #: The distributions over seeds (what, metric, the paper's value).
 COLUMNS = (
@@ -183,9 +188,9 @@ def discuss_obstacles(m: dict, manoeuvre: str, sc: Scenario) -> str:
              'pressed together in the gap, neighbours can meet, since with a = b the pair '
              'gradient phi_alpha n_ij vanishes as two agents coincide (as in Su 2009 Fig. 2). '
              'The paper shows one realisation as snapshots and gives no number to compare '
-             'against; the gains it leaves open, the leader\'s speed, the initial box and the '
-             'run length are ours (preset header), and the variants below test the two that '
-             'matter here.')
+             'against; the gains it leaves open, the leader\'s start and speed and the initial '
+             'box are those of an independent reproduction, the run length is ours (preset '
+             'header), and the variants below test the two choices that matter here.')
     return text
 
 
