@@ -31,9 +31,10 @@ def run(n: int, steps: int, mode: str, domain: int) -> tuple[float, float]:
 
     from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
     from flock_swarm.nodes.batch import BatchPublish, BatchTake, extension
-    from flock_swarm.nodes.spin import make_executor
+    from flock_swarm.nodes.spin import make_executor, middleware_defaults
     from flock_swarm.nodes.wire import OdometryEncoder
     context = Context()
+    middleware_defaults()   # as the nodes publish (RMW_FASTRTPS_PUBLICATION_MODE decides)
     rclpy.init(context=context, domain_id=domain)
     qos = qos_profile(LOCKSTEP_QOS)
     a, b = Node('oneway_a', context=context), Node('oneway_b', context=context)

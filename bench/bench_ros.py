@@ -354,8 +354,9 @@ def run_floor_role(args) -> int:
     import rclpy
     from rclpy.context import Context
 
-    from flock_swarm.nodes.spin import make_executor
+    from flock_swarm.nodes.spin import make_executor, middleware_defaults
     context = Context()
+    middleware_defaults()   # the floors publish as the pipeline's nodes do
     rclpy.init(context=context, domain_id=args.domain)
     ids = list(range(args.n)) if args.agent_ids is None else args.agent_ids
     nodes, state = floor_nodes(args.role, args.n, args.steps, args.hosts, ids, context,

@@ -364,7 +364,10 @@ def ros_context(ros_domain: int):
     after the test), for nodes a test creates itself."""
     import rclpy
     from rclpy.context import Context
+
+    from flock_swarm.nodes.spin import middleware_defaults
     context = Context()
+    middleware_defaults()
     rclpy.init(context=context, domain_id=ros_domain)
     yield context
     rclpy.try_shutdown(context=context)

@@ -26,6 +26,7 @@ from flock_swarm.bag import BagError
 from flock_swarm.console import EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.player import Player, ReplayError
+from flock_swarm.nodes.spin import middleware_defaults
 
 
 def _count(number: int, noun: str, plural: str | None = None) -> str:
@@ -108,6 +109,7 @@ def _play(args: argparse.Namespace, argv: list[str]) -> int:
     try:
         if args.foxglove is not None:
             live = start_live(args.foxglove_host, args.foxglove, '--foxglove')
+        middleware_defaults()
         rclpy.init(args=['replay', *argv], signal_handler_options=SignalHandlerOptions.NO)
         player = Player(
             args.bag, rate=args.rate, loop=args.loop, topics=args.topics, regex=args.regex,

@@ -29,7 +29,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.foxglove_ws import (DEFAULT_HOST, DEFAULT_PORT, LiveServer, ServeError,
                                      message_stamp_ns, start_live)
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
-from flock_swarm.nodes.spin import make_executor, run_node
+from flock_swarm.nodes.spin import make_executor, middleware_defaults, run_node
 
 BRIDGE_QOS = qos_profile(contract.BRIDGE_QOS)
 #: The node's parameters (the others override scenario keys, as in every node).
@@ -137,6 +137,7 @@ class BackgroundBridge:
     def __init__(self, live: LiveServer, domain_id: int, parameters: dict) -> None:
         """Create the context and the node, and start spinning."""
         self.context = Context()
+        middleware_defaults()
         rclpy.init(context=self.context, domain_id=domain_id)
         try:
             self.node = LiveBridge(live, context=self.context, parameter_overrides=[

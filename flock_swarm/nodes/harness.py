@@ -252,7 +252,7 @@ class InProcessSwarm:
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from flock_swarm.nodes.spin import make_executor
+        from flock_swarm.nodes.spin import make_executor, middleware_defaults
         from flock_swarm.nodes.world import WorldNode
 
         self.out = Path(out)
@@ -264,6 +264,7 @@ class InProcessSwarm:
         self.base = node_parameters(self.scenario_path, mode, realtime_factor, allow_unstable)
         self.closed = False
         self.context = Context()
+        middleware_defaults()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.nodes = []
         self.executor = make_executor(self.context) if executor == 'events' \

@@ -4,6 +4,7 @@
 invalid configuration into one line on stderr with exit status 2.
 """
 
+import os
 import re
 import signal
 import sys
@@ -14,6 +15,26 @@ from rclpy.node import Node
 from flock_swarm.console import (EXIT_FAILURE, EXIT_SIGNAL, EXIT_USAGE, FAIL_SIGNAL,
                                  StopSignals)
 from flock_swarm.core.errors import ScenarioError, one_line
+
+
+#: rmw_fastrtps's publication mode, and the mode this package's processes use unless the
+#: environment names one: ``SYNCHRONOUS`` writes each message in the publishing thread (no hand-off
+#: to Fast DDS's asynchronous thread), rmw_fastrtps's own default from ROS 2 Kilted on; Jazzy's is
+#: ``ASYNCHRONOUS``. A lockstep step publishes 2N small messages: the one-way cost of N
+#: odometries fell from 31-33 to 17-18 CPU-us a message at N = 1000 (docs/performance.md).
+PUBLICATION_MODE = ('RMW_FASTRTPS_PUBLICATION_MODE', 'SYNCHRONOUS')
+
+
+def middleware_defaults(environ=None) -> None:
+    """Give the middleware this package's defaults where the environment is silent; call it
+    before ``rclpy.init`` (rmw_fastrtps reads the variables when a context creates its
+    participant).
+
+    :param environ: the environment to complete (default: this process's, ``os.environ``,
+        which the middleware reads).
+    """
+    name, value = PUBLICATION_MODE
+    (os.environ if environ is None else environ).setdefault(name, value)
 
 
 def make_executor(context=None):
@@ -97,6 +118,7 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
     previous = get_logger_level('rcl')
     set_logger_level('rcl', LoggingSeverity.FATAL)
     try:
+        middleware_defaults()
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except rclpy_implementation.RCLError as exc:
         set_logger_level('rcl', previous)
