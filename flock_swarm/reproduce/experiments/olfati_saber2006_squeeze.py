@@ -21,6 +21,10 @@ class Squeeze(ObstacleExperiment):
         'at least about d\' from the obstacles). The paper shows it as snapshots and gives '
         'no number.' + SOURCES)
     order = 210.0
+    #: Through the ROS nodes: the first 30 s, in which the flock meets the obstacles (the
+    #: agents nearest them are within r' from about t = 10 s) and starts into the gap.
+    ros = ('duration=30',)
+    ros_quick = ('duration=2',)
     manoeuvre = 'squeezing through the gap'
     criterion = obstacle_claim('squeezes through the gap')
     setups = obstacle_setups(key)
