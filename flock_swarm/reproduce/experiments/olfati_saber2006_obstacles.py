@@ -47,7 +47,9 @@ SOURCES = (
     '1500 (c2 = 2 sqrt(c1) for both), the leader\'s start and speed and the initial box are '
     'that reproduction\'s choices, taken as they are; its c1_alpha = 3 has no parameter in '
     'our law (the alpha gains are 1) and its linear gamma term is our `_linear` variant. '
-    'Check them against the report before relying on a number.')
+    'A third implementation (the TUHH Institute of Control Systems\' multi-agent library, '
+    '`ObstacleAvoidingAgent.m`) has the same beta-agent formulas for spheres and the '
+    'parameters of our notes (docs/obstacles.md). Check them against the report before relying on a number.')
 
 #: The distributions over seeds (what, metric, the paper's value).
 COLUMNS = (
