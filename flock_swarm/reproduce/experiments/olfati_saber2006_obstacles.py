@@ -49,7 +49,8 @@ SOURCES = (
     'our law (the alpha gains are 1) and its linear gamma term is our `_linear` variant. '
     'A third implementation (the TUHH Institute of Control Systems\' multi-agent library, '
     '`ObstacleAvoidingAgent.m`) has the same beta-agent formulas for spheres and the '
-    'parameters of our notes (docs/obstacles.md). Check them against the report before relying on a number.')
+    'parameters of our notes (docs/obstacles.md). Check them against the report before '
+    'relying on a number.')
 
 #: The distributions over seeds (what, metric, the paper's value).
 COLUMNS = (
