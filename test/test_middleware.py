@@ -1,6 +1,7 @@
-"""The middleware defaults of this package's processes (flock_swarm.nodes.spin.middleware_defaults):
-rmw_fastrtps's synchronous publication unless the environment names a mode, and runs that
-equal ``sim`` bit for bit in either mode (the mode changes who sends a message, never what).
+"""The middleware defaults of this package's processes
+(flock_swarm.nodes.spin.middleware_defaults): rmw_fastrtps's synchronous publication unless
+the environment names a mode, and runs that equal ``sim`` bit for bit in either mode (the
+mode changes who sends a message, never what).
 """
 
 import os
