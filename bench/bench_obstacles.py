@@ -90,10 +90,8 @@ def fingerprint(result: SimResult) -> str:
         if key in result.series:
             value = result.series[key] if key == 'obstacle_clearance' else result.series[key][-1]
             digest.update(np.ascontiguousarray(value).tobytes())
-    summary = result.summary
-    digest.update(repr([summary.get(key) for key in ('obstacle_clearance_min',
-                                                      'obstacle_penetrations',
-                                                      'obstacle_collisions')]).encode())
+    keys = ('obstacle_clearance_min', 'obstacle_penetrations', 'obstacle_collisions')
+    digest.update(repr([result.summary.get(key) for key in keys]).encode())
     return digest.hexdigest()
 
 
