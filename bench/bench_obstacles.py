@@ -16,10 +16,13 @@ time (``time.process_time``; NumPy runs on one thread here), which the other pro
 shared machine disturb far less than the wall time, printed too.
 
 Target (issue 27): the step with obstacles within 1.3 times the free-space step at
-N = 1000, printed with PASS or FAIL.
+N = 1000, printed with PASS or FAIL. At the default size and length the obstacle run's final
+state, recorded clearances and obstacle metrics are also checked against their SHA-256 under
+the code before the speed-ups (``bit for bit as before`` or ``DIFFERENT``).
 """
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -29,13 +32,18 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.core.obstacles import beta_pairs
-from flock_swarm.core.run import simulate
+from flock_swarm.core.run import SimResult, simulate
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.presets import load
 from flock_swarm.reproduce.report import machine
 
 #: Issue 27: the step with 10 obstacles at most this many times the free-space step.
 RATIO_MAX = 1.3
+#: The default run, and the :func:`fingerprint` of its obstacle run as the code before the
+#: beta term's and metrics' speed-ups computed it (main at 34110fe): the speed-ups must leave
+#: it bit for bit unchanged.
+DEFAULT_RUN = (1000, 60)
+DEFAULT_FINGERPRINT = '5c8c4e6f5dd8a2b8dee685c1c63b17f75caa191ef4c4d8cba23de61a6ad01517'
 #: The obstacles: spheres on a ring, walls on two sides of the square.
 SPHERES, SPHERE_RADIUS, WALLS = 8, 2.0, 2
 
@@ -74,15 +82,28 @@ def scenarios(n: int, steps: int) -> tuple[Scenario, Scenario]:
                       extra=start)
 
 
-def step_time(sc: Scenario) -> tuple[float, float, dict]:
-    """Return the CPU and wall seconds per step of one run of ``sc``, and its summary."""
+def fingerprint(result: SimResult) -> str:
+    """Return a SHA-256 of a run's final state (the last recorded ``q``, ``p``, ``u``), its
+    recorded clearances and its obstacle metrics: equal only if bit for bit equal."""
+    digest = hashlib.sha256()
+    for key in ('q', 'p', 'u', 'obstacle_clearance'):
+        if key in result.series:
+            value = result.series[key] if key == 'obstacle_clearance' else result.series[key][-1]
+            digest.update(np.ascontiguousarray(value).tobytes())
+    keys = ('obstacle_clearance_min', 'obstacle_penetrations', 'obstacle_collisions')
+    digest.update(repr([result.summary.get(key) for key in keys]).encode())
+    return digest.hexdigest()
+
+
+def step_time(sc: Scenario) -> tuple[float, float, SimResult]:
+    """Return the CPU and wall seconds per step of one run of ``sc``, and its result."""
     stamps: list[tuple[float, float]] = []
     result = simulate(sc, progress=lambda line: stamps.append((time.process_time(),
                                                                time.perf_counter())),
                       progress_every=0.0)
     steps = len(stamps) - 1
     return ((stamps[-1][0] - stamps[0][0]) / steps, (stamps[-1][1] - stamps[0][1]) / steps,
-            result.summary)
+            result)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,13 +117,14 @@ def main(argv: list[str] | None = None) -> int:
     free, obstructed = scenarios(args.n, args.steps)
     best = {'free': math.inf, 'obstacles': math.inf}
     wall = dict(best)
-    summary = {}
+    results = {}
     for _ in range(args.repeats):
         for name, sc in (('free', free), ('obstacles', obstructed)):
-            cpu, elapsed, summary[name] = step_time(sc)
+            cpu, elapsed, results[name] = step_time(sc)
             best[name], wall[name] = min(best[name], cpu), min(wall[name], elapsed)
     ratio = best['obstacles'] / best['free']
-    s = summary['obstacles']
+    s = results['obstacles'].summary
+    state = fingerprint(results['obstacles'])
     verdict = 'PASS' if ratio <= RATIO_MAX else 'FAIL'
     print(f'N = {args.n}, {args.steps} steps, best of {args.repeats} (interleaved), '
           f'load average {os.getloadavg()[0]:.2f} at the end')
@@ -112,6 +134,9 @@ def main(argv: list[str] | None = None) -> int:
           f'({1e3 * wall["obstacles"]:.2f} wall); closest agent '
           f'{s["obstacle_clearance_min"]:.3g} m from a surface, '
           f'{s["obstacle_penetrations"]} penetrations')
+    if (args.n, args.steps) == DEFAULT_RUN:
+        same = 'bit for bit as before' if state == DEFAULT_FINGERPRINT else 'DIFFERENT'
+        print(f'obstacle run\'s final state: {same} (sha256 {state[:16]}...)')
     print(f'ratio {ratio:.3f} CPU, {wall["obstacles"] / wall["free"]:.3f} wall '
           f'(target <= {RATIO_MAX}): {verdict}')
     if args.json is not None:
@@ -120,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
             'machine': machine(), 'n': args.n, 'steps': args.steps, 'repeats': args.repeats,
             'cpu_seconds_per_step': best, 'wall_seconds_per_step': wall, 'ratio': ratio,
             'target': RATIO_MAX, 'obstacle_clearance_min': s['obstacle_clearance_min'],
-            'obstacle_penetrations': s['obstacle_penetrations']}, indent=2) + '\n')
+            'obstacle_penetrations': s['obstacle_penetrations'],
+            'fingerprint': state}, indent=2) + '\n')
     return 0 if verdict == 'PASS' else 1
 
 

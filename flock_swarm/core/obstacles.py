@@ -260,21 +260,55 @@ class Geometry:
 
     :ivar sq: ``||q_i - y_k||^2`` to each sphere's centre, ``(S, m)``.
     :ivar signed: the signed distance to each wall, ``(W, m)``.
+    :ivar ks: with ``i_s``, the (sphere, agent) pairs with a clearance below ``r'``
+        (``sq < (R + r')^2``), obstacle-major (``np.nonzero``'s order); ``sq_in`` their
+        ``sq``.
+    :ivar kw: with ``iw``, the (wall, agent) pairs with a signed distance below ``r'``, in
+        the same order; ``signed_in`` their signed distances.
     """
 
     sq: np.ndarray
     signed: np.ndarray
+    ks: np.ndarray
+    i_s: np.ndarray
+    sq_in: np.ndarray
+    kw: np.ndarray
+    iw: np.ndarray
+    signed_in: np.ndarray
 
     def part(self, lo: int, hi: int) -> 'Geometry':
         """Return the geometry of the agents ``lo .. hi - 1`` (one run of a stack)."""
-        return Geometry(self.sq[:, lo:hi], self.signed[:, lo:hi])
+        if lo == 0 and hi == self.sq.shape[1] == self.signed.shape[1]:
+            return self
+        s = (self.i_s >= lo) & (self.i_s < hi)
+        w = (self.iw >= lo) & (self.iw < hi)
+        return Geometry(self.sq[:, lo:hi], self.signed[:, lo:hi], self.ks[s], self.i_s[s] - lo,
+                        self.sq_in[s], self.kw[w], self.iw[w] - lo, self.signed_in[w])
 
 
 def geometry(spec: ObstacleSpec, q: np.ndarray) -> Geometry:
-    """Return the :class:`Geometry` of the agents ``q``."""
+    """Return the :class:`Geometry` of the agents ``q``.
+
+    The pairs within ``r'`` are found once, for the beta term's sensed pairs (a subset) and
+    for the metrics (the closest pair and the close ones are among them, when any is within
+    ``r'``): one comparison and one ``np.flatnonzero`` of each kind's whole array a step.
+    """
     m = q.shape[0]
-    return Geometry(_sphere_sq(spec, q) if spec.spheres else np.zeros((0, m)),
-                    _wall_signed(spec, q) if spec.walls else np.zeros((0, m)))
+    none = np.zeros(0, dtype=np.intp)
+    ks = i_s = kw = iw = none
+    sq_in = signed_in = np.zeros(0)
+    sq = signed = np.zeros((0, m))
+    # np.flatnonzero and a divmod, not np.nonzero on the (count, m) mask: the same indices in
+    # the same (row-major) order, at about a third of the cost.
+    if spec.spheres:
+        sq = _sphere_sq(spec, q)
+        ks, i_s = np.divmod(np.flatnonzero(sq < spec.sensing_shell[0][:, None]), m)
+        sq_in = sq[ks, i_s]
+    if spec.walls:
+        signed = _wall_signed(spec, q)
+        kw, iw = np.divmod(np.flatnonzero(signed < spec.r_beta), m)
+        signed_in = signed[kw, iw]
+    return Geometry(sq, signed, ks, i_s, sq_in, kw, iw, signed_in)
 
 
 def clearances(spec: ObstacleSpec, q: np.ndarray) -> np.ndarray:
@@ -365,21 +399,19 @@ def phi_beta(z: np.ndarray, d_beta: float, h: float) -> np.ndarray:
 
 def _near(spec: ObstacleSpec, geo: Geometry) -> tuple[tuple, tuple]:
     """Return ``((k, i) of the spheres, (k, i) of the walls)`` within the sensing range,
-    each obstacle-major (by obstacle, then agent: each agent's obstacles in order)."""
+    each obstacle-major (by obstacle, then agent: each agent's obstacles in order).
+
+    From the geometry's pairs below ``r'``: the spheres' with the inner bound (``sq >
+    (R - r')^2``, which rarely excludes any), the walls' with ``signed > -r'`` (together
+    ``|signed| < r'``: the same pairs in the same order as testing the whole array).
+    """
     spheres = walls = (np.zeros(0, dtype=np.intp),) * 2
-    # np.flatnonzero and a divmod, not np.nonzero on the (count, m) mask: the same indices in
-    # the same (row-major) order, at about a third of the cost (the 2-D nonzero is most of
-    # the fixed cost of finding a few pairs among thousands).
-    if spec.spheres:
-        outer, inner = spec.sensing_shell
-        sq = geo.sq
-        k, i = np.divmod(np.flatnonzero(sq < outer[:, None]), sq.shape[1])
-        # The inner bound on the few candidates only (it rarely excludes any).
-        keep = sq[k, i] > inner[k]
-        spheres = (k[keep], i[keep])
-    if spec.walls:
-        signed = geo.signed
-        walls = np.divmod(np.flatnonzero(np.abs(signed) < spec.r_beta), signed.shape[1])
+    if geo.ks.size:
+        keep = geo.sq_in > spec.sensing_shell[1][geo.ks]
+        spheres = (geo.ks[keep], geo.i_s[keep])
+    if geo.kw.size:
+        keep = geo.signed_in > -spec.r_beta
+        walls = (geo.kw[keep], geo.iw[keep])
     return spheres, walls
 
 
@@ -531,6 +563,12 @@ class ObstacleMetrics:
         # stay close for many steps, and only the new ones go through the sets of tuples.
         self._close: set[int] = set()
         self._inside: set[int] = set()
+        # The geometry's pairs within r' hold every close pair when the collision distance
+        # is at most r', and the closest pair when some pair's clearance is below this
+        # bound: r' less a margin far above the rounding of sq < (R + r')^2 (ObstacleMetrics
+        # ._update_within).
+        self._within = collision_distance <= spec.r_beta
+        self._bound = spec.r_beta - 1e-9 * (spec.r_beta + float(spec.radii.max(initial=0.0)))
 
     def _fold(self, found: set, keys: np.ndarray, last: set[int]) -> set[int]:
         """Add the pairs of ``keys`` not in ``last`` to ``found``; return this instant's."""
@@ -545,6 +583,10 @@ class ObstacleMetrics:
         spec, cd = self.spec, self.collision_distance
         n_s = len(spec.spheres)
         geo = geometry(spec, q) if geo is None else geo
+        if self._within:
+            now = self._update_within(q, geo)
+            if now is not None:
+                return now
         lows = []
         sq = signed = None
         if spec.spheres and q.shape[0]:
@@ -568,6 +610,48 @@ class ObstacleMetrics:
                 k, i = np.divmod(np.flatnonzero(signed < cd), signed.shape[1])
                 keys.append(i * spec.count + (k + n_s))
                 clear.append(signed[k, i])
+            keys_all, clear_all = np.concatenate(keys), np.concatenate(clear)
+            self._close = self._fold(self.collisions, keys_all[clear_all < cd], self._close)
+            self._inside = self._fold(self.penetrations, keys_all[clear_all < 0.0],
+                                      self._inside)
+        else:
+            self._close = self._inside = set()
+        return now
+
+    def _update_within(self, q: np.ndarray, geo: Geometry) -> float | None:
+        """:meth:`update` from the geometry's pairs within ``r'`` only, bit for bit (``None``:
+        they do not settle it, no pair being clearly within ``r'`` or an agent not finite).
+
+        Every other pair has ``sq >= (R + r')^2`` (computed), so a clearance of at least
+        ``r'`` less a few roundings of ``R + r'``, or ``signed >= r'``: when a pair within
+        has a clearance below ``self._bound``, the smallest clearance is a pair's within,
+        and ``min`` is exact (as are ``sqrt`` and the subtraction of ``R``, both monotonic
+        and correctly rounded: the least ``sqrt(sq) - R`` is ``sqrt(min sq) - R``). The
+        close pairs (``sq < (R + cd)^2``, ``signed < cd``, ``cd <= r'``) are all within.
+        """
+        spec, cd = self.spec, self.collision_distance
+        lows = []
+        clear_s = None
+        if geo.ks.size:
+            clear_s = np.sqrt(geo.sq_in) - spec.radii[geo.ks]
+            lows.append(clear_s.min())
+        if geo.kw.size:
+            lows.append(geo.signed_in.min())
+        # A NaN or infinite position is no pair's (sum: one pass; an overflow falls back too).
+        if not lows or not min(lows) < self._bound or not np.isfinite(q.sum()):
+            return None
+        now = float(min(lows))
+        self.clearance_min = min(self.clearance_min, now)
+        if now < cd:
+            count, keys, clear = spec.count, [], []
+            if clear_s is not None:
+                close = geo.sq_in < self._shell[geo.ks]
+                keys.append(geo.i_s[close] * count + geo.ks[close])
+                clear.append(clear_s[close])
+            if geo.kw.size:
+                close = geo.signed_in < cd
+                keys.append(geo.iw[close] * count + (geo.kw[close] + len(spec.spheres)))
+                clear.append(geo.signed_in[close])
             keys_all, clear_all = np.concatenate(keys), np.concatenate(clear)
             self._close = self._fold(self.collisions, keys_all[clear_all < cd], self._close)
             self._inside = self._fold(self.penetrations, keys_all[clear_all < 0.0],
