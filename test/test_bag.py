@@ -780,6 +780,38 @@ def test_batched_writes_make_the_same_file_through_the_fast_path(tmp_path, monke
     assert many.message_counts == one.message_counts
 
 
+def test_batched_writes_mixed_with_single_ones_and_late_topics(tmp_path):
+    """Batches, single messages and a topic added mid-run in the same chunks (a channel
+    indexed several times in a chunk, by both paths): the file of the per-message path."""
+    odom = OdometryEncoder('agent_0').encode(0, (1.0, 2.0), (0.0, 0.0))
+    cmd = AccelEncoder().encode(0, (0.0, 0.0))
+    paths = []
+    for batched in (False, True):
+        path = tmp_path / ('many' if batched else 'one') / 'bag'
+        with BagWriter(path, chunk_size=5000) as writer:
+            writer.add_topic('/agent_0/odom', Odometry)
+            writer.add_topic('/agent_0/cmd_accel', AccelStamped)
+            for k in range(60):
+                if k == 20:
+                    writer.add_topic('/clock', Clock)
+                step = [('/agent_0/odom', odom), ('/agent_0/cmd_accel', cmd)] * (1 + k % 3)
+                if k >= 20:
+                    step.append(('/clock', serialize_message(Clock(clock=Time(sec=k)))))
+                if batched and k % 4:
+                    writer.write_serialized_many(step, k * STEP_NS)
+                else:
+                    for topic, data in step:
+                        writer.write_serialized(topic, data, k * STEP_NS)
+                if k % 5 == 0:
+                    writer.write_serialized('/agent_0/cmd_accel', cmd, k * STEP_NS)
+        paths.append(path)
+    one, many = paths
+    with mcap_file(one).open('rb') as stream:
+        assert len(make_reader(stream).get_summary().chunk_indexes) > 5
+    assert mcap_file(one).read_bytes() == mcap_file(many).read_bytes()
+    assert (one / 'metadata.yaml').read_text() == (many / 'metadata.yaml').read_text()
+
+
 def test_batched_writes_fall_back_without_the_chunk_builder(tmp_path, monkeypatch):
     """Where mcap's internals are not what the fast path expects, each message goes the
     public way: the same file."""
