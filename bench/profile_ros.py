@@ -43,8 +43,10 @@ TIMED = [
     ('flock_swarm.nodes.world', 'WorldNode', 'publish_states', '/clock and odometry out', 3),
     ('flock_swarm.nodes.recording', 'RecordedNode', 'record_message',
      'recording: queue a message', 0),
-    ('flock_swarm.bag.writer', 'BagWriter', 'write_serialized_many', 'recording: write to the bag',
-     0),
+    ('flock_swarm.nodes.recording', 'RecordedNode', 'record_messages',
+     'recording: queue a batch', 0),
+    ('flock_swarm.bag.writer', 'BagWriter', 'write_serialized_batch',
+     'recording: write to the bag', 0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'on_odom', 'agents: an odometry in', 0),
     ('flock_swarm.nodes.agent', 'AgentNode', 'try_answer', 'agents: answer the step', 1),
     ('flock_swarm.nodes.controller', 'AgentController', 'command', 'graph and law', 2),
@@ -56,7 +58,7 @@ TIMED = [
 
 
 #: Rows of the recording, timed inside the handlers above them (not added to their sum).
-RECORDING = ('record_message', 'write_serialized_many')
+RECORDING = ('record_message', 'record_messages', 'write_serialized_batch')
 
 
 def instrument(totals: dict) -> None:

@@ -295,6 +295,24 @@ def test_accel_batch_leaves_anything_else_to_the_one_by_one_path(spoil):
 
 
 @pytest.mark.parametrize('dim', [2, 3])
+def test_accel_batch_encoder_writes_the_encoders_bytes(dim):
+    """The agents' commands encoded at once are, row by row, AccelEncoder's bytes (non-finite
+    values and -0.0 included), and encoding again overwrites stamp and vectors."""
+    from flock_swarm.nodes.wire import AccelBatchEncoder
+    rng = np.random.default_rng(dim)
+    batch = AccelBatchEncoder(BATCH_N)
+    for ns in (1_020_000_000, 7, 0):
+        u = rng.normal(size=(BATCH_N, dim))
+        u[0, 0], u[1, -1], u[2, 0] = np.nan, -0.0, np.inf
+        assert batch.encode(ns, u) == [AccelEncoder().encode(ns, row) for row in u.tolist()]
+        msg = deserialize_message(batch.encode(ns, u)[3], AccelStamped)
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == ns
+        assert [msg.accel.linear.x, msg.accel.linear.y, msg.accel.linear.z][:dim] == \
+            u[3].tolist()
+    assert AccelBatchEncoder(0).encode(5, np.zeros((0, 2))) == []
+
+
+@pytest.mark.parametrize('dim', [2, 3])
 def test_odometry_batch_encoder_writes_the_encoders_bytes(dim):
     """A step encoded at once is, message by message, what rclpy reads as the states (and
     the one-message encoder's bytes); encoding again overwrites stamp and vectors."""

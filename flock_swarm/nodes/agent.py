@@ -60,8 +60,9 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer
-from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, StateEncoder, decode_accel,
-                                    decode_heading, decode_odometry, encode_twist)
+from flock_swarm.nodes.wire import (AccelBatchEncoder, AccelEncoder, MalformedMessage,
+                                    StateEncoder, decode_accel, decode_heading,
+                                    decode_odometry, encode_twist)
 
 
 def _timeout(name: str, default: float, description: str) -> Param:
@@ -162,9 +163,11 @@ class AgentNode(Node):
         self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, qos, raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel, qos,
                                  raw=True)
-        self.encoder = AccelEncoder()
+        self.encoder = AccelBatchEncoder(len(self.cmd_pubs))
         self.outbox: list[tuple[int, bytes]] = []
         self.matched = [False] * len(self.pubs)
+        # Every topic matched once: flush sends the outbox as it is.
+        self.all_matched = False
         self.sent: list[tuple[int, bytes]] = []
         self.duplicates: set[int] = set()
         wall_timer(self, 1.0, self.check_claims)
@@ -335,7 +338,10 @@ class AgentNode(Node):
                 self.usage_encoder.encode
             sent += [(first + row, encode_usage(stamp_ns, values))
                      for row, values in enumerate(usage.tolist())]
-        self.sent = sent + [(row, encode(stamp_ns, a)) for row, a in enumerate(u.tolist())]
+        # The commands of every hosted agent encoded at once (AccelBatchEncoder).
+        self.sent = sent + list(enumerate(encode(stamp_ns, u))) if len(u) == self.encoder.n \
+            else sent + [(row, AccelEncoder().encode(stamp_ns, a))
+                         for row, a in enumerate(u.tolist())]
         self.outbox.extend(self.sent)
         if self.velocity:
             # Not in self.sent: an unstamped command is never repeated (see the module).
@@ -355,14 +361,18 @@ class AgentNode(Node):
         """
         if not self.outbox:
             return
-        waiting, ready, matched = [], [], self.matched
-        for row, msg in self.outbox:
-            if matched[row] or self.pubs[row].get_subscription_count() > 0:
-                matched[row] = True
-                ready.append((row, msg))
-            else:
-                waiting.append((row, msg))
-        self.outbox = waiting
+        if self.all_matched:
+            ready, self.outbox = self.outbox, []
+        else:
+            waiting, ready, matched = [], [], self.matched
+            for row, msg in self.outbox:
+                if matched[row] or self.pubs[row].get_subscription_count() > 0:
+                    matched[row] = True
+                    ready.append((row, msg))
+                else:
+                    waiting.append((row, msg))
+            self.outbox = waiting
+            self.all_matched = all(matched)
         if self.batch_out is not None:
             self.batch_out.publish(ready)
             return

@@ -8,10 +8,8 @@ step); :class:`BagSink` queues them and writes them to the MCAP bag once a step.
 import json
 import os
 import shutil
-from itertools import groupby
-from operator import itemgetter
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Callable, Protocol, Sequence
 
 import yaml
 
@@ -40,6 +38,9 @@ class MessageSink(Protocol):
 
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Take one serialised message of simulation time ``t_ns`` [ns]."""
+
+    # Optional: write_many(topics, data, t_ns), the same as write for each message in turn
+    # (RecordedNode.record_messages uses it where a sink has it).
 
     def flush(self) -> None:
         """Deliver what was taken (called once a step)."""
@@ -132,8 +133,9 @@ class BagSink:
         self.path = path
         self.failed = failed
         self.error: str | None = None
-        # Messages waiting for the bag: (topic, data, t_ns), written once a step.
-        self.records: list[tuple[str, bytes, int]] = []
+        # Messages waiting for the bag, written once a step: runs of one time each,
+        # (t_ns, topics, data) in the order they came.
+        self.runs: list[tuple[int, list[str], list[bytes]]] = []
 
     def __str__(self) -> str:
         """Return ``the bag PATH`` (for log lines)."""
@@ -147,17 +149,33 @@ class BagSink:
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Queue a message for the bag (written by :meth:`flush`, once a step)."""
         if self.bag is not None:
-            self.records.append((topic, data, t_ns))
+            runs = self.runs
+            if runs and runs[-1][0] == t_ns:
+                runs[-1][1].append(topic)
+                runs[-1][2].append(data)
+            else:
+                runs.append((t_ns, [topic], [data]))
+
+    def write_many(self, topics: Sequence[str], data: Sequence[bytes], t_ns: int) -> None:
+        """Queue messages ``data[m]`` on ``topics[m]``, all of time ``t_ns`` (as :meth:`write`
+        for each in turn)."""
+        if self.bag is not None:
+            runs = self.runs
+            if runs and runs[-1][0] == t_ns:
+                runs[-1][1].extend(topics)
+                runs[-1][2].extend(data)
+            else:
+                runs.append((t_ns, list(topics), list(data)))
 
     def flush(self) -> None:
         """Write the queued messages, in the order they were queued, a run of equal times at
-        once (:meth:`~flock_swarm.bag.BagWriter.write_serialized_many`)."""
-        queue, self.records = self.records, []
-        if self.bag is None or not queue:
+        once (:meth:`~flock_swarm.bag.BagWriter.write_serialized_batch`)."""
+        runs, self.runs = self.runs, []
+        if self.bag is None or not runs:
             return
         try:
-            for t_ns, run in groupby(queue, key=itemgetter(2)):
-                self.bag.write_serialized_many([(topic, data) for topic, data, _ in run], t_ns)
+            for t_ns, topics, data in runs:
+                self.bag.write_serialized_batch(topics, data, t_ns)
         except OSError as exc:
             self._fail(exc)
 
@@ -185,12 +203,13 @@ class BagSink:
             return False
         ran = [topic for topic, count in self.bag.message_counts.items()
                if count and not _is_provenance(topic)]
-        return not ran and all(_is_provenance(topic) for topic, _, _ in self.records)
+        return not ran and all(_is_provenance(topic) for _, topics, _ in self.runs
+                               for topic in topics)
 
     def discard(self) -> None:
         """Remove the bag directory: a run stopped before anything was recorded leaves no
         empty bag to look like a recording (and ``swarm --out`` can be used again)."""
-        self.records = []
+        self.runs = []
         bag, self.bag = self.bag, None
         try:
             if bag is not None:
@@ -251,6 +270,18 @@ class RecordedNode(Node):
         """Hand a serialised message of simulation time ``t_ns`` [ns] to every sink."""
         for sink in self.sinks:
             sink.write(topic, data, t_ns)
+
+    def record_messages(self, topics: Sequence[str], data: Sequence[bytes], t_ns: int) -> None:
+        """Hand serialised messages ``data[m]`` of ``topics[m]``, all of simulation time
+        ``t_ns`` [ns], to every sink: as :meth:`record_message` for each in turn, at once
+        where the sink takes a batch (``write_many``)."""
+        for sink in self.sinks:
+            many = getattr(sink, 'write_many', None)
+            if many is not None:
+                many(topics, data, t_ns)
+            else:
+                for topic, message in zip(topics, data):
+                    sink.write(topic, message, t_ns)
 
     def recorded_subscription(self, msg_type, topic: str, decode: Callable,
                               handler: Callable, take: Callable[[bytes], None] | None = None

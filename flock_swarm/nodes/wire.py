@@ -422,6 +422,38 @@ class OdometryBatchEncoder:
         return [blob[lo:hi] for lo, hi in self.bounds]
 
 
+class AccelBatchEncoder:
+    """Every hosted agent's command of a step encoded at once: byte for byte an
+    :class:`AccelEncoder`'s message per row (the same frame), from one template of ``n``
+    messages into which the stamps and the vectors are written with one NumPy scatter each."""
+
+    def __init__(self, n: int, frame: str = FRAME) -> None:
+        """Prepare the template of ``n`` commands."""
+        one = AccelEncoder(frame)
+        size = len(one.buf)
+        self.n = n
+        self.template = np.tile(np.frombuffer(bytes(one.buf), dtype=np.uint8), n)
+        starts = np.arange(n, dtype=np.intp) * size
+        self.bounds = list(zip(starts.tolist(), (starts + size).tolist()))
+        self.stamps = starts[:, None] + np.arange(4, 12)
+        self.linear = starts + one.vectors[0]
+        self._scatter: dict[int, np.ndarray] = {}
+
+    def encode(self, ns: int, linear: np.ndarray) -> list[bytes]:
+        """Return row ``j``'s command stamped ``ns`` [ns] with ``linear[j]`` (``(n, dim)``,
+        dim 2 or 3; 2-D: z stays 0)."""
+        dim = linear.shape[1]
+        scatter = self._scatter.get(dim)
+        if scatter is None:
+            scatter = self._scatter[dim] = self.linear[:, None] + np.arange(8 * dim)
+        buf = self.template
+        buf[self.stamps] = np.frombuffer(_LE.time.pack(*divmod(ns, NS_PER_S)), dtype=np.uint8)
+        buf[scatter] = np.ascontiguousarray(linear, dtype='<f8').view(np.uint8) \
+            .reshape(self.n, 8 * dim)
+        blob = buf.tobytes()
+        return [blob[lo:hi] for lo, hi in self.bounds]
+
+
 #: ``builtin_interfaces/Time`` in little-endian CDR.
 _STAMP_LE = np.dtype([('sec', '<i4'), ('nanosec', '<u4')])
 

@@ -189,9 +189,10 @@ class WorldNode(RecordedNode):
         plant = self.stepper.plant
         self.odom_encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)],
                                                  oriented=plant is not None and plant.oriented)
-        self.state_topics = [pub.topic_name for pub in [self.clock_pub] + self.odom_pubs]
+        self.state_pubs = [self.clock_pub] + self.odom_pubs
+        self.state_topics = [pub.topic_name for pub in self.state_pubs]
         # The current step's serialised /clock and odometry, offered again if it stalls.
-        self.step_bytes: list[tuple] = []
+        self.step_bytes: list[bytes] = []
         self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed,
                                    sc.headline, sc.obstacles)
         subscribe = self.recorded_subscription
@@ -283,9 +284,9 @@ class WorldNode(RecordedNode):
         queue = self.inbox.take()
         k = self.inbox.take_step(queue)
         if k is not None:
-            t_ns, topics = self.clock.ns(k), self.cmd_topics
-            for i, data in queue:
-                self.record_message(topics[i], data, t_ns)
+            topics = self.cmd_topics
+            self.record_messages([topics[i] for i, _ in queue], [data for _, data in queue],
+                                 self.clock.ns(k))
             self._maybe_finish()
             return
         for i, data in queue:
@@ -409,23 +410,22 @@ class WorldNode(RecordedNode):
     def publish_states(self, t_ns: int) -> None:
         """Publish ``/clock`` and every agent's odometry for time ``t_ns``, and record them."""
         st = self.stepper
-        sent = [(self.clock_pub, encode_clock(t_ns))]
         rows = (st.q, st.p) if st.plant is None else odometry_rows(st.plant, st.x,
                                                                    self.scenario.dim)
-        sent += zip(self.odom_pubs, self.odom_encoder.encode(t_ns, *rows))
+        sent = [encode_clock(t_ns)]
+        sent += self.odom_encoder.encode(t_ns, *rows)
         self.send(sent)
+        self.record_messages(self.state_topics, sent, t_ns)
         for sink in self.sinks:
-            for name, (_, data) in zip(self.state_topics, sent):
-                sink.write(name, data, t_ns)
             sink.flush()
         self.step_bytes = sent
 
-    def send(self, sent: list[tuple]) -> None:
-        """Publish ``/clock`` and every odometry, ``(publisher, bytes)`` in that order."""
+    def send(self, sent: list[bytes]) -> None:
+        """Publish ``/clock`` and every odometry (their bytes, in that order)."""
         if self.state_out is not None:
-            self.state_out.publish_to(self.state_targets, [data for _, data in sent])
+            self.state_out.publish_to(self.state_targets, sent)
             return
-        for pub, data in sent:
+        for pub, data in zip(self.state_pubs, sent):
             pub.publish(data)
 
     def go_on(self, obs: Observation) -> None:
