@@ -148,13 +148,7 @@ class BagSink:
 
     def write(self, topic: str, data: bytes, t_ns: int) -> None:
         """Queue a message for the bag (written by :meth:`flush`, once a step)."""
-        if self.bag is not None:
-            runs = self.runs
-            if runs and runs[-1][0] == t_ns:
-                runs[-1][1].append(topic)
-                runs[-1][2].append(data)
-            else:
-                runs.append((t_ns, [topic], [data]))
+        self.write_many((topic,), (data,), t_ns)
 
     def write_many(self, topics: Sequence[str], data: Sequence[bytes], t_ns: int) -> None:
         """Queue messages ``data[m]`` on ``topics[m]``, all of time ``t_ns`` (as :meth:`write`
