@@ -413,6 +413,8 @@ def _stepped(out) -> bool:
 
 @pytest.mark.parametrize('extra_env, args, key', [
     ({'AMENT_PREFIX_PATH': '/nonexistent'}, [], 'record'),
+    # Unset in effect (ament_index_python raises EnvironmentError, not a lookup failure).
+    ({'AMENT_PREFIX_PATH': ''}, [], 'record'),
     ({}, ['-p', 'protocol.r:=-1.0'], 'protocol.r'),
     ({}, ['-p', 'step_timeout:=0.0'], 'step_timeout'),
     ({}, ['-p', 'mode:=warp'], 'mode'),

@@ -115,6 +115,9 @@ def _definition_path(type_name: str, extension: str) -> Path:
     except (PackageNotFoundError, ValueError):
         raise DefinitionNotFoundError(
             f'package {package!r} of {type_name} is not in the ament index') from None
+    except OSError as exc:
+        # ament_index_python's EnvironmentError: AMENT_PREFIX_PATH unset or empty.
+        raise DefinitionNotFoundError(f'{type_name}: {exc}') from None
     path = share / namespace / f'{name}{extension}'
     if not path.is_file():
         raise DefinitionNotFoundError(f'no {path.name} in {path.parent}')
