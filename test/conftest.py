@@ -12,6 +12,8 @@ import shutil
 import subprocess
 import sys
 
+import pytest
+
 # DDS discovery stays on this machine unless the caller asked otherwise (scripts/env.sh sets
 # the same default), so a test run never talks to, or hears from, another host, also in the
 # tests that start processes without a ros_domain fixture.
@@ -121,3 +123,20 @@ def imported_modules(path) -> set[str]:
             found.add(node.module)
             found.update(f'{node.module}.{alias.name}' for alias in node.names)
     return found
+
+
+@pytest.fixture(scope='session')
+def quick_reproduction(tmp_path_factory) -> Path:
+    """Run ``python -m flock_swarm.reproduce --quick --skip-ros`` once for the whole session
+    (about a minute) into a temporary directory: ``out/``, ``report.md``, ``figures/``.
+
+    Read-only for the tests that share it; a test that runs the reproduction again copies
+    ``out/`` first (test_reproduce_seeds).
+    """
+    from flock_swarm.cli import reproduce
+    root = tmp_path_factory.mktemp('reproduce')
+    status = reproduce.main(['--quick', '--skip-ros', '--jobs', '2', '--out', str(root / 'out'),
+                             '--report', str(root / 'report.md'),
+                             '--figures', str(root / 'figures')])
+    assert status == 0
+    return root

@@ -41,15 +41,10 @@ def sections(text):
     return dict(zip(parts[1::2], parts[2::2]))
 
 
-@pytest.fixture(scope='module')
-def quick_run(tmp_path_factory):
-    """Run ``--quick --skip-ros`` once into a temporary directory."""
-    root = tmp_path_factory.mktemp('reproduce')
-    status = reproduce.main(['--quick', '--skip-ros', '--jobs', '2', '--out', str(root / 'out'),
-                             '--report', str(root / 'report.md'),
-                             '--figures', str(root / 'figures')])
-    assert status == 0
-    return root
+@pytest.fixture
+def quick_run(quick_reproduction):
+    """The session's ``--quick --skip-ros`` run (conftest.quick_reproduction)."""
+    return quick_reproduction
 
 
 def test_report_has_a_section_per_experiment(quick_run):

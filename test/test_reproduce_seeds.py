@@ -4,6 +4,7 @@ settling time on a synthetic series, a ``--quick`` report rendered from partial 
 Fig. 3 curves judged at the paper's anchors, and an interrupted reproduction."""
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -112,11 +113,12 @@ def test_settling_time_is_the_last_entry_below_the_tolerance():
     assert settling_time(series, 0.1) is None
 
 
-def test_quick_report_renders_from_partial_caches(tmp_path):
+def test_quick_report_renders_from_partial_caches(tmp_path, quick_reproduction):
+    # The session's full quick run, copied: this test runs the reproduction again in it.
     out = tmp_path / 'out'
+    shutil.copytree(quick_reproduction / 'out', out)
     common = ['--quick', '--skip-ros', '--jobs', '1', '--out', str(out),
               '--report', str(tmp_path / 'report.md'), '--figures', str(tmp_path / 'figures')]
-    assert reproduce.main(common) == 0
     full = read_cache(out / 'seeds' / 'reproduce_su2009_fig2.jsonl')
     assert len(full) == 2
     # A partial cache: one of the two seeds of Fig. 2, nothing else.
