@@ -31,7 +31,7 @@ from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.player import (
     CLOCK_TOPIC, format_ns, Player, REPLAY_DEPTH, replay_qos, ReplayError, select_topics)
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process
+from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
 
 pytestmark = pytest.mark.ros
 
@@ -442,8 +442,10 @@ def test_truncated_bag_replays_its_recovered_prefix(tmp_path, ros_context):
 
 def cli_env() -> dict:
     env = dict(os.environ, PYTHONUNBUFFERED='1')
-    # A domain of its own: the player's publishers must not meet another test's nodes.
-    env['ROS_DOMAIN_ID'] = str(201 + os.getpid() % 30)
+    # A domain of its own, held against every other process of the machine (pytest-xdist's
+    # workers included) until this one exits: the player's publishers (its /clock too) must
+    # not meet another test's nodes, and a world refuses a domain with another /clock on it.
+    env['ROS_DOMAIN_ID'] = str(unique_domain())
     return env
 
 

@@ -158,9 +158,13 @@ GOOD_ACCEL = serialize_message(accel(1, 2, 'world', (1.0, 2.0, 3.0)))
 GOOD_STATE = StateEncoder(('h', 'e[0]', 'e[1]')).encode(1_000_000_002, (1.0, 2.0, 3.0))
 
 
+# Named ids, not the bytes: serialize_message leaves CDR's alignment padding as it found the
+# buffer, so the bytes differ between processes, and pytest-xdist's workers must collect the
+# same test ids.
 @pytest.mark.parametrize('decode, good', [(decode_odometry, GOOD_ODOM),
                                           (decode_accel, GOOD_ACCEL),
-                                          (decode_state, GOOD_STATE)])
+                                          (decode_state, GOOD_STATE)],
+                         ids=['odometry', 'accel', 'state'])
 def test_every_truncation_is_malformed(decode, good):
     for size in range(len(good)):
         with pytest.raises(MalformedMessage):
@@ -176,7 +180,8 @@ def test_every_truncation_is_malformed(decode, good):
     (GOOD_ACCEL[:12] + struct.pack('<I', 10**6) + GOOD_ACCEL[16:], 'NUL'),  # beyond the end
     (GOOD_ACCEL[:16] + b'world!' + GOOD_ACCEL[22:], 'NUL'),            # no terminator
     (GOOD_ACCEL[:16] + b'w\xffrld\0' + GOOD_ACCEL[22:], 'UTF-8'),
-])
+], ids=['empty', 'pl-cdr-be', 'unknown-kind', 'zero-length', 'length-beyond-end',
+        'no-terminator', 'bad-utf8'])
 def test_malformed_bytes_raise_with_a_reason(data, reason):
     with pytest.raises(MalformedMessage, match=reason):
         decode_accel(data)
