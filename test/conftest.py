@@ -125,18 +125,46 @@ def imported_modules(path) -> set[str]:
     return found
 
 
+#: How long a pytest-xdist worker waits for another's quick reproduction (it takes about a
+#: minute alone, two or three beside the other worker's tests).
+QUICK_REPRODUCTION_WAIT = 600.0
+
+
 @pytest.fixture(scope='session')
 def quick_reproduction(tmp_path_factory) -> Path:
     """Run ``python -m flock_swarm.reproduce --quick --skip-ros`` once for the whole session
     (about a minute) into a temporary directory: ``out/``, ``report.md``, ``figures/``.
 
     Read-only for the tests that share it; a test that runs the reproduction again copies
-    ``out/`` first (test_reproduce_seeds).
+    ``out/`` first (test_reproduce_seeds). Under pytest-xdist (scripts/test's default) the
+    workers share one run: it goes in the session's common temporary directory, and the first
+    worker to need it runs it holding a lock while the others wait (at most
+    :data:`QUICK_REPRODUCTION_WAIT`) and then read it. (xdist's ``--dist loadgroup`` would
+    send its tests to one worker instead, but 3.8.0 cannot mark a test's id under pytest 9.2.)
     """
+    import fcntl
+    import time
     from flock_swarm.cli import reproduce
-    root = tmp_path_factory.mktemp('reproduce')
-    status = reproduce.main(['--quick', '--skip-ros', '--jobs', '2', '--out', str(root / 'out'),
-                             '--report', str(root / 'report.md'),
-                             '--figures', str(root / 'figures')])
-    assert status == 0
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get('PYTEST_XDIST_WORKER'):
+        base = base.parent  # the session's, shared by its workers (each has a directory in it)
+    root, done = base / 'quick_reproduction', base / 'quick_reproduction.done'
+    deadline = time.monotonic() + QUICK_REPRODUCTION_WAIT
+    with open(base / 'quick_reproduction.lock', 'w') as lock:
+        while True:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                assert time.monotonic() < deadline, (
+                    f'another worker held {lock.name} for {QUICK_REPRODUCTION_WAIT:.0f} s')
+                time.sleep(0.5)  # polling a lock another process holds: no event to wait on
+        if not done.exists():
+            shutil.rmtree(root, ignore_errors=True)  # what a failed attempt left
+            status = reproduce.main(['--quick', '--skip-ros', '--jobs', '2',
+                                     '--out', str(root / 'out'),
+                                     '--report', str(root / 'report.md'),
+                                     '--figures', str(root / 'figures')])
+            assert status == 0
+            done.touch()
     return root
