@@ -465,7 +465,11 @@ class Player(Node):
         self._pass_start_ns = start_ns
         self._wall_zero = time.monotonic()
         if self._clock_pub is not None:
-            self._next_clock = self._wall_zero
+            # The pass's first tick is its start, exactly (not the bag time of the moment the
+            # first message is read, which a loaded machine delays); the others follow bag time.
+            self._publish_clock(self._wall_zero)
+            result.clock_ticks += 1
+            self._next_clock = self._wall_zero + self._clock_period
         published = 0
         for message in self._reader.messages(self._topic_pubs):
             if message.log_time_ns < start_ns:
