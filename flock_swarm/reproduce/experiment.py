@@ -373,7 +373,10 @@ class Experiment:
         ``None`` without set-ups (:func:`flock_swarm.reproduce.seeds.run_study`)."""
         if not self.setups:
             return None
-        return seeds.run_study(self, cache_dir, backend, say, quick, cached_only, live)
+        res = seeds.run_study(self, cache_dir, backend, say, quick, cached_only, live)
+        res['curves_figure'] = seeds.curves_figure(res, self.key,
+                                                   figures / f'{self.key}_curves.png')
+        return res
 
     def seeds_section(self, res: dict, figures: Path) -> list[str]:
         """Return the report lines of the study over seeds.
@@ -381,7 +384,7 @@ class Experiment:
         :param res: :meth:`run_study`'s result.
         :param figures: the figures' directory relative to the report.
         """
-        return seeds.section(self, res)
+        return seeds.section(self, res, figures)
 
     def judge(self, res: dict) -> dict:
         """Return the experiment's verdicts: ``{'verdict': the paper's set-up's, 'over':
@@ -396,8 +399,20 @@ class Experiment:
         first = study['setups'][0]
         over = f'{first["label"]}: {first["seeds"]} of {first["planned"]} seeds; ' \
             + seeds.judgement_text(first['judged'])
+        clear = seeds.margin(first['judged'])
+        if clear is not None:
+            over += f', margin {fmt(clear)}'
+        held = first.get('held_out')
+        if held is not None:
+            over += (f'; held-out seeds ({held["seeds"]} of {held["planned"]}): '
+                     + (seeds.judgement_text(held['judged']) + f', {held["judged"]["verdict"]}'
+                        if held['seeds'] else 'none cached yet'))
+
+        def verdict(s: dict) -> str:
+            return s['judged']['verdict'] + (' (fragile)' if s.get('fragile') else '')
         return {'verdict': first['judged']['verdict'], 'over': over,
-                'setups': [(s['label'], s['judged']['verdict']) for s in study['setups']]}
+                'fragile': bool(first.get('fragile')),
+                'setups': [(s['label'], verdict(s)) for s in study['setups']]}
 
 
 @dataclass(frozen=True)

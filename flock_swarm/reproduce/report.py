@@ -108,6 +108,8 @@ def verdict_cell(judged: dict) -> str:
     if judged['verdict'] == stats.NOT_RUN:
         return stats.NOT_RUN
     text = f'**{judged["verdict"]}**'
+    if judged.get('fragile'):
+        text += ' (**fragile**: the held-out seeds differ)'
     others = [f'{label}: {verdict}' for label, verdict in judged['setups'][1:]]
     return text + (f' (variants: {"; ".join(others)})' if others else '')
 

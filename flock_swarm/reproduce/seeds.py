@@ -21,7 +21,10 @@ import numpy as np
 from flock_swarm import __version__
 from flock_swarm.core.run import SimResult
 from flock_swarm.core.scenario import Scenario
-from flock_swarm.reproduce.common import cell, fmt
+from flock_swarm.reproduce.common import FIG_SIZE, cell, fmt, pyplot, save_figure
+from flock_swarm.reproduce.questions import (LEADER_KEY, TIMES, TOLERANCES, question_keys,
+                                             three_questions, time_key, tolerance_key)
+from flock_swarm.reproduce.stats import mean_interval
 from flock_swarm.study.cache import read_cache
 from flock_swarm.study.spec import Run, plain
 
@@ -32,6 +35,12 @@ QUICK_SEEDS = 2
 #: Seeds per set-up where a run costs under :data:`CHEAP_RUN_S` of computing, and where more.
 SEEDS_CHEAP, SEEDS_COSTLY = 50, 20
 CHEAP_RUN_S = 60.0
+#: The first seed of the held-out set: every set-up is judged again on as many seeds from
+#: here (disjoint from the first set, which starts at 1), cached apart
+#: (``NAME_heldout.jsonl``); a verdict that differs between the two sets is *fragile*.
+HELD_OUT_FIRST = 1001
+#: The suffix of a held-out set's cache.
+HELD_OUT_SUFFIX = '_heldout'
 
 
 def settling_time(series: dict, tolerance: float) -> float | None:
@@ -64,6 +73,10 @@ class SeedRecorder:
         """Return the record (non-finite values as ``None``)."""
         s, series = result.summary, result.series
         metrics: dict[str, Any] = self.experiment.analyse(sc, s, series)
+        if {'q', 'p', 'leader_p', 'informed'} <= series.keys():
+            # The three questions of every study (flock_swarm.reproduce.questions); an
+            # experiment's own analysis keeps its keys.
+            metrics = {**three_questions(sc, series), **metrics}
         metrics['settling_time'] = settling_time(series, sc.eta_tolerance)
         gains = s.get('adaptive_gain_final')
         if gains:
@@ -85,6 +98,16 @@ def distribution(values: list) -> dict:
         out.update(mean=float(arr.mean()), std=float(arr.std(ddof=1)) if arr.size > 1 else 0.0,
                    min=float(arr.min()), max=float(arr.max()))
     return out
+
+
+def mean_with_interval(values: list) -> dict:
+    """Return the mean of the finite numbers of ``values``, its 95 % t interval (``None``
+    below two values) and their count."""
+    nums = [float(v) for v in values
+            if v is not None and not isinstance(v, (str, bool)) and math.isfinite(float(v))]
+    mean, interval = mean_interval(nums)
+    return {'count': len(nums), 'mean': mean if nums else None,
+            'interval': list(interval) if interval else None}
 
 
 def point_label(setup, point: dict) -> str:
@@ -120,7 +143,9 @@ def summarise(exp, groups: list[tuple[str, list[dict], int]], notes: dict | None
                          for r in sorted(records, key=lambda r: r['seed'])]
             if exp.per_seed else [],
             'stats': {key: distribution([m.get(key) for m in metrics])
-                      for _, key, _ in exp.columns}})
+                      for _, key, _ in exp.columns},
+            'questions': {key: mean_with_interval([m.get(key) for m in metrics])
+                          for key in question_keys()}})
     out = {'setups': setups, 'criterion': exp.criterion.statement()}
     paired = getattr(exp, 'paired', None)
     if paired is not None:
@@ -149,46 +174,94 @@ def study_runs(name: str | dict, overrides: tuple[str, ...] = (), seeds: int | N
 
 
 def run_study(exp, cache_dir: Path, backend, say: Callable[[str], None], quick: bool = False,
-              cached_only: bool = False, live: Callable[[str], None] | None = None) -> dict:
+              cached_only: bool = False, live: Callable[[str], None] | None = None,
+              held_out: bool | None = None) -> dict:
     """Run (or resume, or only read) the set-ups of one experiment; return their summary.
 
+    Each set-up runs on its seeds (from 1) and, unless ``quick``, on as many held-out seeds
+    from :data:`HELD_OUT_FIRST`: each set-up's summary then carries ``held_out`` (the
+    criterion's judgement on those seeds) and ``fragile`` (whether the two verdicts differ).
+
     :param exp: the experiment.
-    :param cache_dir: where the caches ``NAME.jsonl`` live.
+    :param cache_dir: where the caches ``NAME.jsonl`` (and ``NAME_heldout.jsonl``) live.
     :param backend: where missing runs go.
     :param say: progress lines.
     :param quick: the experiment's ``--quick`` overrides and :data:`QUICK_SEEDS` seeds.
     :param cached_only: run nothing; use what the caches hold.
     :param live: rewrites the terminal's progress line, or ``None``.
+    :param held_out: whether to judge the held-out seeds too (default: unless ``quick``).
     """
-    from flock_swarm.study.execute import execute
-    groups, notes = [], {}
+    held_out = not quick if held_out is None else held_out
+    groups, notes, second = [], {}, []
     for setup in exp.setups:
-        spec, runs = study_runs(setup.spec, tuple(exp.quick) if quick else (),
-                                QUICK_SEEDS if quick else None)
-        path = cache_dir / f'{spec.name}.jsonl'
-        if cached_only:
-            cache = read_cache(path, ('digest', 'status'), say)
-            records = [cache[r.digest] for r in runs if r.digest in cache]
-        else:
-            records = execute(runs, path, SeedRecorder(exp), backend, spec.stack_agents, say,
-                              live, prefix=spec.name)['records']
-        records = [r for r in records if r['status'] == 'completed']
-        points = []
-        for run in runs:
-            if run.point not in points:
-                points.append(run.point)
-        for point in points:
-            mine = [r for r in records if r['point'] == plain(point)]
-            label = point_label(setup, point)
-            groups.append((label, mine, len(spec.seeds)))
-            if label in setup.notes:
-                notes[label] = setup.notes[label]
+        found = _setup_groups(exp, setup, cache_dir, backend, say, quick, cached_only, live)
+        groups += found
+        notes.update({label: setup.notes[label] for label, _, _ in found
+                      if label in setup.notes})
+        if held_out:
+            second += _setup_groups(exp, setup, cache_dir, backend, say, quick, cached_only,
+                                    live, held_out=True)
     res = summarise(exp, groups, notes)
+    if held_out:
+        attach_held_out(res, exp, second)
     # A spec written in the experiment's module has no file for `sweep` to read.
     res['commands'] = [f'sweep {s.name}' if isinstance(s.spec, str)
                        else 'python -m flock_swarm.reproduce --seeds-only' for s in exp.setups]
     res['caches'] = [str(cache_dir / f'{s.name}.jsonl') for s in exp.setups]
     return res
+
+
+def _setup_groups(exp, setup, cache_dir: Path, backend, say, quick: bool, cached_only: bool,
+                  live, held_out: bool = False) -> list[tuple[str, list[dict], int]]:
+    """Return ``(label, completed records, planned seeds)`` of each point of a set-up, run
+    (or read) on its own seeds or, with ``held_out``, on the held-out ones."""
+    from flock_swarm.study.execute import execute
+    seeds = QUICK_SEEDS if quick else None
+    if held_out:
+        spec, _ = study_runs(setup.spec, tuple(exp.quick) if quick else (), seeds)
+        seeds = {'first': HELD_OUT_FIRST, 'count': len(spec.seeds)}
+    spec, runs = study_runs(setup.spec, tuple(exp.quick) if quick else (), seeds)
+    path = cache_dir / f'{spec.name}{HELD_OUT_SUFFIX if held_out else ""}.jsonl'
+    if cached_only:
+        cache = read_cache(path, ('digest', 'status'), say) if path.exists() else {}
+        records = [cache[r.digest] for r in runs if r.digest in cache]
+    else:
+        records = execute(runs, path, SeedRecorder(exp), backend, spec.stack_agents, say,
+                          live, prefix=spec.name + (HELD_OUT_SUFFIX if held_out else ''))[
+                              'records']
+    records = [r for r in records if r['status'] == 'completed']
+    points = []
+    for run in runs:
+        if run.point not in points:
+            points.append(run.point)
+    return [(point_label(setup, point), [r for r in records if r['point'] == plain(point)],
+             len(spec.seeds)) for point in points]
+
+
+def attach_held_out(res: dict, exp, groups: list[tuple[str, list[dict], int]]) -> None:
+    """Judge each set-up of :func:`summarise`'s ``res`` again on its held-out records
+    (``groups``, in the same order); mark it ``fragile`` when the verdicts differ."""
+    for setup, (label, records, planned) in zip(res['setups'], groups):
+        judged = exp.criterion.judge(records)
+        setup['held_out'] = {'label': label, 'seeds': len(records), 'planned': planned,
+                             'judged': judged}
+        setup['fragile'] = bool(records) and judged['verdict'] != setup['judged']['verdict']
+
+
+def margin(judged: dict) -> float | None:
+    """Return how far the interval clears the nearer edge of the band that supports the claim
+    (negative: by how much it misses it; ``None`` without an interval).
+
+    A reproduced verdict with a margin of 0.002 rests on an edge; the report says so.
+    """
+    interval, band = judged.get('interval'), judged.get('band')
+    if not interval or not band:
+        return None
+    edges = [interval[0] - band[0]]
+    if judged.get('statistic') != 'fraction of seeds':
+        # A fraction's upper end (1) cannot be passed: only its lower edge counts.
+        edges.append(band[1] - interval[1])
+    return float(min(edges))
 
 
 def run_studies(cache_dir: Path, backend, say: Callable[[str], None], quick: bool = False,
@@ -237,18 +310,27 @@ def _stat(d: dict) -> str:
     return text + (f'; {d["missing"]} without a value' if d['missing'] else '')
 
 
-def section(exp, res: dict) -> list[str]:
+def section(exp, res: dict, figures: Path = Path('figures')) -> list[str]:
     """Return the report lines of an experiment's study: per set-up, the criterion's
-    statistic with its interval and verdict, then the distributions."""
+    statistic with its interval and verdict (on both seed sets), the three questions, the
+    curves' figure, then the distributions.
+
+    :param figures: the figures' directory relative to the report.
+    """
     lines = ['', '**Over seeds.** Each set-up is judged on its own by the criterion above '
-             '(95 % intervals; the first set-up is the paper\'s).', '',
+             '(95 % intervals; the first set-up is the paper\'s), on its seeds from 1 and '
+             f'again on held-out seeds from {HELD_OUT_FIRST}; a verdict that differs between '
+             'the two sets is marked **fragile**. The margin is how far the interval clears '
+             'the nearer edge of the values that support the claim (negative: how far it '
+             'misses).', '',
              '| set-up | seeds (planned) | computing per run [s] | statistic [95 % interval] | '
-             'verdict |', '|---|---|---|---|---|']
+             'margin | verdict | held-out seeds: statistic | held-out verdict |',
+             '|---|---|---|---|---|---|---|---|']
     for s in res['setups']:
-        verdict = s['judged']['verdict']
         lines.append(f'| {cell(s["label"])} | {s["seeds"]} ({s["planned"]}) | '
                      f'{fmt(s["cost_s"])} | {cell(judgement_text(s["judged"]))} | '
-                     f'**{verdict}** |')
+                     f'{fmt(margin(s["judged"]))} | **{s["judged"]["verdict"]}** | '
+                     + held_out_cells(s) + ' |')
     for s in res['setups']:
         if s['note']:
             lines += ['', f'*{s["label"]}*: {s["note"]}']
@@ -264,6 +346,10 @@ def section(exp, res: dict) -> list[str]:
         lines.append(f'| {cell(s["label"])} | '
                      + ' | '.join(cell(_stat(s['stats'][key])) for _, key, _ in exp.columns)
                      + ' |')
+    lines += questions_lines(res)
+    if res.get('curves_figure'):
+        lines += ['', f'![{exp.key}: eta over tolerances and over time]'
+                  f'({(figures / res["curves_figure"]).as_posix()})']
     whats = '; '.join(what for what, _ in exp.per_seed)
     for s in res['setups']:
         if s['per_seed']:
@@ -286,6 +372,93 @@ def section(exp, res: dict) -> list[str]:
             f'{s["label"]}: {s["seeds"]} of {s["planned"]} seeds' for s in short)
             + ' (the cache holds what the time allowed; re-running resumes).')
     return lines
+
+
+def held_out_cells(setup: dict) -> str:
+    """Return the held-out columns of a set-up's row: its statistic and its verdict
+    (**fragile** when it differs from the first set's)."""
+    held = setup.get('held_out')
+    if held is None:
+        return 'not run | -'
+    if not held['seeds']:
+        return f'none of {held["planned"]} cached yet | -'
+    verdict = f'**{held["judged"]["verdict"]}**'
+    if setup.get('fragile'):
+        verdict += ' (**fragile**)'
+    return (f'{held["seeds"]} of {held["planned"]}: '
+            f'{cell(judgement_text(held["judged"]))} | {verdict}')
+
+
+def _mean_cell(d: dict) -> str:
+    """Return ``mean [low, high]`` of :func:`mean_with_interval`'s result."""
+    if not d or d['mean'] is None:
+        return 'n/a'
+    ci = f' [{fmt(d["interval"][0])}, {fmt(d["interval"][1])}]' if d['interval'] else ''
+    return fmt(d['mean']) + ci
+
+
+def questions_lines(res: dict) -> list[str]:
+    """Return the three questions' table of a study: per set-up, is the flock whole, does
+    it move with the leader, do the agents agree with it (eta over tolerances and over time),
+    each a mean over the seeds with its 95 % interval."""
+    setups = [s for s in res['setups'] if s.get('questions')
+              and any(v['count'] for v in s['questions'].values())]
+    if not setups:
+        return ['', 'The three questions (whole, with the leader, agreement) need runs recorded '
+                'since they were added to the records: none of this study\'s cached runs has '
+                'them yet.']
+    tol = [tolerance_key(t) for t in TOLERANCES]
+    times = [time_key(f) for f in TIMES]
+    lines = ['', 'Three questions, apart (means over the seeds, 95 % intervals): **whole** - the '
+             'fraction of agents in the largest component at t_final, and linked to an informed '
+             'agent; **with the leader** - the velocity error of the group\'s mean '
+             '`||mean p_i - p_gamma||` [m/s]; **agreement** - eta at t_final over tolerances, '
+             'and eta at the scenario\'s tolerance over time (fractions of the run).', '',
+             '| set-up | seeds | largest component | linked to informed | group velocity error '
+             '[m/s] | ' + ' | '.join(f'eta @ {t:g} m/s' for t in TOLERANCES) + ' | '
+             + ' | '.join(f'eta @ {round(100 * f)} % of t' for f in TIMES) + ' |',
+             '|---|---|---|---|---|' + '---|' * (len(tol) + len(times))]
+    for s in setups:
+        q = s['questions']
+        count = max(v['count'] for v in q.values())
+        lines.append(f'| {cell(s["label"])} | {count} | {_mean_cell(q["whole_largest"])} | '
+                     f'{_mean_cell(q["whole_linked"])} | {_mean_cell(q[LEADER_KEY])} | '
+                     + ' | '.join(_mean_cell(q[k]) for k in tol + times) + ' |')
+    return lines
+
+
+def curves_figure(res: dict, title: str, path: Path) -> str | None:
+    """Draw each set-up's eta against the tolerance (at t_final) and over time (at the
+    scenario's tolerance), means over the seeds with their 95 % intervals; return the file's
+    name (``None`` when no cached run has the curves yet)."""
+    setups = [s for s in res['setups'] if s.get('questions')
+              and s['questions'][tolerance_key(TOLERANCES[0])]['count']]
+    if not setups:
+        return None
+    plt = pyplot()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=FIG_SIZE)
+    for s in setups:
+        for ax, keys, x in ((ax1, [tolerance_key(t) for t in TOLERANCES], TOLERANCES),
+                            (ax2, [time_key(f) for f in TIMES], TIMES)):
+            d = [s['questions'][k] for k in keys]
+            mean = np.array([np.nan if v['mean'] is None else v['mean'] for v in d])
+            low = np.array([v['interval'][0] if v['interval'] else m for v, m in zip(d, mean)])
+            high = np.array([v['interval'][1] if v['interval'] else m
+                             for v, m in zip(d, mean)])
+            ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker='o', ms=3, capsize=2,
+                        label=s['label'])
+    ax1.set_xscale('log')
+    ax1.set_xlabel('tolerance [m/s]')
+    ax1.set_ylabel('eta at t_final')
+    ax1.set_title(f'{title}: eta over tolerances', fontsize=8)
+    ax2.set_xlabel('fraction of the run')
+    ax2.set_ylabel("eta at the scenario's tolerance")
+    ax2.set_title('eta over time', fontsize=8)
+    for ax in (ax1, ax2):
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(True, alpha=0.3)
+    ax1.legend(loc='best', fontsize=7)
+    return save_figure(fig, path).name
 
 
 def _seed_text(seeds: list[int]) -> str:
