@@ -193,3 +193,32 @@ def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domai
                               'each run a domain of its own')
     assert not (tmp_path / 'b' / 'summary.json').exists()
     assert not (tmp_path / 'b' / 'bag').exists()  # the same --out can be used again
+
+
+#: A short lockstep run with obstacles: its bag holds the latched obstacle map (a
+#: MarkerArray) and /swarm/metrics (DiagnosticArrays), both padded in CDR.
+BYTES_RUN = ['n_agents=4', 'informed.count=2', 'duration=1',
+             'obstacles={spheres: [{centre: [30, 30], radius: 3}], '
+             'walls: [{point: [0, -2], normal: [0, 1]}]}']
+
+
+def test_identical_lockstep_runs_write_byte_identical_bags(tmp_path, ros_domain):
+    """Issue 38: two identical runs differed in 200 of 201 ``/swarm/metrics`` messages, only
+    in CDR alignment padding (rclpy leaves it uninitialised). Every file of the two bag
+    directories (the MCAP and ``metadata.yaml``) is now the same, byte for byte: a bag
+    records no wall time, so nothing is excluded."""
+    from conftest import subprocess_env
+    bags = []
+    for name in ('a', 'b'):
+        out = tmp_path / name
+        run = subprocess.run(
+            ['swarm', 'demo', *[a for s in BYTES_RUN for a in ('--set', s)], '--no-plots',
+             '--out', str(out), '--domain-id', str(ros_domain)],
+            env=subprocess_env(), capture_output=True, text=True, timeout=RUN_TIMEOUT)
+        assert run.returncode == 0, run.stderr
+        bags.append(out / 'bag')
+    files = sorted(p.name for p in bags[0].iterdir())
+    assert files == sorted(p.name for p in bags[1].iterdir()) == ['bag_0.mcap',
+                                                                  'metadata.yaml']
+    for name in files:
+        assert (bags[0] / name).read_bytes() == (bags[1] / name).read_bytes(), name

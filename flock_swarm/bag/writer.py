@@ -10,7 +10,8 @@ split) and, once the writer is closed, ``metadata.yaml``; ``ros2 bag info/play``
   definition text (:mod:`flock_swarm.bag.msgdefs`);
 - one channel per topic, message encoding ``cdr``, channel metadata ``offered_qos_profiles``
   (QoS YAML, metadata version 9) and ``topic_type_hash`` (``RIHS01_...``);
-- messages serialised by rclpy, ``log_time`` = ``publish_time`` = the given stamp;
+- messages serialised as rclpy does, padding zeroed (:func:`serialize`), ``log_time`` =
+  ``publish_time`` = the given stamp;
 - an MCAP metadata record ``rosbag2`` (``serialized_metadata``: the bag metadata as YAML),
   written when the bag opens and again when each file closes, as rosbag2's
   ``update_metadata`` does;
@@ -277,6 +278,109 @@ def _emit_sequence(data: list, indent: str, lines: list[str]) -> None:
             raise _NotPlain
         else:
             lines.append(f'{indent}- {_scalar(item)}')
+
+
+#: Plain CDR of the primitive types rclpy names (``get_fields_and_field_types``): the
+#: NumPy dtype of one value, little-endian; its size is its alignment.
+_CDR_PRIMITIVES = {
+    'boolean': np.dtype('?'), 'octet': np.dtype('u1'), 'char': np.dtype('u1'),
+    'uint8': np.dtype('u1'), 'int8': np.dtype('i1'), 'uint16': np.dtype('<u2'),
+    'int16': np.dtype('<i2'), 'uint32': np.dtype('<u4'), 'int32': np.dtype('<i4'),
+    'uint64': np.dtype('<u8'), 'int64': np.dtype('<i8'), 'float': np.dtype('<f4'),
+    'double': np.dtype('<f8'),
+}
+_CDR_SCALARS = {kind: struct.Struct('<' + fmt) for kind, fmt in (
+    ('boolean', '?'), ('octet', 'B'), ('char', 'B'), ('uint8', 'B'), ('int8', 'b'),
+    ('uint16', 'H'), ('int16', 'h'), ('uint32', 'I'), ('int32', 'i'), ('uint64', 'Q'),
+    ('int64', 'q'), ('float', 'f'), ('double', 'd'))}
+_SEQUENCE = re.compile(r'sequence<(.+?)(?:, ?\d+)?>$')
+_ARRAY = re.compile(r'(.+)\[(\d+)\]$')
+
+
+class _Unsupported(Exception):
+    """A field type :func:`serialize` does not write itself (``wstring``, ``long double``)."""
+
+
+def _cdr_pad(buf: bytearray, size: int) -> None:
+    """Pad ``buf`` with zeros to a multiple of ``size`` from the end of the 4-byte header."""
+    buf.extend(bytes(-(len(buf) - 4) % size))
+
+
+def _cdr_values(buf: bytearray, kind: str, values) -> None:
+    """Append the elements ``values`` of type ``kind``, without a length (an array's
+    layout; a sequence puts its length first)."""
+    dtype = _CDR_PRIMITIVES.get(kind)
+    if dtype is not None:
+        # Aligned to the element's size even when empty, as Fast CDR does.
+        _cdr_pad(buf, dtype.itemsize)
+        if not len(values):
+            return
+        if isinstance(values, (bytes, bytearray)):
+            values = list(values)
+        elif isinstance(values[0], (bytes, bytearray)):     # byte[]: one bytes object each
+            values = [v[0] for v in values]
+        buf.extend(np.asarray(values).astype(dtype, copy=False).tobytes())
+        return
+    for value in values:
+        _cdr_field(buf, kind, value)
+
+
+def _cdr_field(buf: bytearray, kind: str, value) -> None:
+    """Append one field of type ``kind`` (rclpy's type string) holding ``value``."""
+    dtype = _CDR_PRIMITIVES.get(kind)
+    if dtype is not None:
+        if isinstance(value, (bytes, bytearray)):           # byte / octet: bytes([v])
+            value = value[0]
+        _cdr_pad(buf, dtype.itemsize)
+        buf.extend(_CDR_SCALARS[kind].pack(value))
+    elif kind == 'string' or kind.startswith('string<'):
+        text = value.encode('utf-8')
+        _cdr_pad(buf, 4)
+        buf.extend(struct.pack('<I', len(text) + 1))
+        buf.extend(text)
+        buf.append(0)
+    elif (match := _SEQUENCE.match(kind)) is not None:
+        _cdr_pad(buf, 4)
+        buf.extend(struct.pack('<I', len(value)))
+        _cdr_values(buf, match.group(1), value)
+    elif (match := _ARRAY.match(kind)) is not None:
+        _cdr_values(buf, match.group(1), value)
+    elif '/' in kind:
+        _cdr_message(buf, value)
+    else:
+        raise _Unsupported(kind)
+
+
+def _cdr_message(buf: bytearray, msg: Any) -> None:
+    """Append the fields of the message ``msg`` in their declared order."""
+    fields = msg.get_fields_and_field_types()
+    if not fields:
+        # A message of no fields is the one uint8 its type support adds; rclpy writes it
+        # padded to 4 bytes as a whole message, and it is left to rclpy inside another.
+        if len(buf) > 4:
+            raise _Unsupported('a nested message of no fields')
+        buf.extend(bytes(4))
+    for name, kind in fields.items():
+        _cdr_field(buf, kind, getattr(msg, name))
+
+
+def serialize(msg: Any) -> bytes:
+    """Return the rclpy message ``msg`` serialised as rclpy's ``serialize_message`` does
+    (little-endian plain CDR, XCDR1), with every alignment padding byte zero.
+
+    rclpy's serialisation leaves its padding bytes uninitialised, so the same message gives
+    different bytes from run to run (a ``DiagnosticArray`` pads after each ``level``); a bag
+    written through this function is byte-for-byte reproducible. A message with a field type
+    this function does not write (``wstring``, ``long double``) is serialised by rclpy.
+
+    :param msg: an rclpy message object.
+    """
+    buf = bytearray(b'\x00\x01\x00\x00')
+    try:
+        _cdr_message(buf, msg)
+    except _Unsupported:
+        return serialize_message(msg)
+    return bytes(buf)
 
 
 def serialize_qos_profiles(profiles: list[QoSProfile]) -> str:
@@ -658,7 +762,7 @@ class BagWriter:
         self._topics[name] = topic
 
     def write(self, topic: str, msg: Any, t_ns: int) -> None:
-        """Serialise a message with rclpy and record it.
+        """Serialise a message (:func:`serialize`: its padding zero) and record it.
 
         :param topic: a topic declared with :meth:`add_topic`.
         :param msg: a message of the topic's type.
@@ -672,7 +776,7 @@ class BagWriter:
         if not isinstance(msg, expected):
             raise TypeError(f'topic {topic} records {type_name_of(expected)}, '
                             f'got {type(msg).__module__}.{type(msg).__qualname__}')
-        self.write_serialized(topic, serialize_message(msg), t_ns)
+        self.write_serialized(topic, serialize(msg), t_ns)
 
     def write_serialized(self, topic: str, data: bytes, t_ns: int) -> None:
         """Record an already CDR-serialised message.

@@ -17,12 +17,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from flock_swarm import __version__
+from flock_swarm.bag.writer import serialize
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import Realization, Scenario
 from flock_swarm.contract import LOCKSTEP_QOS, OBSTACLES, SCENARIO, qos_profile
@@ -255,8 +255,9 @@ class RecordedNode(Node):
         return pub
 
     def publish_recorded(self, pub, msg, t_ns: int) -> None:
-        """Publish ``msg`` (a message, or its bytes) and record it: the same bytes for both."""
-        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        """Publish ``msg`` (a message, or its bytes) and record it: the same bytes for both
+        (a message serialised with its padding zeroed, so a run's bag is reproducible)."""
+        data = msg if isinstance(msg, bytes) else serialize(msg)
         pub.publish(data)
         self.record_message(pub.topic_name, data, t_ns)
 

@@ -33,12 +33,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
-from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
+from flock_swarm.bag.writer import serialize
 from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, FRAME, LEADER_ACCEL,
                                   LEADER_ODOM, LOCKSTEP_QOS, OBSTACLES, OBSTACLES_QOS, RUNNING,
                                   SCENARIO, SCENARIO_QOS, STATUS, STATUS_QOS, cmd_topic,
@@ -244,7 +244,7 @@ class WorldNode(RecordedNode):
             # The map for viewers, latched and recorded at t = 0 (docs/obstacles.md).
             self.obstacles_pub = self.recorded_publisher(MarkerArray, OBSTACLES,
                                                          qos_profile(OBSTACLES_QOS))
-            self.obstacles_map = serialize_message(obstacle_markers(
+            self.obstacles_map = serialize(obstacle_markers(
                 sc.obstacles, sc.dim, self.clock.stamp(0), FRAME))
             self.publish_recorded(self.obstacles_pub, self.obstacles_map, 0)
         for sink in self.sinks:
