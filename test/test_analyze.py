@@ -8,6 +8,7 @@ truncated file and a bag without the ``flock_swarm`` metadata record.
 
 import json
 from pathlib import Path
+import signal
 import subprocess
 import sys
 
@@ -309,3 +310,36 @@ def test_bad_input_is_one_line_and_status_2(flat, tmp_path, case):
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith('analyze: error: '), result.stderr
     assert 'Traceback' not in result.stderr and result.stdout == ''
+
+
+@pytest.fixture(scope='module')
+def long_bag(tmp_path_factory):
+    """The ``demo`` preset as it ships (30 agents, 40 s): a bag that takes seconds to read."""
+    return record(tmp_path_factory.mktemp('long') / 'run', 'demo', []) / 'bag'
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_a_signal_while_reading_ends_analyze_with_its_status_and_no_verdict(
+        long_bag, tmp_path, sig):
+    # The signal comes once the first progress line says the messages are being decoded:
+    # most of that time is spent in rclpy's deserialisation, where the handler's
+    # KeyboardInterrupt used to surface as a TypeError taken for an undecodable message,
+    # after which the run was analysed without it and verified (exit 0).
+    out = tmp_path / 'out'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'flock_swarm.cli.analyze', str(long_bag), '--no-anim',
+         '--verify', '--out', str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = process.stderr.readline()
+        assert first.startswith('[analyze] reading '), first
+        process.send_signal(sig)
+        stdout, stderr = process.communicate(timeout=60)
+    finally:
+        process.kill()
+        process.wait()
+    assert process.returncode == 128 + int(sig), stderr
+    assert stderr.splitlines()[-1] == 'analyze: interrupted', stderr
+    assert 'do not decode' not in stderr and 'completed' not in stderr, stderr
+    assert 'verify' not in stdout
+    assert not (out / 'summary.json').exists()

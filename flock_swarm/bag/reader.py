@@ -287,6 +287,7 @@ def _scan(stream: BinaryIO, size: int, mcap: _McapFile) -> None:
                 else:
                     mcap.metadata.append(parsed)
         except Exception as exc:
+            _reraise_interrupt(exc)
             problem = f'damaged at byte {offset} ({_one_line(exc) or type(exc).__name__})'
             break
         offset += _PREFIX.size + length
@@ -305,6 +306,26 @@ def _scan(stream: BinaryIO, size: int, mcap: _McapFile) -> None:
                         'writer had not yet written is lost')
     else:
         mcap.warning = f'{name} is {problem}: {read}; the rest is lost'
+
+
+def _reraise_interrupt(exc: BaseException) -> None:
+    """Raise the ``KeyboardInterrupt`` that ``exc`` hides, if any.
+
+    A stop signal whose handler raises while rclpy's deserialisation builds the message
+    surfaces as pybind11's ``TypeError`` ("Unable to convert function return value ..."),
+    chained from the ``KeyboardInterrupt``: the message is sound, the process was asked to
+    stop, so the interrupt goes on rather than the message being reported as undecodable.
+
+    :param exc: the exception the deserialisation raised.
+    :raises KeyboardInterrupt: if ``exc`` was caused by one.
+    """
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
 
 
 def _count(number: int, noun: str) -> str:
@@ -503,6 +524,7 @@ class BagReader:
             try:
                 decoded = deserialize_message(message.data, cls)
             except Exception as exc:
+                _reraise_interrupt(exc)
                 if undecodable is None:
                     raise BagError(f'message on {message.topic} at {message.log_time_ns} ns '
                                    f'does not decode as {message.type_name} '
@@ -552,5 +574,6 @@ class BagReader:
                 raise ValueError('no chunk record there')
             return breakup_chunk(_parse(*record), validate_crc=True)
         except Exception as exc:
+            _reraise_interrupt(exc)
             raise BagError(f'{file.path}: chunk at byte {chunk.offset} is damaged '
                            f'({_one_line(exc)})') from None

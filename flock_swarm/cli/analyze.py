@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM and SIGHUP stop it as Ctrl-C does, with the status of the signal.
     with StopSignals(interrupt=True) as stop:
         try:
-            return _run(args, say, warn)
+            return _run(args, say, warn, stop)
         except KeyboardInterrupt:
             warn('analyze: interrupted')
             return stop.status(EXIT_INTERRUPTED)
@@ -124,10 +124,22 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_USAGE
 
 
-def _run(args: argparse.Namespace, say: Progress | None, warn: Progress) -> int:
+def _unless_stopped(stop: StopSignals) -> None:
+    """Raise ``KeyboardInterrupt`` if a stop signal came (one a library swallowed).
+
+    A signal must end ``analyze`` with its status, never with a verdict on the part of the
+    bag read before it.
+    """
+    if stop.stopped:
+        raise KeyboardInterrupt
+
+
+def _run(args: argparse.Namespace, say: Progress | None, warn: Progress,
+         stop: StopSignals) -> int:
     started = time.monotonic()
     run = load_run(args.bag, radius=args.radius, eta_tolerance=args.eta_tolerance,
                    collision_distance=args.collision_distance, progress=say)
+    _unless_stopped(stop)
     if run.warning is not None:
         warn(f'[analyze] warning: {run.warning}; analysing the {len(run.steps)} complete '
              'step(s)')
@@ -149,6 +161,7 @@ def _run(args: argparse.Namespace, say: Progress | None, warn: Progress) -> int:
                          record_every=args.record_every, progress=say)
     except OSError as exc:
         raise AnalyzeError(f'--out: writing {out} failed: {exc.strerror or exc}') from None
+    _unless_stopped(stop)
     s = result.summary
     if say:
         say(f'[analyze] {s["status"]} at t = {s["t_final"]:g} s: eta = {s["eta"]:.3f}, '
