@@ -280,6 +280,14 @@ class Experiment:
         """Return "where we differ and why", written from the numbers ('' for none)."""
         return ''
 
+    def mechanism(self, res: dict) -> str:
+        """Return the study's mechanism as measured beside its prediction, for the summary
+        (a study beyond the papers overrides it; '' for none).
+
+        :param res: the experiment's JSON result (with ``seeds`` when it has a study).
+        """
+        return ''
+
     def figure(self, sc: Scenario, summary: dict, series: dict, m: dict, path: Path) -> Path:
         """Draw the experiment's figure (default: eta and the largest velocity mismatch
         over time) and return its path."""

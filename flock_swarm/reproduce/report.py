@@ -15,7 +15,7 @@ from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import cell, fmt
 from flock_swarm.reproduce.execution import COMPARED
 from flock_swarm.reproduce.plan import Plan
-from flock_swarm.reproduce.seeds import SEEDS_CHEAP, SEEDS_COSTLY
+from flock_swarm.reproduce.seeds import SEEDS_CHEAP, SEEDS_COSTLY, questions_cell
 from flock_swarm.study.spec import plain
 
 
@@ -227,21 +227,30 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
         '',
         '## Summary',
         '',
+        'Each row: the paper\'s claim, our run of the preset, the criterion and its verdict '
+        'over seeds (and on the held-out seeds), then the three questions apart for the '
+        'paper\'s set-up (is the flock whole: the fraction linked to an informed agent; does it '
+        'move with the leader: the group\'s velocity error; do the agents agree: eta at two '
+        'tolerances) and, for a study beyond the papers, its mechanism measured beside its '
+        'prediction.',
+        '',
         '| experiment | paper | ours (the preset\'s seed) | criterion | over seeds (the '
-        'paper\'s set-up; 95 % interval) | verdict |',
-        '|---|---|---|---|---|---|',
+        'paper\'s set-up; 95 % interval) | verdict | whole / with leader / agreement | '
+        'mechanism |',
+        '|---|---|---|---|---|---|---|---|',
     ]
     experiments = all_experiments()
     for exp in experiments:
         res = results.get(exp.key)
         if res is None:
-            lines.append(f'| {exp.title} | | not run | | | |')
+            lines.append(f'| {exp.title} | | not run | | | | | |')
             continue
         paper, ours = exp.headline(res)
         judged = exp.judge(res)
         lines.append(f'| [{exp.title}](#{anchor(exp.title)}) | {paper} | {ours} | '
                      f'{cell(exp.criterion.short())} | {cell(judged["over"])} | '
-                     f'{verdict_cell(judged)} |')
+                     f'{verdict_cell(judged)} | {cell(questions_cell(res.get("seeds")))} | '
+                     f'{cell(exp.mechanism(res) or "-")} |')
     lines += ['', '## Misprints in the papers', '']
     lines += [f'- {text}' for text in misprints(experiments)]
     for exp in experiments:
@@ -288,11 +297,13 @@ def write_seeds_report(studies: dict[str, dict], meta: dict, report: Path,
         f'{", ".join(f"{x:.2f}" for x in mach["load_average"])} at the start on '
         f'{mach["nproc"]} CPUs). Every number is written by the run. {RULE}', '',
         '| experiment | criterion | the paper\'s set-up over seeds (95 % interval) | '
-        'verdict |', '|---|---|---|---|']
+        'verdict | whole / with leader / agreement | mechanism |', '|---|---|---|---|---|---|']
     for exp in experiments:
         judged = exp.judge({'seeds': studies[exp.key]})
         lines.append(f'| [{exp.title}](#{anchor(exp.title)}) | {cell(exp.criterion.short())} '
-                     f'| {cell(judged["over"])} | {verdict_cell(judged)} |')
+                     f'| {cell(judged["over"])} | {verdict_cell(judged)} | '
+                     f'{cell(questions_cell(studies[exp.key]))} | '
+                     f'{cell(exp.mechanism({"seeds": studies[exp.key]}) or "-")} |')
     for exp in experiments:
         lines += ['', f'## {exp.title}', '',
                   f'**Criterion** (stated before the numbers). {exp.criterion.statement()}']

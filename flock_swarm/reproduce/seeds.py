@@ -244,7 +244,10 @@ def attach_held_out(res: dict, exp, groups: list[tuple[str, list[dict], int]]) -
     for setup, (label, records, planned) in zip(res['setups'], groups):
         judged = exp.criterion.judge(records)
         setup['held_out'] = {'label': label, 'seeds': len(records), 'planned': planned,
-                             'judged': judged}
+                             'judged': judged, 'questions': {
+                                 key: mean_with_interval([r['metrics'].get(key)
+                                                          for r in records])
+                                 for key in question_keys()}}
         setup['fragile'] = bool(records) and judged['verdict'] != setup['judged']['verdict']
 
 
@@ -397,12 +400,38 @@ def _mean_cell(d: dict) -> str:
     return fmt(d['mean']) + ci
 
 
+def answered(setup: dict) -> tuple[dict | None, str]:
+    """Return the three questions' statistics of a set-up and which seeds they come from:
+    its own seeds where their records answer them, else the held-out seeds' (records
+    cached before the questions were recorded do not answer them)."""
+    for q, which in ((setup.get('questions'), 'seeds from 1'),
+                     ((setup.get('held_out') or {}).get('questions'), 'held-out seeds')):
+        if q and q['whole_linked']['count']:
+            return q, which
+    return None, ''
+
+
+def questions_cell(res: dict | None) -> str:
+    """Return the summary's cell of the three questions for a study's first set-up (the
+    paper's): whole (linked to an informed agent), with the leader (the group's velocity
+    error), agreement (eta at 0.05 and 0.2 m/s), each a mean [95 % interval]."""
+    if not res or not res.get('setups'):
+        return '-'
+    q, which = answered(res['setups'][0])
+    if q is None:
+        return 'not recorded yet'
+    return (f'({which}, {q["whole_linked"]["count"]}) whole {_mean_cell(q["whole_linked"])}; '
+            f'with leader {_mean_cell(q[LEADER_KEY])} m/s; '
+            f'eta@0.05 {_mean_cell(q[tolerance_key(0.05)])}, '
+            f'@0.2 {_mean_cell(q[tolerance_key(0.2)])}')
+
+
 def questions_lines(res: dict) -> list[str]:
     """Return the three questions' table of a study: per set-up, is the flock whole, does
     it move with the leader, do the agents agree with it (eta over tolerances and over time),
     each a mean over the seeds with its 95 % interval."""
-    setups = [s for s in res['setups'] if s.get('questions')
-              and any(v['count'] for v in s['questions'].values())]
+    setups = [(s, *answered(s)) for s in res['setups']]
+    setups = [(s, q, which) for s, q, which in setups if q is not None]
     if not setups:
         return ['', 'The three questions (whole, with the leader, agreement) need runs recorded '
                 'since they were added to the records: none of this study\'s cached runs has '
@@ -418,11 +447,11 @@ def questions_lines(res: dict) -> list[str]:
              '[m/s] | ' + ' | '.join(f'eta @ {t:g} m/s' for t in TOLERANCES) + ' | '
              + ' | '.join(f'eta @ {round(100 * f)} % of t' for f in TIMES) + ' |',
              '|---|---|---|---|---|' + '---|' * (len(tol) + len(times))]
-    for s in setups:
-        q = s['questions']
+    for s, q, which in setups:
         count = max(v['count'] for v in q.values())
-        lines.append(f'| {cell(s["label"])} | {count} | {_mean_cell(q["whole_largest"])} | '
-                     f'{_mean_cell(q["whole_linked"])} | {_mean_cell(q[LEADER_KEY])} | '
+        lines.append(f'| {cell(s["label"])} | {count} ({which}) | '
+                     f'{_mean_cell(q["whole_largest"])} | {_mean_cell(q["whole_linked"])} | '
+                     f'{_mean_cell(q[LEADER_KEY])} | '
                      + ' | '.join(_mean_cell(q[k]) for k in tol + times) + ' |')
     return lines
 
@@ -431,16 +460,16 @@ def curves_figure(res: dict, title: str, path: Path) -> str | None:
     """Draw each set-up's eta against the tolerance (at t_final) and over time (at the
     scenario's tolerance), means over the seeds with their 95 % intervals; return the file's
     name (``None`` when no cached run has the curves yet)."""
-    setups = [s for s in res['setups'] if s.get('questions')
-              and s['questions'][tolerance_key(TOLERANCES[0])]['count']]
+    setups = [(s, answered(s)[0]) for s in res['setups']]
+    setups = [(s, q) for s, q in setups if q is not None]
     if not setups:
         return None
     plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=FIG_SIZE)
-    for s in setups:
+    for s, q in setups:
         for ax, keys, x in ((ax1, [tolerance_key(t) for t in TOLERANCES], TOLERANCES),
                             (ax2, [time_key(f) for f in TIMES], TIMES)):
-            d = [s['questions'][k] for k in keys]
+            d = [q[k] for k in keys]
             mean = np.array([np.nan if v['mean'] is None else v['mean'] for v in d])
             low = np.array([v['interval'][0] if v['interval'] else m for v, m in zip(d, mean)])
             high = np.array([v['interval'][1] if v['interval'] else m
