@@ -119,3 +119,24 @@ def test_a_study_runs_its_held_out_seeds_into_their_own_cache(tmp_path):
     assert again['setups'][0]['held_out']['judged'] == s['held_out']['judged']
     name = seeds.curves_figure(res, exp.key, tmp_path / 'curves.png')
     assert name == 'curves.png' and (tmp_path / 'curves.png').stat().st_size > 0
+
+
+def test_studies_option_names_an_unknown_experiment_in_one_line(capsys):
+    from flock_swarm.cli import reproduce
+    assert reproduce.main(['--seeds-only', '--studies', 'su2009_fig2', 'nope']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown experiment 'nope'" in err[0]
+    assert reproduce.main(['--studies', 'su2009_fig2']) == 2
+    assert capsys.readouterr().err.strip() == 'reproduce: error: --studies needs --seeds-only'
+
+
+def test_run_studies_runs_only_the_named_studies(tmp_path):
+    # The named study runs into the empty cache directory; the other only reads (nothing).
+    said = []
+    out = seeds.run_studies(tmp_path, SerialBackend(), said.append,
+                            experiments=[TinyStudy(), experiment('jadbabaie2003_linked')],
+                            only=frozenset({'tiny_study'}), figures=tmp_path)
+    assert out['tiny_study']['setups'][0]['seeds'] == 2
+    assert out['jadbabaie2003_linked']['setups'][0]['seeds'] == 0
+    names = sorted(p.name for p in tmp_path.glob('*.jsonl'))
+    assert names == ['tiny_study.jsonl', 'tiny_study_heldout.jsonl']

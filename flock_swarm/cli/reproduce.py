@@ -44,6 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--seeds-only', action='store_true',
                         help='only the experiments over seeds and the Fig. 3 curves: no '
                         'presets, no ROS runs; the report holds their sections alone')
+    parser.add_argument('--studies', nargs='+', metavar='KEY',
+                        help='with --seeds-only: run (or resume) only these experiments\' '
+                        'studies (their keys, as in docs/reproduction.md\'s figures); the '
+                        'others are read from their caches')
     parser.add_argument('--cached-seeds', action='store_true',
                         help='run nothing new over seeds: the distributions use what the '
                         'caches hold (the report states the counts)')
@@ -61,6 +65,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.jobs < 1:
         print('reproduce: error: --jobs must be >= 1', file=sys.stderr)
         return EXIT_USAGE
+    if args.studies:
+        from flock_swarm.reproduce.catalogue import all_experiments
+        known = [exp.key for exp in all_experiments()]
+        unknown = [key for key in args.studies if key not in known]
+        if unknown or not args.seeds_only:
+            print(f'reproduce: error: --studies: unknown experiment {unknown[0]!r} (known: '
+                  f'{", ".join(known)})' if unknown else
+                  'reproduce: error: --studies needs --seeds-only', file=sys.stderr)
+            return EXIT_USAGE
     # SIGTERM and SIGHUP stop it as Ctrl-C does, with the status of the signal.
     with StopSignals(interrupt=True) as stop:
         try:

@@ -115,7 +115,8 @@ def seeds_only(args: argparse.Namespace, plan: Plan, meta: dict,
     live = terminal_line if sys.stderr.isatty() else None
     pool = SerialBackend() if args.jobs <= 1 else LocalPool(args.jobs, say)
     studies = run_studies(seeds_dir, pool, say, plan.quick, args.cached_seeds, live,
-                          args.fig3_curves, args.figures)
+                          args.fig3_curves, args.figures,
+                          only=frozenset(args.studies) if args.studies else None)
     meta['wall_min'] = (time.monotonic() - started) / 60.0
     write_seeds_report(studies, meta, args.report, args.figures)
     say(f'[reproduce] wrote {args.report}; {meta["wall_min"]:.1f} min')

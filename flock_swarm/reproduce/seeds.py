@@ -270,7 +270,7 @@ def margin(judged: dict) -> float | None:
 def run_studies(cache_dir: Path, backend, say: Callable[[str], None], quick: bool = False,
                 cached_only: bool = False, live: Callable[[str], None] | None = None,
                 long: bool = False, figures: Path = Path('docs/figures'),
-                experiments=None) -> dict[str, dict]:
+                experiments=None, only: frozenset[str] | None = None) -> dict[str, dict]:
     """Run (or resume, or only read) the study of every experiment; return it by key.
 
     :param cache_dir: where the caches ``NAME.jsonl`` live.
@@ -283,11 +283,15 @@ def run_studies(cache_dir: Path, backend, say: Callable[[str], None], quick: boo
         only read their caches, as they do in ``--quick`` mode.
     :param figures: where a study's own figure goes.
     :param experiments: the experiments (default: the catalogue's).
+    :param only: the keys of the experiments whose studies run (or resume); the others only
+        read their caches (``None``: every one).
     """
     from flock_swarm.reproduce.catalogue import all_experiments
     out = {}
     for exp in all_experiments() if experiments is None else experiments:
         read_only = (not long or quick) if exp.long_study else cached_only
+        if only is not None and exp.key not in only:
+            read_only = True
         res = exp.run_study(cache_dir, backend, say, quick, read_only, live, figures)
         if res is not None:
             out[exp.key] = res
