@@ -1,5 +1,6 @@
 """The network model (``network:``, :mod:`flock_swarm.core.network`): its validation, its
-semantics, its layout-independent draws, and the oracles of the linear consensus law."""
+semantics, its layout-independent draws, the delay compensation, and the oracles of the
+linear consensus law and of the delay's drag on a moving flock."""
 
 import dataclasses
 
@@ -7,9 +8,11 @@ import numpy as np
 import pytest
 import yaml
 
+from flock_swarm.core import delay_drag
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.laws import linear
+from flock_swarm.core.laws.base import AgentData, swarm_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.network import (LEADER, NetworkState, neighbourhood_of, parse_network,
                                       uniforms)
@@ -65,6 +68,8 @@ def test_times_become_steps():
     ({'period': 0}, 'network.period'),
     ({'period': 1.5}, 'network.period'),
     ({'model': 'output'}, 'network.model'),
+    ({'compensation': 'extrapolate'}, 'network.compensation'),
+    ({'compensation': ['predict']}, 'network.compensation'),
     ({'delay': 0.1, 'max_age': 0.05}, 'network.max_age'),
     ({'leader': {'delay': 0.001}}, 'network.leader.delay'),
     ({'leader': {'model': 'input'}}, 'network.leader.model'),
@@ -132,14 +137,17 @@ def replay_rows(sc, series, ids):
     return np.array(rows)
 
 
-@pytest.mark.parametrize('model', ['communication', 'input'])
-def test_a_subset_of_receivers_gets_sim_rows_bit_for_bit(model):
+@pytest.mark.parametrize('model, compensation', [
+    ('communication', 'none'), ('input', 'none'), ('communication', 'predict'),
+    ('input', 'predict')])
+def test_a_subset_of_receivers_gets_sim_rows_bit_for_bit(model, compensation):
     """The controller's path (a subset of the agents, their links only) equals ``sim``."""
     sc = load('demo', ['duration=0.6', 'network={delay: {law: uniform, min: 0, max: 0.1}, '
                        'loss: {model: gilbert_elliott, p_good_bad: 0.2, p_bad_good: 0.5, '
                        'loss_bad: 0.8}, noise: {position: 0.05, velocity: 0.02}, '
                        'leader: {delay: 0.04, loss: 0.2, noise: {velocity: 0.1}}, '
-                       f'model: {model}}}'])
+                       f'model: {model}, compensation: {compensation}}}'])
+    assert sc.network.compensation == compensation
     series = run_with_states(sc).series
     ids = np.array([1, 4, 5, 11, 20, 29])
     rows = replay_rows(sc, series, ids)
@@ -390,3 +398,164 @@ def test_the_recorded_statistics_cover_every_step_since_the_previous_instant():
     np.testing.assert_allclose(series['network_age_mean'][1:], 0.5 * dt, rtol=1e-12)
     np.testing.assert_allclose(series['network_age_max'][1:], dt, rtol=1e-12)
     assert np.all(series['network_delivered'] == 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Delay compensation on a uniformly moving lattice
+
+#: The lattice's common velocity [m/s] and the leader's acceleration [m/s^2].
+V, LEADER_ACCEL = np.array([1.0, 0.5]), np.array([0.3, -0.2])
+#: Fig. 2's law and step; agents 0 .. 4 informed.
+FIG2 = load('su2009_fig2')
+INFORMED = 5
+
+
+def lattice_start(count=19, seed=4):
+    """Return a triangular patch at Fig. 2's spacing, jittered by up to 0.2 m: every pair is
+    nearer than 3.7 m or farther than 5.3 m (the radius is 4 m, the shift under test 0.07 m)."""
+    q = delay_drag.triangular_lattice(count, FIG2.law.d)
+    return q + np.random.default_rng(seed).uniform(-0.2, 0.2, q.shape)
+
+
+def leader_at(t):
+    """Return the virtual leader at ``t``: constant acceleration from (1, 2) at (0.5, 0.5)."""
+    q0, p0 = np.array([1.0, 2.0]), np.array([0.5, 0.5])
+    return LeaderState(q0 + p0 * t + 0.5 * LEADER_ACCEL * t * t, p0 + LEADER_ACCEL * t,
+                       LEADER_ACCEL.copy())
+
+
+def moving_lattice(network, steps=8):
+    """Feed a NetworkState ``steps`` steps of the lattice translating at :data:`V` (and of an
+    accelerating leader); return its ``u`` at the last step, the states and the agents."""
+    law, dt = FIG2.law, FIG2.dt
+    q0 = lattice_start()
+    n = q0.shape[0]
+    agents = AgentData(np.arange(n) < INFORMED)
+    net = NetworkState(parse_network(network, dt), 1, n, 2, law, 'disk')
+    for k in range(steps):
+        q, p = q0 + V * (k * dt), np.tile(V, (n, 1))
+        net.send(k, q, p, leader_at(k * dt), disk_graph(q, law.radius, law.strict_radius),
+                 agents.informed)
+    u = net.control(None, q, p, agents, dt)[0]
+    return u, q, p, agents, (steps - 1) * dt
+
+
+@pytest.mark.parametrize('model', ['communication', 'input'])
+def test_predict_gives_the_undelayed_law_on_a_uniformly_moving_lattice(model):
+    """At constant velocity the prediction ``q + p a dt`` is exact (the leader's, at constant
+    acceleration, too): the law's output is the one on current states, to rounding."""
+    u, q, p, agents, t = moving_lattice({'delay': 0.06, 'leader': {'delay': 0.04},
+                                         'model': model, 'compensation': 'predict'})
+    law = FIG2.law
+    exact = swarm_control(law, q, p, disk_graph(q, law.radius, law.strict_radius),
+                          leader_at(t), agents, FIG2.dt)
+    assert np.abs(exact).max() > 0.5
+    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-12)
+    # Without it: under the communication model the delay drags every agent; under the
+    # input model the relative states are exact, only the informed agents' differ (the
+    # leader's acceleration since the message was sent).
+    stale = moving_lattice({'delay': 0.06, 'leader': {'delay': 0.04}, 'model': model})[0]
+    if model == 'communication':
+        assert np.abs(stale - exact)[INFORMED:].min() > 0.05
+    else:
+        np.testing.assert_allclose(stale[INFORMED:], exact[INFORMED:], rtol=0, atol=1e-12)
+        assert np.abs(stale - exact)[:INFORMED].min() > 1e-3
+
+
+def test_without_compensation_the_neighbours_appear_shifted_by_minus_v_d():
+    """Under the communication model every neighbour held is ``v D`` behind its current
+    position: the law's output is the law on the neighbours at ``q_j - v D`` (evaluated
+    pair by pair here), the agent's own state current."""
+    delay = 0.06
+    u, q, p, agents, t = moving_lattice({'delay': delay})
+    law, n = FIG2.law, q.shape[0]
+    s = np.zeros((n, 2))
+    for i in range(n):
+        for j in range(n):
+            seen = q[j] - V * delay
+            if j != i and np.linalg.norm(seen - q[i]) < law.radius:
+                s[i] += law.pair(q[i:i + 1], p[i:i + 1], seen[None], p[j:j + 1], np.ones(1))[0]
+    expected = law.combine(q, p, s, leader_at(t), agents, FIG2.dt)
+    np.testing.assert_allclose(u, expected, rtol=0, atol=1e-12)
+
+
+def test_the_default_is_no_compensation_bit_for_bit():
+    """A run without the key equals one with ``compensation: none`` in every output."""
+    net = 'network={delay: 0.04, loss: 0.1, leader: {delay: 0.02}}'
+    plain = simulate(load('demo', ['duration=0.5', net]))
+    none = simulate(load('demo', ['duration=0.5', net[:-1] + ', compensation: none}']))
+    assert load('demo', [net]).network.compensation == 'none'
+    for result in (plain, none):
+        result.summary.pop('wall_time_s')
+    assert none.summary == plain.summary
+    for key, value in plain.series.items():
+        np.testing.assert_array_equal(none.series[key], value, err_msg=key)
+
+
+# --------------------------------------------------------------------------------------------
+# The oracle of the delay's drag on a moving flock
+
+
+def test_the_drag_oracle_on_a_chain_is_the_hand_formula():
+    """A chain of N agents at the spacing d along x, moving along x: each link adds
+    ``phi_alpha'(d_alpha) d^2 / (1 + eps d^2)`` to both its ends, ``phi_alpha'(d_alpha) = a``
+    (``a = b``, ``d_alpha / r_alpha = 0.727 < h = 0.9``), so ``beta_0 = D a d^2 / (1 + eps
+    d^2) 2 (N - 1) / N``; across the chain nothing (the links' Jacobians are ``g g^T``)."""
+    law, n, delay = FIG2.law, 7, 0.02
+    q = np.stack([law.d * np.arange(n), np.zeros(n)], axis=1)
+    pred = delay_drag.predict_drag(law, q, [1.0, 0.0], delay)
+    link = law.a * law.d ** 2 / (1.0 + law.eps * law.d ** 2)
+    assert pred.rate == pytest.approx(delay * link * 2 * (n - 1) / n, rel=1e-12)
+    np.testing.assert_allclose(pred.acceleration, [-link * 2 * (n - 1) / n * delay, 0.0],
+                               rtol=1e-12, atol=1e-15)
+    across = delay_drag.predict_drag(law, q, [0.0, 1.0], delay)
+    assert abs(across.rate) < 1e-12
+    # a_ij = 1 on every link (the bump's plateau): K_bar = 2 (N - 1) / N.
+    assert pred.consensus[0, 0] == pytest.approx(2 * (n - 1) / n, rel=1e-12)
+    # The interior of a triangular lattice: 3 a d^2 / (1 + eps d^2) in every direction.
+    hexagon = delay_drag.predict_drag(law, delay_drag.triangular_lattice(7, law.d),
+                                      [0.6, 0.8], delay)
+    np.testing.assert_allclose(hexagon.per_agent[0], 3 * link * np.eye(2), rtol=1e-12)
+
+
+def test_the_analytic_jacobians_are_the_pair_terms_derivatives():
+    """The Hessians of psi_alpha equal the central differences of the law's own pair term."""
+    x = np.random.default_rng(2).uniform(-4.5, 4.5, (200, 2))
+    x = x[np.linalg.norm(x, axis=1) > 0.3]
+    np.testing.assert_allclose(delay_drag.su_jacobians(FIG2.law, x),
+                               delay_drag.numeric_jacobians(FIG2.law, x), rtol=0, atol=1e-6)
+
+
+def drag_run(count, velocity, delay, duration=0.6):
+    """Return ``(t, p)`` of a sim run of an uninformed triangular patch at Fig. 2's law and
+    spacing, moving at ``velocity``, under a communication delay; every step recorded."""
+    q = delay_drag.triangular_lattice(count, FIG2.law.d) + 20.0
+    data = {**FIG2.raw, 'n_agents': count, 'duration': duration, 'record_every': 1,
+            'informed': {'select': 'first', 'count': 0},
+            'initial': {'positions': q.tolist(),
+                        'velocities': np.tile(velocity, (count, 1)).tolist()},
+            'network': {'delay': delay}}
+    series = simulate(parse_scenario(data)).series
+    return q, series['t'], series['p']
+
+
+@pytest.mark.parametrize('count, velocity, delay', [(37, [1.0, 0.0], 0.02),
+                                                    (30, [0.6, 0.8], 0.04)])
+def test_the_drag_oracle_predicts_the_braking_of_a_sim_run(count, velocity, delay):
+    """A patch of Fig. 2's alpha-lattice moving at 1 m/s, nobody informed, under a
+    communication delay: the first step with messages brakes it at ``beta_0`` (within 1 %:
+    the neglected terms are O((v D)^2)), the next half second at the settled rate (within
+    2 %: the lattice's slow deformation is neglected). The ideal network conserves it."""
+    q, t, p = drag_run(count, velocity, delay)
+    pred = delay_drag.predict_drag(FIG2.law, q, velocity, delay)
+    d = round(delay / FIG2.dt)
+    along = p.mean(axis=1) @ np.asarray(velocity)
+    # Nothing is held before the first messages arrive: no force, no braking.
+    np.testing.assert_allclose(along[:d + 1], 1.0, rtol=1e-12)
+    first = (along[d] - along[d + 1]) / FIG2.dt
+    assert first == pytest.approx(pred.rate, rel=0.01)
+    settled = delay_drag.measured_rate(t[d + 5:d + 26], p[d + 5:d + 26], velocity)
+    assert settled == pytest.approx(pred.settled_rate, rel=0.02)
+    assert pred.settled_rate < 0.95 * pred.rate
+    ideal = drag_run(count, velocity, 0.0, duration=0.2)[2].mean(axis=1) @ velocity
+    np.testing.assert_allclose(ideal, 1.0, rtol=1e-12)

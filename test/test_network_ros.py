@@ -32,6 +32,9 @@ DEMO = ['n_agents=8', 'informed.count=3', 'duration=0.4', 'record_every=3',
         'initial.position_box=[[0, 8], [0, 8]]',
         'network={delay: {law: uniform, min: 0.02, max: 0.06}, loss: 0.2, '
         'noise: {position: 0.01, velocity: 0.005}, leader: {delay: 0.04, loss: 0.1}}']
+#: The same with the delay compensation: every held state (the leader's too) extrapolated by
+#: its age before the neighbours are decided.
+DEMO_PREDICT = [*DEMO[:-1], DEMO[-1][:-1] + ', compensation: predict}']
 #: Zhou's law on its fixed graph with adaptive gains, under the input delay model.
 ZHOU = ['duration=0.05', 'network={delay: 0.005, loss: 0.1, leader: {delay: 0.01}, '
         'model: input}']
@@ -44,10 +47,17 @@ RUN_TIMEOUT = 240.0
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize('layout', LAYOUTS)
-def test_delay_loss_and_noise_match_sim_in_every_layout(tmp_path, ros_domain, layout):
-    run = assert_matches_sim('demo', tmp_path / 'run', DEMO, domain_id=ros_domain, atol=0,
+@pytest.mark.parametrize('layout, overrides', [
+    *((layout, DEMO) for layout in LAYOUTS), ('one process', DEMO_PREDICT)],
+    ids=[*LAYOUTS, 'one process, predict'])
+def test_delay_loss_and_noise_match_sim_in_every_layout(tmp_path, ros_domain, layout,
+                                                        overrides):
+    """``compensation: predict`` runs in the agents' controller as in sim: one layout is
+    enough, the layouts themselves being checked without it."""
+    run = assert_matches_sim('demo', tmp_path / 'run', overrides, domain_id=ros_domain, atol=0,
                              timeout=RUN_TIMEOUT, **LAYOUTS[layout])
+    assert run.scenario.network.compensation == ('predict' if overrides is DEMO_PREDICT
+                                                 else 'none')
     series = run.timeseries()
     # The model did act: messages were lost and the information used was old.
     assert 0.0 < run.summary['network_delivered'] < 1.0
@@ -80,17 +90,20 @@ def test_zhou_on_its_fixed_graph_under_an_input_delay_matches_sim(tmp_path, ros_
     assert run.summary['network_age_max'] > 0.0
 
 
-def test_an_observer_counts_the_statistics_control_counts():
+@pytest.mark.parametrize('overrides', [DEMO, DEMO_PREDICT], ids=['none', 'predict'])
+def test_an_observer_counts_the_statistics_control_counts(overrides):
     """The world's bookkeeping (:meth:`NetworkState.observe`) gives the statistics of
-    :meth:`NetworkState.control` of every agent, step by step and per record."""
-    sc, _ = prepare('demo', DEMO, None)
+    :meth:`NetworkState.control` of every agent, step by step and per record (with the
+    prediction deciding the neighbours too)."""
+    sc, _ = prepare('demo', overrides, None)
     agents = realize(sc).agents
     q = np.random.default_rng(3).uniform(0.0, 8.0, (sc.n_agents, sc.dim))
-    p = np.zeros_like(q)
     ruler, observer = (NetworkState(sc.network, sc.seed, sc.n_agents, sc.dim, sc.law,
                                     neighbourhood_of(sc.graph_type, False)) for _ in range(2))
     leader = LeaderState(np.zeros(2), np.ones(2), np.zeros(2))
     none = np.zeros(sc.n_agents, dtype=bool)
+    # Moving: the prediction moves the held positions, so it changes who is a neighbour.
+    p = np.full_like(q, 0.5)
     for k in range(12):
         q = q + 0.01 * k
         edges = disk_graph(q, sc.law.radius, sc.law.strict_radius)

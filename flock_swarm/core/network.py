@@ -18,6 +18,9 @@ or for the agents one process hosts (the agents' controller): both get the same 
   ``max_age``); on an r-disk graph a sender is a neighbour when the position held of it is
   within the radius of ``i``'s own position (the current one under the ``communication``
   delay model, the one of the message's sending step under ``input``);
+- under ``compensation: predict`` every state the law uses, of age ``a`` steps, is first
+  extrapolated to the current step at constant velocity (``q + p a dt``; the leader's with
+  its acceleration), before the r-disk neighbour decision;
 - an informed agent without any held leader state applies the law of an uninformed agent
   (``combine`` with ``leader=None``).
 
@@ -29,7 +32,7 @@ the agents' own states over those steps: never an ``N x N`` array.
 """
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,8 +46,11 @@ DELAY_LAWS = ('fixed', 'uniform', 'geometric')
 LOSS_MODELS = ('bernoulli', 'gilbert_elliott')
 #: The delay models of the consensus literature (Olfati-Saber & Murray 2004, Section VIII).
 DELAY_MODELS = ('communication', 'input')
+#: What an agent does with the age of what it holds: ``none`` (uses it as it is) or
+#: ``predict`` (extrapolates it to the current step, docs/network.md).
+COMPENSATIONS = ('none', 'predict')
 CHANNEL_KEYS = ('delay', 'loss', 'noise', 'period')
-NETWORK_KEYS = (*CHANNEL_KEYS, 'leader', 'model', 'max_age')
+NETWORK_KEYS = (*CHANNEL_KEYS, 'leader', 'model', 'max_age', 'compensation')
 #: A time in seconds is a whole number of steps when ``|x / dt - round(x / dt)|`` is below it.
 STEP_TOLERANCE = 1e-9
 #: The longest history kept [steps]: the window holds the agents' states and the links of
@@ -223,12 +229,21 @@ class NetworkSpec:
     :ivar leader: the channel of the leader's state to the informed agents.
     :ivar model: ``communication`` (own state current) or ``input`` (own state delayed too).
     :ivar max_age: information older than this [steps] is dropped.
+    :ivar compensation: ``none`` or ``predict`` (each state used extrapolated by its age).
+    :ivar dt: the step [s] the ages are counted in (the prediction's unit of time).
     """
 
     agents: Channel = Channel()
     leader: Channel = Channel()
     model: str = 'communication'
     max_age: int = 0
+    compensation: str = 'none'
+    dt: float = 0.0
+
+    @property
+    def predict(self) -> bool:
+        """Return whether the states used are extrapolated to the current step."""
+        return self.compensation == 'predict'
 
     @property
     def active(self) -> bool:
@@ -346,6 +361,8 @@ def parse_network(value, dt: float) -> NetworkSpec:
     only(leader_section, CHANNEL_KEYS, 'network.leader.')
     leader = _parse_channel(leader_section, 'network.leader.', dt)
     model = choice(section.get('model', 'communication'), 'network.model', DELAY_MODELS)
+    compensation = choice(section.get('compensation', 'none'), 'network.compensation',
+                          COMPENSATIONS)
     oldest = max(agents.oldest, leader.oldest)
     if 'max_age' in section:
         max_age = steps_of(section['max_age'], 'network.max_age', dt)
@@ -359,7 +376,7 @@ def parse_network(value, dt: float) -> NetworkSpec:
     if max_age > MAX_WINDOW:
         raise ScenarioError('network.max_age', f'must be <= {MAX_WINDOW} steps, got '
                             f'{max_age}')
-    return NetworkSpec(agents, leader, model, max_age)
+    return NetworkSpec(agents, leader, model, max_age, compensation, float(dt))
 
 
 # --------------------------------------------------------------------------------------------
@@ -709,6 +726,10 @@ class NetworkState:
         which messages make neighbours and their weights."""
         law = self.law
         held = self.links.held(self.step, hosted)
+        if self.spec.predict:
+            # Each neighbour's state at the current step, at constant velocity (a message
+            # carries no command): q + p a dt, before the neighbours are decided.
+            held = replace(held, q=held.q + held.p * (held.age * self.spec.dt)[:, None])
         own_q, own_p = self._own(held.receiver, held.age, q, p)
         use = np.ones(held.receiver.size, dtype=bool)
         weight = held.weight
@@ -798,11 +819,15 @@ class NetworkState:
 
     def _own(self, receiver: np.ndarray, age: np.ndarray, q: np.ndarray,
              p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return each receiver's own state: current, or at the message's sending step."""
+        """Return each receiver's own state: current, or at the message's sending step
+        (extrapolated from it to the current step at constant velocity under ``predict``)."""
         if self.spec.model == 'communication':
             return q.take(receiver, axis=0), p.take(receiver, axis=0)
         slot = (self.step - age) % (self.spec.max_age + 1)
-        return self.own_q[slot, receiver], self.own_p[slot, receiver]
+        own_q, own_p = self.own_q[slot, receiver], self.own_p[slot, receiver]
+        if self.spec.predict:
+            own_q = own_q + own_p * (age * self.spec.dt)[:, None]
+        return own_q, own_p
 
     def _combine(self, ids, row, q, p, s, agents, dt, fn):
         """Apply ``fn(q, p, s, leader, group, dt)`` per group of agents sharing a leader state.
@@ -835,6 +860,8 @@ class NetworkState:
             else:
                 first = which[np.searchsorted(at, members[0])]
                 state = LeaderState(held.q[first], held.p[first], held.a[first])
+                if self.spec.predict:
+                    state = predicted_leader(state, held.age[first] * self.spec.dt)
                 own_q, own_p = qs[members], ps[members]
                 if self.spec.model == 'input':
                     own_q, own_p = self._own(ids[members], np.full(members.size,
@@ -938,6 +965,19 @@ def _statistics(tally: list[int], dt: float) -> dict:
     return {'network_delivered': got / total if total else np.nan,
             'network_age_mean': age_sum / count * dt if count else np.nan,
             'network_age_max': age_max * dt if count else np.nan}
+
+
+def predicted_leader(state: LeaderState, s: float) -> LeaderState:
+    """Return a held leader state extrapolated by ``s`` seconds at constant acceleration.
+
+    ``q + p s + a s^2 / 2``, ``p + a s``, ``a`` (the leader's message carries its
+    acceleration ``f_gamma``).
+
+    :param state: the state held.
+    :param s: its age [s].
+    """
+    return LeaderState(state.q + state.p * s + state.a * (0.5 * s * s), state.p + state.a * s,
+                       state.a)
 
 
 def _scatter(out, members: np.ndarray, part, size: int):
