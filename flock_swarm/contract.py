@@ -55,6 +55,10 @@ OBSTACLES_TYPE = MARKERS_TYPE
 #: Faults the leader and the agent nodes report to the world (not recorded in the bag:
 #: ``summary.json`` tells them); type :data:`METRICS_TYPE`, QoS :data:`FAULTS_QOS`.
 FAULTS = 'swarm/faults'
+#: The robot agents' emergency stop (``robot_agent``, docs/robots.md): absolute, so one
+#: message stops every robot agent whatever its namespace; QoS :data:`ESTOP_QOS`.
+ESTOP = '/swarm/estop'
+ESTOP_TYPE = 'std_msgs/msg/Bool'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
@@ -169,6 +173,11 @@ OBSTACLES_QOS = QosSpec(depth=1, latched=True)
 #: failed node late still learns its fault; the depth covers a run of non-finite commands
 #: reported step after step.
 FAULTS_QOS = QosSpec(depth=10, latched=True)
+#: The e-stop's subscriptions, one per durability: latched (transient local), so a robot
+#: agent started after a latched publisher engaged the stop sees it, and volatile, because a
+#: transient-local subscription ignores a volatile publisher (``ros2 topic pub``'s default)
+#: while a volatile one matches both (a latched publisher's message comes through both).
+ESTOP_QOS = (QosSpec(depth=1, latched=True), QosSpec(depth=1))
 #: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
 #: acknowledgements (it matches the reliable writers of the contract); the depth covers a
 #: step's burst.

@@ -304,6 +304,54 @@ def test_the_safety_layer_in_the_node_limits_and_stops(safety_rig):
     assert agent.safety.counts['estop'] >= 1 and agent.safety.counts['geofence'] >= 1
 
 
+def test_the_estop_obeys_a_default_qos_publisher_and_stays_latched(safety_rig, fleet,
+                                                                   ros_context):
+    """Issue 38: the e-stop was subscribed transient-local only, so a volatile publisher
+    (``ros2 topic pub``'s default, as docs/robots.md's line uses it) was ignored. A
+    default-QoS publisher now engages and releases it; a robot agent started after a latched
+    publisher engaged it still starts stopped."""
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import Bool
+
+    from flock_swarm.contract import ESTOP
+    from flock_swarm.nodes.robot_agent import RobotAgentNode
+    executor, robot, agent = safety_rig
+    plain = robot.node.create_publisher(Bool, ESTOP, QoSProfile(depth=10))
+    assert plain.qos_profile.durability == DurabilityPolicy.VOLATILE
+
+    def moving():
+        return agent.last_stop == '' and robot.cmds and robot.cmds[-1].linear.x > 0.05
+
+    def stopped():
+        return (agent.last_stop == 'estop' and robot.cmds[-1].linear.x == 0.0
+                and robot.cmds[-1].angular.z == 0.0)
+    feed_until(executor, robot, moving, 'the robot to move toward the leader')
+    spin_until(executor, lambda: plain.get_subscription_count() >= 1, 30,
+               'the robot agent to match the volatile publisher')
+    plain.publish(Bool(data=True))
+    feed_until(executor, robot, stopped, 'the e-stop from a volatile publisher')
+    plain.publish(Bool(data=False))
+    feed_until(executor, robot, moving, 'the release from a volatile publisher')
+    estops = agent.safety.counts['estop']
+    robot.estop_pub.publish(Bool(data=True))
+    feed_until(executor, robot, stopped, 'the e-stop from a latched publisher')
+    late = RobotAgentNode(context=ros_context, node_name='late_robot_agent',
+                          parameter_overrides=[Parameter('scenario', value=str(fleet)),
+                                               Parameter('agent_id', value=1)])
+    executor.add_node(late)
+    try:
+        feed_until(executor, robot, lambda: late.estop and late.last_stop == 'estop',
+                   'a robot agent started later to see the latched e-stop')
+        assert agent.safety.counts['estop'] > estops
+        plain.publish(Bool(data=False))
+        feed_until(executor, robot, lambda: moving() and not late.estop,
+                   'the release of both robot agents by the volatile publisher')
+    finally:
+        executor.remove_node(late)
+        late.destroy_node()
+
+
 def test_bad_bridge_parameters_are_one_line(fleet, ros_domain):
     """A bad parameter of the robot agent: one line naming it, exit status 2."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))

@@ -36,11 +36,10 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.qos import (QoSDurabilityPolicy, QoSProfile, QoSReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Bool
 
-from flock_swarm.contract import FRAME, LEADER_ACCEL, LEADER_ODOM
+from flock_swarm.contract import ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL, LEADER_ODOM, qos_profile
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.laws.base import local_control
 from flock_swarm.core.leaders.base import LeaderState
@@ -55,9 +54,6 @@ from flock_swarm.nodes.spin import run_node, wall_timer
 VELOCITY_PLANTS = ('velocity_lag', 'unicycle')
 #: Commands: reliable, depth 1 (only the newest command matters to a robot's driver).
 CMD_QOS = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE)
-#: The emergency stop: latched, so a robot agent started after it was engaged sees it.
-ESTOP_QOS = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
-                       durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def _positive(name: str, default: float, description: str) -> Param:
@@ -89,7 +85,7 @@ ROBOT_PARAMS = tuple(
           'name)'),
     Param('leader_odom_topic', LEADER_ODOM, "the leader's nav_msgs/Odometry (world frame)"),
     Param('leader_accel_topic', LEADER_ACCEL, "the leader's geometry_msgs/AccelStamped"),
-    Param('estop_topic', 'swarm/estop', 'the emergency stop (std_msgs/Bool, latched): true '
+    Param('estop_topic', ESTOP, 'the emergency stop (std_msgs/Bool, latched or not): true '
           'stops this robot until false'),
     Param('world_frame', FRAME, 'the frame every pose must be in (header.frame_id); a message '
           'in another is refused'),
@@ -211,7 +207,9 @@ class RobotAgentNode(Node):
                                  sensor)
         self.create_subscription(AccelStamped, params['leader_accel_topic'],
                                  self.on_leader_accel, sensor)
-        self.create_subscription(Bool, params['estop_topic'], self.on_estop, ESTOP_QOS)
+        for spec in ESTOP_QOS:   # latched and volatile publishers both reach it
+            self.create_subscription(Bool, params['estop_topic'], self.on_estop,
+                                     qos_profile(spec))
         self.cmd_topic = params['cmd_vel_topic'].replace('{robot}', self.names[i])
         self.cmd_pub = self.create_publisher(Twist, self.cmd_topic, CMD_QOS)
         wall_timer(self, self.period, self.on_timer)
@@ -284,7 +282,9 @@ class RobotAgentNode(Node):
         self.leader_accel = np.array([a.x, a.y, a.z][:self.scenario.dim])
 
     def on_estop(self, msg: Bool) -> None:
-        """Engage or release the emergency stop."""
+        """Engage or release the emergency stop, from either subscription
+        (:data:`~flock_swarm.contract.ESTOP_QOS`): a latched publisher's message comes
+        through both, and the same value twice changes nothing."""
         if bool(msg.data) != self.estop:
             self.get_logger().warning('emergency stop ' + ('engaged' if msg.data else
                                                            'released'))

@@ -5,6 +5,8 @@ for each robot's name (its namespace), so one profile serves the whole fleet. Wh
 mapping rests on, and which were exercised here, is in docs/robots.md ("Robot profiles").
 """
 
+from flock_swarm.contract import ESTOP
+
 #: Profile name -> the robot agent's parameters.
 PROFILES: dict[str, dict[str, str]] = {
     # ROBOTIS TurtleBot3 (turtlebot3_bringup, one namespace per robot): Twist in the body
@@ -43,7 +45,7 @@ ARGUMENTS = (
     ('max_yaw_rate', '2.84', 'safety: largest yaw rate (rad/s)'),
     ('stale_after', '0.5', 'safety: oldest own or leader state that commands motion (s)'),
     ('geofence', '', "safety: 'xmin,ymin,xmax,ymax' (or with z) in the world frame"),
-    ('estop_topic', '/swarm/estop', 'emergency stop (std_msgs/Bool, latched)'),
+    ('estop_topic', ESTOP, 'emergency stop (std_msgs/Bool, latched or not)'),
 )
 #: Arguments passed on as numbers.
 NUMBERS = ('max_speed', 'max_accel', 'max_yaw_rate', 'stale_after')
