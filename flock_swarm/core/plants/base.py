@@ -21,7 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from flock_swarm.core.checks import number
+from flock_swarm.core.checks import choice, number
 from flock_swarm.core.errors import ScenarioError
 
 #: The agents' command interfaces: an acceleration (``AccelStamped`` on ``cmd_accel``) or a
@@ -29,6 +29,11 @@ from flock_swarm.core.errors import ScenarioError
 COMMANDS = ('accel', 'cmd_vel')
 #: Frames of a ``Twist`` command (REP 103/105): the robot's own (``base_link``) or ``world``.
 FRAMES = ('body', 'world')
+#: The conversions of the law's acceleration into a command (``plant.conversion``): ``exact``
+#: inverts the plant's known discrete dynamics so that one step delivers the law's velocity
+#: change; ``naive`` integrates ``p + u T`` and hands it over as it is (the runs before the
+#: exact conversion, reproduced bit for bit). docs/plants.md gives the equations.
+CONVERSIONS = ('exact', 'naive')
 
 
 def pad3(a: np.ndarray) -> np.ndarray:
@@ -62,6 +67,14 @@ class Plant:
     #: Whether its odometry carries a heading (orientation and yaw rate) besides the
     #: position and the linear velocity.
     oriented: ClassVar[bool] = False
+    #: The conversions it offers (:data:`CONVERSIONS`), the default first.
+    conversions: ClassVar[tuple[str, ...]] = ('exact',)
+
+    #: How :meth:`command` turns the law's acceleration into the command (one of
+    #: :attr:`conversions`; a name, not a number, keyword-only so a subclass's fields may
+    #: be required).
+    conversion: str = dataclasses.field(default='exact', kw_only=True,
+                                        metadata={'choices': 'conversions'})
 
     @classmethod
     def param_keys(cls) -> tuple[str, ...]:
@@ -70,14 +83,18 @@ class Plant:
 
     @classmethod
     def from_section(cls, section: dict, prefix: str) -> 'Plant':
-        """Return the model of a ``plant:`` section (every parameter a number).
+        """Return the model of a ``plant:`` section (every parameter a number, but the names
+        of a field whose metadata lists its ``choices``, as ``conversion``).
 
         :param section: the section's mapping.
         :param prefix: the dotted key of the section, ``'plant.'``.
         :return: the model (not yet validated).
         :raises ScenarioError: naming the first invalid key.
         """
-        values = {f.name: number(section[f.name], prefix + f.name)
+        values = {f.name: (choice(section[f.name], prefix + f.name,
+                                  getattr(cls, f.metadata['choices']))
+                           if 'choices' in f.metadata else
+                           number(section[f.name], prefix + f.name))
                   for f in dataclasses.fields(cls) if f.init and f.name in section}
         for f in dataclasses.fields(cls):
             if f.init and f.name not in values and f.default is dataclasses.MISSING:
@@ -87,19 +104,26 @@ class Plant:
     def validate(self, dim: int, prefix: str) -> None:
         """Raise :class:`ScenarioError` for parameters outside the model's domain.
 
-        The default: every parameter given must be ``> 0`` (time constants, lengths, limits).
+        The default: every numeric parameter given must be ``> 0`` (time constants, lengths,
+        limits).
 
         :param dim: the scenario's dimension.
         :param prefix: the dotted key of the section, ``'plant.'``.
         """
-        for key in self.param_keys():
+        for key in self.number_keys():
             value = getattr(self, key)
             if value is not None and value <= 0.0:
                 raise ScenarioError(prefix + key, f'must be > 0, got {value!r}')
 
+    @classmethod
+    def number_keys(cls) -> tuple[str, ...]:
+        """Return the keys of the numeric parameters (:meth:`param_keys` but the choices)."""
+        return tuple(f.name for f in dataclasses.fields(cls)
+                     if f.init and 'choices' not in f.metadata)
+
     def limits(self) -> dict[str, float | None]:
         """Return the model's limits by name (``None``: unlimited)."""
-        return {key: getattr(self, key) for key in self.param_keys()
+        return {key: getattr(self, key) for key in self.number_keys()
                 if key.startswith('max_')}
 
     def state_names(self, dim: int) -> tuple[str, ...]:

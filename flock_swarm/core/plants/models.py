@@ -11,7 +11,7 @@ import numpy as np
 
 from flock_swarm.core.dynamics import step_double_integrator
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.core.plants.base import Plant, pad3
+from flock_swarm.core.plants.base import CONVERSIONS, Plant, pad3
 
 
 @dataclass(frozen=True)
@@ -51,9 +51,11 @@ class DoubleIntegrator(_Holonomic):
 
     name: ClassVar[str] = 'double_integrator'
     citation: ClassVar[str] = "Su, Wang, Lin 2009, eq. (1): q' = p, p' = u, exact zero-order hold"
+    conversions: ClassVar[tuple[str, ...]] = CONVERSIONS
 
     def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
-        """Return ``u`` (a copy): the double integrator executes the acceleration."""
+        """Return ``u`` (a copy): the double integrator executes the acceleration, whatever
+        the conversion (both deliver the law exactly)."""
         return np.array(u, dtype=float)
 
     def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
@@ -67,12 +69,21 @@ class VelocityLag(_Holonomic):
     """A robot under a velocity controller: first-order tracking of a velocity setpoint.
 
     ``q' = v``, ``v' = (v_sp - v) / tau``, the setpoint ``v_sp`` held over a step and
-    discretised exactly (the lag is linear). The command is ``v_sp = p + u T`` (the law's
-    acceleration integrated from the measured velocity over the command period ``T``),
-    its norm saturated at ``max_speed``, then its distance from ``p`` at ``tau max_accel``:
-    the lag's acceleration ``(v_sp - v) / tau`` is largest at the start of a step, so it never
-    exceeds ``max_accel``. Ground robots (2-D) and multirotors under a velocity controller
-    (3-D).
+    discretised exactly (the lag is linear). The law asks for the velocity ``w = p + u T``
+    after the command period ``T`` (its acceleration integrated from the measured velocity
+    ``p``); :meth:`command` turns ``w`` into the setpoint (``conversion``):
+
+    - ``exact`` (the default): ``w``'s norm saturated at ``max_speed``, its distance from ``p``
+      at ``(1 - e) tau max_accel``, then the exact zero-order hold inverted,
+      ``v_sp = p + (w - p) / (1 - e)``, ``e = exp(-T / conversion_tau)``: after one period
+      the velocity is ``w`` (to rounding, when ``conversion_tau = tau``).
+    - ``naive``: ``v_sp = w`` saturated the same way (the distance at ``tau max_accel``): the
+      velocity reaches only ``p + (1 - e) (w - p)`` after a period, the law with every gain
+      divided by ``T / (tau (1 - e))`` roughly (the runs before the exact conversion).
+
+    Either way the lag's acceleration ``(v_sp - v) / tau`` is largest at the start of a step,
+    ``|v_sp - p| / tau <= max_accel``. Ground robots (2-D) and multirotors under a velocity
+    controller (3-D).
     """
 
     name: ClassVar[str] = 'velocity_lag'
@@ -81,6 +92,7 @@ class VelocityLag(_Holonomic):
     commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
     frames: ClassVar[tuple[str, ...]] = ('world',)
     symbols: ClassVar[tuple[str, str]] = ('v', 'v_sp')
+    conversions: ClassVar[tuple[str, ...]] = CONVERSIONS
 
     #: Time constant of the velocity controller [s].
     tau: float = 0.1
@@ -88,18 +100,46 @@ class VelocityLag(_Holonomic):
     max_speed: float | None = None
     #: Largest acceleration [m/s^2] (``None``: unlimited).
     max_accel: float | None = None
+    #: The time constant the exact conversion assumes [s] (``None``: ``tau``): a robot whose
+    #: lag is known only roughly.
+    conversion_tau: float | None = None
+
+    def validate(self, dim: int, prefix: str) -> None:
+        """Check every number ``> 0``, and ``conversion_tau`` only with the exact conversion."""
+        super().validate(dim, prefix)
+        if self.conversion_tau is not None and self.conversion != 'exact':
+            raise ScenarioError(prefix + 'conversion_tau', 'only with conversion: exact (the '
+                                f'{self.conversion} conversion assumes no lag)')
 
     def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
-        """Return the saturated setpoint ``v_sp`` (see the class)."""
+        """Return the saturated setpoint ``v_sp`` (see the class).
+
+        The exact conversion: with ``a = 1 - exp(-T / tau_c)`` (``tau_c`` the assumed lag,
+        ``conversion_tau`` or ``tau``) the setpoint ``v_sp = p + (w - p) / a`` held over ``T``
+        gives ``v(t) = p + (w - p) (1 - exp(-t / tau)) / a``: for ``tau_c = tau`` the velocity
+        moves along the segment from ``p`` (``t = 0``) to ``w`` (``t = T``) and never leaves
+        it, so it stays within ``max(|p|, |w|) <= max_speed`` (a convex set holds the segment)
+        although ``|v_sp|`` itself may exceed ``max_speed``. With ``tau_c < tau`` it stops
+        short of ``w`` (fraction ``(1 - exp(-T / tau)) / a < 1``), still on the segment; with
+        ``tau_c > tau`` it overshoots ``w`` by that fraction and may exceed ``max_speed``. The
+        acceleration ``(v_sp - v) / tau`` is largest at ``t = 0``: ``|w - p| <= a tau
+        max_accel`` keeps it within ``max_accel``.
+        """
         p = x[:, x.shape[1] // 2:]
-        v_sp = p + u * period
+        wanted = p + u * period
         if self.max_speed is not None:
-            v_sp = v_sp * _shrink(np.linalg.norm(v_sp, axis=1), self.max_speed)[:, None]
+            wanted = wanted * _shrink(np.linalg.norm(wanted, axis=1), self.max_speed)[:, None]
+        if self.conversion == 'naive':
+            reach = 1.0
+        else:
+            reach = -np.expm1(-period / (self.conversion_tau or self.tau))
         if self.max_accel is not None:
-            change = v_sp - p
-            v_sp = p + change * _shrink(np.linalg.norm(change, axis=1),
-                                        self.tau * self.max_accel)[:, None]
-        return v_sp
+            change = wanted - p
+            wanted = p + change * _shrink(np.linalg.norm(change, axis=1),
+                                          reach * self.tau * self.max_accel)[:, None]
+        if self.conversion == 'naive':
+            return wanted
+        return p + (wanted - p) / reach
 
     def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
         """Advance exactly: ``v = v_sp + (v - v_sp) e``, ``q += v_sp dt + (v - v_sp) tau (1 - e)``
@@ -133,10 +173,17 @@ class Unicycle(Plant):
     The law sees the point ``q = (x, y) + ell (cos theta, sin theta)`` and its velocity
     ``p = R(theta) (v, ell omega)`` (Lawton, Beard, Young 2003, Sec. II, the "hand
     position"; Olfati-Saber 2002, near-identity diffeomorphisms for SE(2) vehicles). The
-    command inverts that map at the desired velocity ``p + u T``:
-    ``v = c pd_x + s pd_y``, ``omega = (-s pd_x + c pd_y) / ell``, then saturates (the
-    accelerations first, from the executed ``v``, ``omega``; then ``max_speed`` and
-    ``max_yaw_rate``).
+    command steers the point to the desired velocity ``w = p + u T`` (``conversion``):
+
+    - ``naive``: it inverts that map at the current heading, ``v = c w_x + s w_y``,
+      ``omega = (-s w_x + c w_y) / ell``: the point has velocity ``w`` at the start of the
+      step, but the robot turns by ``omega T`` during it and the velocity with it.
+    - ``exact`` (the default): it inverts the map at the heading the robot has after the
+      period, ``theta + omega T`` (:func:`exact_turn`), so the point's velocity after one
+      held step is ``w`` (to rounding).
+
+    Then it saturates (the accelerations first, from the executed ``v``, ``omega``; then
+    ``max_speed`` and ``max_yaw_rate``).
 
     The heading is held as the unit quaternion ``(qz, qw) = (sin(theta / 2), cos(theta / 2))``
     of a yaw rotation: exactly what ``nav_msgs/Odometry`` carries, so an agent rebuilds the
@@ -150,6 +197,7 @@ class Unicycle(Plant):
     commands: ClassVar[tuple[str, ...]] = ('cmd_vel', 'accel')
     frames: ClassVar[tuple[str, ...]] = ('body', 'world')
     oriented: ClassVar[bool] = True
+    conversions: ClassVar[tuple[str, ...]] = CONVERSIONS
 
     #: Distance of the steered point ahead of the axle [m].
     ell: float = 0.1
@@ -203,8 +251,17 @@ class Unicycle(Plant):
         _, p = self.law_state(x)
         wanted = p + u * period
         c, s = self._cos_sin(x)
-        v = c * wanted[:, 0] + s * wanted[:, 1]
-        w = (c * wanted[:, 1] - s * wanted[:, 0]) / self.ell
+        # The wanted velocity in the body frame: forward, left.
+        ahead = c * wanted[:, 0] + s * wanted[:, 1]
+        left = c * wanted[:, 1] - s * wanted[:, 0]
+        if self.conversion == 'naive':
+            v = ahead
+            w = left / self.ell
+        else:
+            turn = exact_turn(ahead, left, period / self.ell)
+            ct, st = np.cos(turn), np.sin(turn)
+            v = ct * ahead + st * left
+            w = turn / period
         if self.max_accel is not None:
             v = np.clip(v, x[:, 4] - self.max_accel * period, x[:, 4] + self.max_accel * period)
         if self.max_yaw_accel is not None:
@@ -283,6 +340,70 @@ class Unicycle(Plant):
     def recorded(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Return the state and the heading ``theta`` (``heading``, ``(n,)``)."""
         return {'plant_state': x, 'heading': self.heading(x)}
+
+
+#: The largest number of iterations of :func:`exact_turn` (it stops earlier at a fixed point).
+TURN_ITERATIONS = 100
+#: Cells per radian of :func:`exact_turn`'s search for the nearest root when it is not unique.
+TURN_GRID = 32
+
+
+def exact_turn(ahead: np.ndarray, left: np.ndarray, ratio: float) -> np.ndarray:
+    """Return the turn ``delta = omega T`` of the unicycle's exact conversion, per robot.
+
+    The point ``ell`` ahead of the axle, ``(v, omega)`` held over ``T``, has the velocity
+    ``R(theta + delta) (v, ell omega)`` at the end. Equal to the wanted ``w``, whose body-frame
+    components at the current heading are ``(ahead, left)``: ``(v, ell omega) = R(delta)^T
+    (ahead, left)``, i.e. ``v = cos(delta) ahead + sin(delta) left`` and, with ``r = T / ell``,
+
+        ``g(delta) = delta + r (ahead sin(delta) - left cos(delta)) = 0``.
+
+    With ``k = r |w|``: ``g(-k) <= 0 <= g(k)``, so a root lies in ``[-k, k]``, and ``g' = 1 +
+    r (ahead cos(delta) + left sin(delta)) >= 1 - k``: for ``k < 1`` (``|w| T < ell``) the
+    root is unique. For ``k >= 1`` several may exist; the conversion takes the one nearest
+    the naive turn ``delta_0 = r left``, searched on a grid of :data:`TURN_GRID` cells per
+    radian over ``[-k, k]`` (the sign change whose cell is nearest ``delta_0``; two roots
+    within one cell, near a tangency, are missed). The root is then polished by Newton's
+    method kept inside its bracket (bisection when a Newton step leaves it; the bracket's
+    ends are kept by the sign of ``g``, ``g(lo) <= 0 <= g(hi)``), at most
+    :data:`TURN_ITERATIONS` times, stopping when no robot's iterate changes any more (a fixed
+    point: more iterations would give the same bits, so a robot's turn does not depend on the
+    others in the batch).
+
+    :param ahead: the wanted velocity along the heading ``(n,)``.
+    :param left: the wanted velocity across it ``(n,)``.
+    :param ratio: ``T / ell``.
+    :return: the turns ``(n,)`` [rad].
+    """
+    k = ratio * np.hypot(ahead, left)
+    lo, hi = -k, k.copy()
+    delta = np.clip(ratio * left, lo, hi)
+    for i in np.flatnonzero(k >= 1.0):
+        # A robot whose root may not be unique: the sign change nearest the naive turn, on
+        # its own grid (cells of at most 1 / TURN_GRID rad).
+        grid = k[i] * np.linspace(-1.0, 1.0, int(np.ceil(2.0 * k[i] * TURN_GRID)) + 1)
+        g = grid + ratio * (ahead[i] * np.sin(grid) - left[i] * np.cos(grid))
+        change = (g[:-1] <= 0.0) != (g[1:] <= 0.0)
+        gap = np.maximum(np.maximum(grid[:-1] - delta[i], delta[i] - grid[1:]), 0.0)
+        cell = np.argmin(np.where(change, gap, np.inf))
+        delta[i] = min(max(delta[i], grid[cell]), grid[cell + 1])
+        # The bracket's ends by sign: g(lo) <= 0 <= g(hi), lo above hi where g falls.
+        lo[i], hi[i] = (grid[cell], grid[cell + 1]) if g[cell] <= 0.0 else \
+            (grid[cell + 1], grid[cell])
+    for _ in range(TURN_ITERATIONS):
+        sd, cd = np.sin(delta), np.cos(delta)
+        g = delta + ratio * (ahead * sd - left * cd)
+        slope = 1.0 + ratio * (ahead * cd + left * sd)
+        lo = np.where(g <= 0.0, delta, lo)
+        hi = np.where(g >= 0.0, delta, hi)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            newton = delta - g / slope
+        inside = (newton > np.minimum(lo, hi)) & (newton < np.maximum(lo, hi))
+        nxt = np.where(inside, newton, 0.5 * (lo + hi))
+        if np.array_equal(nxt, delta):
+            break
+        delta = nxt
+    return delta
 
 
 def _shrink(norm: np.ndarray, bound: float) -> np.ndarray:
