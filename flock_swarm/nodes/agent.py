@@ -46,6 +46,7 @@ from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_t
                                   cmd_vel_topic, network_topic, odom_topic, qos_profile,
                                   state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
+from flock_swarm.core.latency import LATENCY_CHOICES, LATENCY_PREDICT
 from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.plants.base import COMMANDS
 from flock_swarm.core.plants.spec import command_interface
@@ -93,6 +94,11 @@ AGENT_PARAMS = COMMON_PARAMS + (
     Param('command', '', "the command interface: '' (the scenario's plant.command), accel "
           '(cmd_accel only) or cmd_vel (a robot plant: Twist on cmd_vel too)',
           lambda v: v in ('', *COMMANDS), "must be '', 'accel' or 'cmd_vel', got {value!r}"),
+    Param('latency', LATENCY_PREDICT, "realtime: 'predict' acts on each agent's state "
+          'predicted to the step its command applies at (its own through the commands it was '
+          "sent, the others' at constant velocity; docs/robots.md); 'off' on the states as "
+          'measured. Lockstep states are current: no effect',
+          lambda v: v in LATENCY_CHOICES, "must be 'predict' or 'off', got {value!r}"),
 ) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH)
 
 
@@ -113,10 +119,15 @@ class AgentNode(Node):
         sc = self.scenario = params.load_scenario()
         ids = parse_agent_ids(params['agent_ids'], params['agent_id'], sc.n_agents)
         params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
+        # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
+        self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
                                           leader_start_timeout=params['leader_start_timeout'],
-                                          non_finite=params['non_finite'])
+                                          non_finite=params['non_finite'],
+                                          latency=params['latency'],
+                                          realtime_factor=params['realtime_factor'],
+                                          velocity=self.velocity)
         self.reporter = FaultReporter(self)
         #: The line of the fault that ended this node's part of the run, or ``None``.
         self.failure: str | None = None
@@ -139,8 +150,6 @@ class AgentNode(Node):
                            for i in self.controller.ids] \
             if self.controller.net is not None and not self.lockstep else []
         self.usage_encoder = StateEncoder(USAGE_LABELS)
-        # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
-        self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
         self.twist_pubs = [self.create_publisher(Twist, cmd_vel_topic(int(i)), qos)
                            for i in self.controller.ids] if self.velocity else []
         # The hosted agents' odometry carries a heading (an oriented plant's).
@@ -217,8 +226,7 @@ class AgentNode(Node):
         if checked is None:
             return
         k, state = checked
-        self.controller.latest.odom[j] = state
-        self.controller.latest_step = k
+        self.controller.heard(j, k, state, time.monotonic())
         self.stash(k, lambda box: box.put(j, state), self.odom_topics[j])
 
     def check_odometry(self, topic: str, data: bytes, child: str,

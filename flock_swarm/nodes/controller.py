@@ -11,6 +11,7 @@ queued as bytes and stored at once (:class:`OdometryInbox`).
 """
 
 import logging
+import math
 import re
 import time
 from collections import Counter
@@ -24,9 +25,11 @@ from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fault,
                                      non_finite_rows, state_blew_up)
+from flock_swarm.core.latency import LATENCY_CHOICES, LATENCY_PREDICT, CommandHistory, extrapolate
 from flock_swarm.core.laws.base import advance_state, group_control, group_sums
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.obstacles import with_obstacles
+from flock_swarm.core.plants.models import DoubleIntegrator
 from flock_swarm.core.pseudo_leaders import Reselector
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import Scenario, realize
@@ -164,7 +167,9 @@ class AgentController:
 
     def __init__(self, sc: Scenario, ids: Sequence[int], log: Log | None = None,
                  leader_timeout: float = 1.0, leader_start_timeout: float = 30.0,
-                 now: float | None = None, non_finite: str = NON_FINITE_FAIL) -> None:
+                 now: float | None = None, non_finite: str = NON_FINITE_FAIL,
+                 latency: str = LATENCY_PREDICT, realtime_factor: float = 1.0,
+                 velocity: bool = False) -> None:
         """Create the controller of agents ``ids`` (ascending, distinct) of scenario ``sc``.
 
         :param log: where the leader's loss and non-finite commands are told (default: the
@@ -173,6 +178,11 @@ class AgentController:
         :param leader_start_timeout: the same before the leader was first heard.
         :param now: the time [s, a monotonic clock] the leader's silence counts from.
         :param non_finite: :data:`NON_FINITE_FAIL` or :data:`NON_FINITE_ZERO` (see above).
+        :param latency: realtime: ``'predict'`` (each state predicted to the step the next
+            command applies, :meth:`predicted`) or ``'off'`` (the states as measured).
+        :param realtime_factor: realtime: simulated seconds per wall second.
+        :param velocity: the commands go out as velocities (``cmd_vel``, the plant's
+            commands) rather than accelerations.
         """
         self.sc = sc
         self.ids = np.asarray(ids, dtype=np.intp)
@@ -215,6 +225,23 @@ class AgentController:
         self.plant = None if sc.plant.default else sc.plant.model
         self.view = None if self.plant is None else self.law_view
         self.x: np.ndarray | None = None
+        if latency not in LATENCY_CHOICES:
+            raise ScenarioError('latency', f"must be 'predict' or 'off', got {latency!r}")
+        #: Realtime: predict the states to the step the next command applies (latency).
+        self.predicting = latency == LATENCY_PREDICT
+        self.rate = realtime_factor
+        self.velocity = velocity
+        #: The plant the prediction steps (the double integrator's for the default plant).
+        self.dynamics = DoubleIntegrator() if self.plant is None else self.plant
+        #: The hosted agents' commands sent, each in force from the step it applies at.
+        self.history = CommandHistory(self.dynamics, accelerations=not velocity,
+                                      period=sc.dt)
+        #: Realtime: each agent's latest odometry step, and the newest step with the
+        #: monotonic time its first odometry came (where the world's ticks are).
+        self.measured = np.zeros(sc.n_agents, dtype=np.int64)
+        self.reference: tuple[int, float] | None = None
+        #: Realtime with prediction: the time [s, simulated] the last commands apply at.
+        self.apply_at: float | None = None
 
     def law_view(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return what the law sees, ``(q, p)``, of every agent's odometry vectors; keep the
@@ -227,7 +254,49 @@ class AgentController:
         plant's conversion from their state of the step answered (exactly what ``sim`` and
         the world compute), as ``Twist`` vectors ``(linear (m, 3), angular (m, 3))``."""
         own = self.x[self.ids]
-        return self.plant.twist(own, self.plant.command(own, u, self.sc.dt), frame)
+        cmd = self.plant.command(own, u, self.sc.dt)
+        if self.apply_at is not None:
+            self.history.sent(self.apply_at, cmd)
+        return self.plant.twist(own, cmd, frame)
+
+    def heard(self, j: int, k: int, state: tuple, now: float) -> None:
+        """Realtime: keep agent ``j``'s odometry of step ``k``, received at ``now``
+        [s, monotonic], as its latest."""
+        self.latest.odom[j] = state
+        self.latest_step = k
+        self.measured[j] = k
+        if self.reference is None or k > self.reference[0]:
+            self.reference = (k, now)
+
+    def predicted(self, q: np.ndarray, p: np.ndarray, now: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Return the swarm's law state ``(q, p)`` predicted to the step the commands
+        computed ``now`` apply at (realtime, docs/robots.md "Latency prediction").
+
+        The world ticks every ``dt / realtime_factor`` seconds: step ``k``'s odometry goes
+        out at its tick, and a command received before the tick of step ``k + 1`` is
+        applied from there. The newest step's first odometry marks its tick, so ``now`` is
+        before the tick of step ``k_a = k + 1 + floor(realtime_factor (now - then) / dt)``.
+        The hosted agents' states are predicted from their measured steps to ``t_a = k_a
+        dt`` through the commands they were sent (:class:`CommandHistory`); the other
+        agents' at constant velocity (:func:`extrapolate`).
+
+        :param q: the law's positions as measured (every agent).
+        :param p: the law's velocities as measured.
+        :param now: the time [s, monotonic].
+        """
+        sc, ids = self.sc, self.ids
+        k_ref, then = self.reference
+        k_apply = k_ref + 1 + max(0, math.floor(self.rate * (now - then) / sc.dt))
+        t_apply = self.apply_at = k_apply * sc.dt
+        x = self.x if self.plant is not None else np.concatenate([q, p], axis=1)
+        t_measured = self.measured * sc.dt
+        x_hat = extrapolate(self.dynamics, x, t_apply - t_measured)
+        x_hat[ids] = self.history.predict(x[ids], t_measured[ids], t_apply)
+        if self.plant is not None:
+            self.x = x_hat
+            return self.plant.law_state(x_hat)
+        return x_hat[:, :sc.dim], x_hat[:, sc.dim:]
 
     def inputs(self, k: int) -> StepInputs | None:
         """Return the buffer of step ``k`` (``None`` for a step already answered).
@@ -310,14 +379,23 @@ class AgentController:
 
     def realtime_answer(self, now: float) -> np.ndarray | None:
         """Realtime: return the commands for the latest known states (``None`` before every
-        agent's odometry came in); a leader silent for ``leader_timeout`` is lost."""
+        agent's odometry came in), predicted to the step the commands apply at unless
+        ``latency`` is ``'off'`` (:meth:`predicted`); a leader silent for ``leader_timeout``
+        is lost.
+
+        :param now: the time [s, monotonic].
+        """
         latest = self.latest
         if not latest.has_odometry(self.sc.n_agents):
             return None
         q, p, leader = latest.swarm(self.sc.n_agents, self.view)
+        if self.predicting and self.reference is not None:
+            q, p = self.predicted(q, p, now)
         if leader is not None and self.leader.silent_for(now) > self.leader_timeout:
             self.lose_leader(self.latest_step)
         u = self.command(q, p, None if self.leader.lost else leader, k=self.latest_step or 0)
+        if self.apply_at is not None and not self.velocity:
+            self.history.sent(self.apply_at, u)
         if self.net is not None:
             self.usage = self.net.usage(self.ids, q, p)
         return u
