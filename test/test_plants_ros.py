@@ -3,7 +3,9 @@
 The world integrates the plant with the core's ``step``; the agents read the plant state off
 the odometry (the unicycle's heading as its yaw quaternion) and convert the law's acceleration
 with the core's ``command``, into a ``Twist`` on ``cmd_vel`` (or the world converts their
-``cmd_accel``): the same arithmetic as ``sim``, so the series agree exactly.
+``cmd_accel``): the same arithmetic as ``sim``, so the series agree exactly. The runs through
+``cmd_vel`` use the exact conversion (the default; the velocity lag's with an assumed lag
+``conversion_tau`` off the true one), the unicycle commanded by acceleration the naive one.
 """
 
 import numpy as np
@@ -19,7 +21,8 @@ DEMO = ['n_agents=6', 'informed.count=3', 'duration=0.2', 'record_every=2',
         'initial.position_box=[[0, 6], [0, 6]]']
 UNICYCLE = 'plant={model: unicycle, ell: 0.3, max_speed: 1.5, max_yaw_rate: 2.0, ' \
     'max_accel: 4.0}'
-VELOCITY_LAG = 'plant={model: velocity_lag, tau: 0.15, max_speed: 1.5, max_accel: 5.0}'
+VELOCITY_LAG = 'plant={model: velocity_lag, tau: 0.15, max_speed: 1.5, max_accel: 5.0, ' \
+    'conversion: exact, conversion_tau: 0.12}'
 #: The layouts of a ROS run: keyword arguments of assert_matches_sim.
 LAYOUTS = {'one process': {},
            'processes, container': {'processes': True, 'container': True}}
@@ -36,6 +39,7 @@ def test_a_robot_plant_through_cmd_vel_matches_sim(tmp_path, ros_domain, plant, 
     sc = run.scenario
     plant, xs = sc.plant.model, series['plant_state']
     assert xs.shape[:2] == (6, 6) and np.ptp(xs[:, :, 0]) > 0
+    assert plant.conversion == 'exact'
     # The bag, read by an independent reader: one Twist per agent and step, the core's
     # conversion of the recorded state and acceleration; odometry carrying the plant state.
     steps = {round(t / sc.dt): r for r, t in enumerate(series['t'])}
@@ -76,7 +80,7 @@ def test_the_unicycle_commanded_by_acceleration_matches_sim_per_agent_process(tm
                                                                               ros_domain):
     assert_matches_sim('demo', tmp_path / 'run',
                        DEMO + [UNICYCLE.replace('model: unicycle', 'model: unicycle, '
-                                                'command: accel')],
+                                                'command: accel, conversion: naive')],
                        domain_id=ros_domain, atol=0, timeout=RUN_TIMEOUT, processes=True)
 
 
