@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
+import tempfile
 from pathlib import Path
 from types import FrameType
 from typing import Iterator
@@ -41,6 +43,53 @@ FAIL_SIGNAL = signal.SIGUSR1
 #: Exit status of a command whose machinery failed while it ran, its input being valid (a
 #: sweep's Dask scheduler lost, no Dask workers): running it again may succeed.
 EXIT_RUNTIME = 3
+
+
+#: Where the runs of this machine hold their ROS domains (:func:`claim_domain`): one file per
+#: id, ``<id>.run``, beside the test processes' ``<id>.lock`` (a different hold).
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / 'flock_swarm_domains'
+
+
+class DomainBusy(Exception):
+    """Another run of this machine holds the ROS domain; the message is one line."""
+
+
+def claim_domain(domain: int, command: str) -> object | None:
+    """Hold ROS domain ``domain`` for a run of this process, or refuse: one run per domain.
+
+    Two runs on one domain mix their messages (a second world zeroes every command while its
+    agents follow the first world's clock): ``swarm`` and ``replay --clock`` hold the domain
+    for as long as they run, with a lock on ``DOMAIN_LOCKS/<id>.run`` (released when the
+    returned file is closed, or the process ends, however it ends), and a second one is
+    refused at once. Discovery is limited to this machine (``scripts/env.sh``), so the
+    machine's lock files cover every run that can meet; a world started by hand is still
+    refused by the world itself (docs/ros.md, "One world per domain").
+
+    :param domain: the ROS domain id.
+    :param command: who holds it (written into the file for the refusal of the next one).
+    :return: the open lock file (close it to release the domain), or ``None`` when no lock
+        file can be made here (nothing held, nothing refused).
+    :raises DomainBusy: when another process holds the domain.
+    """
+    import fcntl
+    try:
+        DOMAIN_LOCKS.mkdir(exist_ok=True)
+        lock = open(DOMAIN_LOCKS / f'{domain}.run', 'a+', encoding='utf-8')
+    except OSError:
+        return None
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.seek(0)
+        holder = ' '.join(lock.read().split()) or 'another process'
+        lock.close()
+        raise DomainBusy(f'domain {domain} is in use by a run of this machine ({holder}): '
+                         'give each run a domain of its own') from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(f'{command}, pid {os.getpid()}\n')
+    lock.flush()
+    return lock
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -116,3 +116,57 @@ def test_every_node_refuses_the_dt_sim_refuses_with_the_same_line(tmp_path, node
     assert sim.returncode == run.returncode == 2, run.stderr
     assert run.stderr == sim.stderr.replace('sim: ', f'{node}: ', 1)
     assert not (tmp_path / 'world').exists()
+
+
+@pytest.mark.parametrize('name', ['swarm', 'replay', 'world', 'agents'])
+def test_a_ros_domain_id_that_is_no_number_is_one_line(tmp_path, monkeypatch, capsys, name):
+    """``ROS_DOMAIN_ID=abc``: one line naming the variable and status 2, from the commands
+    (swarm raised ValueError while it built its parser) and the nodes (rcl's RCLError)."""
+    from importlib import import_module
+    monkeypatch.setenv('ROS_DOMAIN_ID', 'abc')
+    if name in ('swarm', 'replay'):
+        main = import_module(f'flock_swarm.cli.{name}').main
+        args = ['demo', '--out', str(tmp_path / 'out')] if name == 'swarm' else [
+            str(tmp_path / 'bag')]
+    else:
+        module = import_module(f'flock_swarm.nodes.{name.rstrip("s")}')
+        main = module.main if name == 'world' else module.container_main
+        args = [name, '--ros-args', '-p', 'scenario:=demo', '-p',
+                f'out_dir:={tmp_path / "out"}']
+    status = main(args)
+    captured = capsys.readouterr()
+    assert status == 2 and captured.out == ''
+    assert captured.err == (f"{name}: error: ROS_DOMAIN_ID: must be a domain id in [0, 232], "
+                            "got 'abc'\n")
+    assert not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize('option, value, line', [
+    ('--rate', '1e-300', '--rate: must be >= 0.001 (a bag second would last more than 1000 s), '
+     'got 1e-300'),
+    ('--delay', '1e300', '--delay: must be at most 3600 s, got 1e+300'),
+    ('--wait-timeout', 'inf', '--wait-timeout: must be at most 3600 s, got inf'),
+    ('--start-offset', '1e300', "--start-offset: must be at most 9e+09 s (the nanoseconds of a "
+     "bag's time axis), got 1e+300"),
+], ids=['rate', 'delay', 'wait-timeout', 'start-offset'])
+def test_replay_refuses_timings_it_could_never_play(tmp_path, capsys, option, value, line):
+    """A replay that would wait 1e300 s (or overflow the bag's time axis: OverflowError
+    before) is refused with one line and status 2."""
+    from flock_swarm.cli.replay import main
+    assert main([str(tmp_path / 'bag'), option, value]) == 2
+    assert capsys.readouterr().err == f'replay: error: {line}\n'
+
+
+@pytest.mark.ros
+def test_swarm_no_record_runs_beside_a_bag_it_leaves_alone(tmp_path, ros_domain):
+    """``--no-record`` writes no bag, so one already in ``--out`` is no reason to refuse (it
+    was); the bag is left as it was and not listed among the files written."""
+    out = tmp_path / 'run'
+    (out / 'bag').mkdir(parents=True)
+    (out / 'bag' / 'bag_0.mcap').write_bytes(b'an earlier recording')
+    run = command('swarm', ['demo', *UNSTABLE, '--allow-unstable', '--no-plots', '--no-record',
+                            '--out', str(out), '--domain-id', str(ros_domain)])
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert (out / 'bag' / 'bag_0.mcap').read_bytes() == b'an earlier recording'
+    assert run.stderr.splitlines()[-1] == (f'[swarm] wrote {out / "summary.json"}, '
+                                           f'{out / "timeseries.npz"}')

@@ -327,3 +327,37 @@ def test_replay_signal_exit_status(small_bag, ros_domain, sig):
         err = finish(proc)
     assert proc.returncode == EXIT_SIGNAL[sig], err
     assert 'Traceback' not in err and err.splitlines()[-1].startswith('[replay] stopped: ')
+
+
+# -- one run per domain ---------------------------------------------------------------------
+
+def test_a_second_run_on_a_busy_domain_is_refused_at_once(tmp_path, ros_domain, monkeypatch,
+                                                          capsys):
+    """Beside a running one-process swarm, ``swarm --processes --container`` and ``replay
+    --clock`` on its domain are refused with one line and status 2 before they start a node
+    or write a file (the second swarm's world used to zero every command while its agents
+    followed the first world's clock); the first run goes on and finalises."""
+    from flock_swarm.cli.replay import main as replay
+    from flock_swarm.cli.swarm import main as swarm
+    first = tmp_path / 'first'
+    proc = start(executable('swarm') + ['demo', *sets(LONG), '--out', str(first), '--no-plots',
+                                        '--domain-id', str(ros_domain)])
+    try:
+        wait_for(lambda: stepping(first), TIMEOUT, 'the first world to step')
+        second = tmp_path / 'second'
+        status = swarm(['demo', '--processes', '--container', '--out', str(second),
+                        '--domain-id', str(ros_domain)])
+        swarm_err = capsys.readouterr().err
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+        replay_status = replay([str(first / 'bag'), '--clock'])
+        replay_err = capsys.readouterr().err
+        os.kill(proc.pid, signal.SIGINT)
+    finally:
+        err = finish(proc)
+    busy = (f'domain {ros_domain} is in use by a run of this machine (swarm demo, pid '
+            f'{proc.pid}): give each run a domain of its own\n')
+    assert status == 2 and swarm_err == f'swarm: error: --domain-id: {busy}', swarm_err
+    assert not second.exists()
+    assert replay_status == 2 and replay_err == f'replay: error: ROS_DOMAIN_ID: {busy}'
+    assert proc.returncode == EXIT_SIGNAL[signal.SIGINT], err[-3000:]
+    assert_finalised(first)

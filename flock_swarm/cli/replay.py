@@ -19,11 +19,13 @@ status (130, 143, 129: :data:`~flock_swarm.console.EXIT_SIGNAL`). See ``docs/rep
 """
 
 import argparse
+import os
 from pathlib import Path
 import sys
 
 from flock_swarm.bag import BagError
-from flock_swarm.console import EXIT_FAILURE, EXIT_USAGE, OneLineParser, StopSignals
+from flock_swarm.console import (claim_domain, DomainBusy, EXIT_FAILURE, EXIT_USAGE,
+                                 OneLineParser, StopSignals)
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
 from flock_swarm.nodes.player import Player, ReplayError
 from flock_swarm.nodes.spin import middleware_defaults
@@ -93,10 +95,59 @@ def main(argv: list[str] | None = None) -> int:
         print(f"replay: error: --ros-args: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_USAGE
     args = build_parser().parse_args(own_args)
+    try:
+        _check_bounds(args)
+        # A replay --clock drives a world's clock: held like a swarm's domain, so that it
+        # is refused beside a running swarm and a swarm is refused beside it.
+        domain = _environment_domain()
+        held = claim_domain(domain, 'replay --clock') if args.clock else None
+    except (ReplayError, DomainBusy) as exc:
+        key = 'ROS_DOMAIN_ID: ' if isinstance(exc, DomainBusy) else ''
+        print(f'replay: error: {key}{exc}', file=sys.stderr)
+        return EXIT_USAGE
     # The stop signals raise KeyboardInterrupt, as Ctrl-C does: the playback ends cleanly
     # (rclpy's own handlers, which shut the context down under a publish, are not installed).
-    with StopSignals(interrupt=True) as stop:
-        return stop.status(_play(args, argv))
+    try:
+        with StopSignals(interrupt=True) as stop:
+            return stop.status(_play(args, argv))
+    finally:
+        if held is not None:
+            held.close()
+
+
+#: Bounds of the timing options beyond which a replay would never play (a rate of 1e-300
+#: plays a bag second in 1e300 s) or overflow the bag's nanosecond time axis.
+MIN_RATE = 1e-3
+MAX_WAIT = 3600.0
+MAX_START_OFFSET = 9e9
+
+
+def _check_bounds(args: argparse.Namespace) -> None:
+    """Refuse timing options a replay could not honour (one line naming the option).
+
+    :raises ReplayError: for a rate below :data:`MIN_RATE`, a delay or wait timeout above
+        :data:`MAX_WAIT` seconds, a start offset above :data:`MAX_START_OFFSET` seconds.
+    """
+    if args.rate > 0 and not args.rate >= MIN_RATE:
+        raise ReplayError('--rate', f'must be >= {MIN_RATE:g} (a bag second would last more '
+                          f'than {1 / MIN_RATE:g} s), got {args.rate:g}')
+    for option, value in (('--delay', args.delay), ('--wait-timeout', args.wait_timeout)):
+        if value > MAX_WAIT:
+            raise ReplayError(option, f'must be at most {MAX_WAIT:g} s, got {value:g}')
+    if args.start_offset > MAX_START_OFFSET:
+        raise ReplayError('--start-offset', f'must be at most {MAX_START_OFFSET:g} s (the '
+                          f'nanoseconds of a bag\'s time axis), got {args.start_offset:g}')
+
+
+def _environment_domain() -> int:
+    """Return the domain of ``$ROS_DOMAIN_ID`` (0 when unset or empty).
+
+    :raises ReplayError: when it is not a whole number.
+    """
+    text = os.environ.get('ROS_DOMAIN_ID', '').strip()
+    if not text.isdigit() and text:
+        raise ReplayError('ROS_DOMAIN_ID', f'must be a domain id in [0, 232], got {text!r}')
+    return int(text or 0)
 
 
 def _play(args: argparse.Namespace, argv: list[str]) -> int:

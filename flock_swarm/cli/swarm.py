@@ -15,8 +15,8 @@ import os
 import sys
 from pathlib import Path
 
-from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
-                                 StopSignals, out_dir, signal_name)
+from flock_swarm.console import (claim_domain, DomainBusy, EXIT_FAILURE, EXIT_INTERRUPTED,
+                                 EXIT_USAGE, OneLineParser, StopSignals, out_dir, signal_name)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
 from flock_swarm.engine import BACKENDS
@@ -41,8 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='with --processes: host all agents in one process (`agents`)')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep')
     parser.add_argument('--domain-id', type=int,
-                        default=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0),
-                        help='ROS domain id (default: $ROS_DOMAIN_ID or 0)')
+                        help='ROS domain id (default: $ROS_DOMAIN_ID or 0); one run per '
+                        'domain: a second swarm on it is refused')
     parser.add_argument('--realtime-factor', type=float, default=1.0,
                         help='realtime mode: simulated seconds per wall second')
     parser.add_argument('--step-timeout', type=float, default=2.0,
@@ -94,6 +94,8 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
     args = build_parser().parse_args(argv)
     say = _say
     try:
+        if args.domain_id is None:
+            args.domain_id = _environment_domain()
         if not 0 <= args.domain_id <= 232:
             raise ScenarioError('--domain-id', f'must be in [0, 232], got {args.domain_id}')
         if args.realtime_factor <= 0:
@@ -117,25 +119,56 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
                                 'always hosts the agents in one container node)')
         name = Path(args.scenario).stem
         out = args.out if args.out is not None else Path('out') / f'{name}_ros'
-        if (out / 'bag').exists() and any((out / 'bag').iterdir()):
+        # --no-record writes no bag: one already there is not in its way.
+        if not args.no_record and (out / 'bag').exists() and any((out / 'bag').iterdir()):
             raise ScenarioError('--out', f'{out / "bag"} already holds a bag; choose another '
                                 '--out')
+        # Held until the run ends: a second swarm (or a replay --clock) on the domain is
+        # refused at once (before it writes anything) instead of mixing its messages with
+        # this run's.
+        held = claim_domain(args.domain_id, f'swarm {args.scenario}')
+    except DomainBusy as exc:
+        print(f'swarm: error: --domain-id: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    except ScenarioError as exc:
+        print(f'swarm: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+    try:
         scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out,
                                     args.allow_unstable)
+    except (ScenarioError, OSError) as exc:
+        if held is not None:
+            held.close()
+        key = '--out: ' if isinstance(exc, OSError) else ''
+        print(f'swarm: error: {key}{exc}', file=sys.stderr)
+        return EXIT_USAGE
+    live = None
+    try:
         # Bound before the nodes start, so a port in use is a usage error, not a failed run.
         live = (None if args.foxglove is None
                 else start_live(args.foxglove_host, args.foxglove, '--foxglove'))
-    except (ScenarioError, ServeError) as exc:
+        return _run(args, scenario, out, live, say, stop)
+    except ServeError as exc:
         print(f'swarm: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
-    except OSError as exc:
-        print(f'swarm: error: --out: {exc}', file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        return _run(args, scenario, out, live, say, stop)
     finally:
         if live is not None:
             live.close()
+        if held is not None:
+            held.close()
+
+
+def _environment_domain() -> int:
+    """Return the domain ``$ROS_DOMAIN_ID`` names (0 when unset or empty, as ROS reads it).
+
+    :raises ScenarioError: when it is not a whole number.
+    """
+    text = os.environ.get('ROS_DOMAIN_ID', '').strip()
+    if not text:
+        return 0
+    if not text.isdigit():
+        raise ScenarioError('ROS_DOMAIN_ID', f'must be a domain id in [0, 232], got {text!r}')
+    return int(text)
 
 
 def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
@@ -217,7 +250,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
                 status = EXIT_FAILURE
     say('[swarm] ' + result_line(summary, sc.headline, ('collisions', 'missed_commands')))
     # Only what is there: a run stopped before its first step has no bag and no time series.
-    written = [path for path in [out / 'bag', out / 'summary.json', *written] if path.exists()]
+    bag = [] if args.no_record else [out / 'bag']
+    written = [path for path in [*bag, out / 'summary.json', *written] if path.exists()]
     say('[swarm] wrote ' + ', '.join(str(path) for path in written))
     if summary.get('failure'):
         print(f'swarm: error: {summary["failure"]}', file=sys.stderr)

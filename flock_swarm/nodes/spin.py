@@ -13,7 +13,7 @@ from typing import Callable
 from rclpy.node import Node
 
 from flock_swarm.console import (EXIT_FAILURE, EXIT_SIGNAL, EXIT_USAGE, FAIL_SIGNAL,
-                                 StopSignals)
+                                 STOP_SIGNALS, StopSignals)
 from flock_swarm.core.errors import ScenarioError, one_line
 
 
@@ -75,11 +75,18 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     node is being built too): the context stays valid until the node is closed and
     destroyed, so no callback meets an invalid context (rclpy's own handlers shut it down
     under a running callback), and the exit status is the signal's
-    (:data:`~flock_swarm.console.EXIT_SIGNAL`: 130, 143, 129).
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`: 130, 143, 129), unless the run had ended by
+    itself (``until``) when it came.
+
+    Run as a process (``args`` is ``None``: the command line), the node ignores stop signals
+    from the end of its run to the exit: ``ros2 launch`` sends SIGINT to the leader and the
+    agents when the world exits, as they finish on their own, and one that came after the
+    handlers were restored made a cleanly finished node die of it (exit code -2).
 
     :param name: executable name (prefix of error lines).
     :param factory: builds the node (after ``rclpy.init``).
-    :param args: command-line arguments (``None``: ``sys.argv``).
+    :param args: command-line arguments (``None``: ``sys.argv``, and this is the process's
+        node: see above).
     :param until: optional condition ending the spin (the world ends after its last step).
     :param on_fail: when given, :data:`~flock_swarm.console.FAIL_SIGNAL` (a supervisor saw
         another process of the run die) ends the spin too: ``on_fail`` gets the node before
@@ -90,18 +97,36 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     previous = None
     if on_fail is not None:
         previous = signal.signal(FAIL_SIGNAL, lambda number, frame: failed.append(number))
+    process = args is None
     try:
         with StopSignals() as stop:
-            status, stopped = _spin(name, factory, args, until,
-                                    lambda: bool(stop.received or failed),
-                                    lambda node: on_fail(node) if failed else None)
+            try:
+                status, stopped = _spin(name, factory, args, until,
+                                        lambda: bool(stop.received or failed),
+                                        lambda node: on_fail(node) if failed else None)
+            finally:
+                if process:
+                    # Held from here until ignored: none is lost between the handlers.
+                    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+        if process:
+            ignore_stop_signals()
     finally:
+        if process:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
         if previous is not None:
             signal.signal(FAIL_SIGNAL, previous)
     # A signal that comes while the node closes after its run ended by itself changes nothing.
     if status != 0 or not stopped:
         return status
     return EXIT_SIGNAL[stop.first] if stop.received else EXIT_FAILURE
+
+
+def ignore_stop_signals() -> None:
+    """Ignore the stop signals (:data:`~flock_swarm.console.STOP_SIGNALS`) for the rest of
+    the process: its run is over and its outputs are written, so a signal can only change
+    its exit status (ignored, they stay ignored while the interpreter finalises)."""
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
 
 
 def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
@@ -123,6 +148,12 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
     except rclpy_implementation.RCLError as exc:
         set_logger_level('rcl', previous)
         reason = str(exc).removeprefix('failed to initialize rcl: ')
+        if reason.startswith('ROS_DOMAIN_ID '):
+            # rcl: "ROS_DOMAIN_ID is not an integral number, at .../domain_id.c:49".
+            got = os.environ.get('ROS_DOMAIN_ID', '')
+            print(f'{name}: error: ROS_DOMAIN_ID: must be a domain id in [0, 232], got '
+                  f'{got!r}', file=sys.stderr)
+            return EXIT_USAGE, False
         if "Couldn't parse" not in reason:
             raise
         # A malformed --ros-args rule ('-p key' without ':=', unparsable YAML, a missing
@@ -143,6 +174,8 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
         executor.add_node(node)
         while not (stopped := signalled()) and rclpy.ok() and (until is None or not until(node)):
             executor.spin_once(timeout_sec=0.1)
+        if stopped and until is not None and until(node):
+            stopped = False     # the run had ended by itself: the signal changes nothing
     except ScenarioError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
         status = EXIT_USAGE
