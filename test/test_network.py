@@ -376,13 +376,15 @@ def test_a_sweep_may_vary_every_network_key_and_collect_its_statistics():
                  'network.period': [2], 'network.model': ['input'],
                  'network.max_age': [0.2], 'network.leader.delay': [0.02],
                  'network.leader.loss': [0.1], 'network.leader.noise.position': [0.0],
-                 'network.leader.noise.velocity': [0.0], 'network.leader.period': [1]},
+                 'network.leader.noise.velocity': [0.0], 'network.leader.period': [1],
+                 'network.compensation': ['predict']},
         'metrics': ['eta', 'network_delivered', 'network_age_mean', 'network_age_max']})
     runs = plan_runs(parsed)
     assert len(runs) == 4
     scenarios = [run.scenario() for run in runs]
     assert {sc.network.agents.delay.low for sc in scenarios} == {0, 2}
     assert all(sc.network.model == 'input' and sc.network.max_age == 10 for sc in scenarios)
+    assert all(sc.network.compensation == 'predict' for sc in scenarios)
     assert all(run.stack_key is None for run in runs)
     with pytest.raises(ScenarioError, match='network.delay'):
         plan_runs(parse_spec({'scenario': 'demo', 'grid': {'network.delay': [0.03]}}))
