@@ -5,10 +5,13 @@
 Six TurtleBot3 Burgers in the physics engine (flock_swarm.engine) follow the circling leader of
 examples/robots/tb3_fleet.yaml (Su 2009 protocol (10), the unicycle plant's conversion), with
 no ROS: every control period each robot's law sees the robots' states ``delay`` periods old,
-and its command integrates the law's acceleration either from that (late) measured velocity
-(``measured``: the plant's conversion, as sim does it) or from the last command it sent
-(``command``: the robot agent's default). Printed per delay and way: the largest velocity
-mismatch with the leader at the end, the closest pair of axles, and the pairs that touched.
+and its command integrates the law's acceleration from that (late) measured velocity
+(``measured``: the plant's conversion, as sim does it), from the last command it sent
+(``command``), or acts on the states predicted to the present (``predict``: the robot's own
+through the commands it sent since, the others' at constant velocity,
+flock_swarm.core.latency; the robot agent's and the agent nodes' default). Printed per delay
+and way: the largest velocity mismatch with the leader at the end, the closest pair of axles,
+and the pairs that touched.
 """
 
 import argparse
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flock_swarm.core.latency import CommandHistory, extrapolate
 from flock_swarm.core.laws.base import local_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.robot_state import from_command, plant_state
@@ -40,8 +44,9 @@ def fly(delay: int, integrate_from: str, seconds: float) -> tuple[float, float, 
     a_matrix = np.array(FLEET['leader']['A'])
     lq, lp = np.array(FLEET['leader']['position']), np.array(FLEET['leader']['velocity'])
     history, sent = [], np.zeros((n, 2))
+    commands = CommandHistory(plant)
     closest = math.inf
-    for _ in range(int(round(seconds / dt))):
+    for k in range(int(round(seconds / dt))):
         poses, vels = world.poses(), world.velocities()
         rows = np.array([plant_state(plant, 2, np.array([x, y, 0.0]),
                                      np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]),
@@ -49,20 +54,31 @@ def fly(delay: int, integrate_from: str, seconds: float) -> tuple[float, float, 
                          for j, (x, y, yaw) in enumerate(poses)])
         history.append((rows, lq.copy(), lp.copy()))
         seen, sq, sp = history[max(0, len(history) - 1 - delay)]
+        if integrate_from == 'predict':
+            # Every robot's own state through its commands, the neighbours' (in the law) at
+            # constant velocity: both from the measurement's step to this one.
+            age = min(delay, k) * dt
+            own = commands.predict(seen, (k - min(delay, k)) * dt, k * dt)
+            seen = extrapolate(plant, seen, age)
         q, p = plant.law_state(seen)
         leader = LeaderState(sq, sp, a_matrix @ sp)
         cmd = np.zeros((n, 2))
         for i in range(n):
             nb = [j for j in range(n) if j != i and np.linalg.norm(q[j] - q[i]) < sc.law.radius]
-            u = local_control(sc.law, q[i], p[i], q[nb], p[nb], np.ones(len(nb)), leader,
+            if integrate_from == 'predict':
+                q_i, p_i = (a[0] for a in plant.law_state(own[i:i + 1]))
+            else:
+                q_i, p_i = q[i], p[i]
+            u = local_control(sc.law, q_i, p_i, q[nb], p[nb], np.ones(len(nb)), leader,
                               real.agents.subset(np.array([i])), dt)
-            x = seen[i:i + 1]
+            x = own[i:i + 1] if integrate_from == 'predict' else seen[i:i + 1]
             if integrate_from == 'command':
                 x = from_command(plant.name, x, sent[i:i + 1])
             cmd[i] = plant.command(x, u[None], dt)[0]
         world.set_twists(cmd[:, 0], cmd[:, 1])
         world.step(dt)
         sent = cmd
+        commands.sent(k * dt, cmd)
         # The leader's linear field p' = A p, integrated as the world does (Euler is enough
         # for the comparison: both ways see the same leader).
         lq, lp = lq + dt * lp, lp + dt * (a_matrix @ lp)
@@ -79,7 +95,7 @@ def main() -> int:
     parser.add_argument('--seconds', type=float, default=12.0)
     args = parser.parse_args()
     for delay in args.delays:
-        for way in ('measured', 'command'):
+        for way in ('measured', 'command', 'predict'):
             mismatch, closest, touched = fly(delay, way, args.seconds)
             print(f'delay {delay} periods ({delay * 50} ms)  integrate from {way:8s}  '
                   f'velocity mismatch {mismatch:.3f} m/s  closest axles {closest:.3f} m  '

@@ -21,9 +21,10 @@ counted), so its state goes stale and the robot stops. Output: ``geometry_msgs/T
 The command: the scenario's law at the point the plant says (``plant.model``: ``unicycle``,
 the point ``ell`` ahead of the axle, or ``velocity_lag``), over the neighbours whose state is
 fresh and within ``r`` (the r-disk graph), turned into a velocity by the plant's own
-``command`` and ``twist`` (the same code ``sim`` runs; integrated from the last command sent,
-``integrate_from:=command``, because odometry arrives late: see
-:func:`~flock_swarm.core.robot_state.from_command`), then filtered by the safety layer.
+``command`` and ``twist`` (the same code ``sim`` runs), from the states predicted to the
+moment the command is sent (``integrate_from:=predict``, because odometry arrives late: the
+robot's own state through the commands it was sent since it was measured, the others' at
+constant velocity, :mod:`flock_swarm.core.latency`), then filtered by the safety layer.
 docs/robots.md maps the topics of TurtleBot3, Husky, Jackal, PX4 (MAVROS) and motion capture.
 """
 
@@ -41,6 +42,7 @@ from std_msgs.msg import Bool
 
 from flock_swarm.contract import ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL, LEADER_ODOM, qos_profile
 from flock_swarm.core.errors import ScenarioError
+from flock_swarm.core.latency import CommandHistory, extrapolate
 from flock_swarm.core.laws.base import local_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.robot_state import (PoseDifferentiator, from_command, plant_state,
@@ -95,9 +97,12 @@ ROBOT_PARAMS = tuple(
     _choice('stale_clock', 'received', ('received', 'stamp'), "a state's age: since it was "
             "received (this node's steady clock; robust to clocks out of sync) or since its "
             "header stamp (this node's ROS clock; counts transport latency too)"),
-    _choice('integrate_from', 'command', ('command', 'measured'), "the velocity the law's "
-            'acceleration is integrated from: the last command sent (robust to odometry '
-            "latency) or the measured one (sim's conversion exactly)"),
+    _choice('integrate_from', 'predict', ('predict', 'command', 'measured'), "predict: the "
+            'law and the conversion act on the states predicted to the moment the command is '
+            "sent (the robot's own through the commands sent since it was measured, the "
+            "others' at constant velocity; docs/robots.md); command: the law's acceleration "
+            'integrated from the last command sent; measured: from the measured velocity '
+            "(sim's conversion exactly)"),
     Param('pose_filter_tau', 0.05, 'odom_type pose: time constant of the velocity estimate '
           '(s, 0: raw differences)', lambda v: math.isfinite(v) and v >= 0,
           'must be >= 0, got {value!r}'),
@@ -193,6 +198,13 @@ class RobotAgentNode(Node):
         self.last_stop = ''
         self.commands = 0
         self.from_sent = params['integrate_from'] == 'command'
+        #: ``integrate_from:=predict``: the commands sent, in force from when they were sent,
+        #: and when each robot's state was measured (both on the steady clock).
+        self.predicting = params['integrate_from'] == 'predict'
+        self.history = CommandHistory(plant)
+        self.taken = np.zeros(n)
+        #: The own state the last command was converted from (predicted, or as measured).
+        self.x_now: np.ndarray | None = None
         #: The last command sent, as the plant's command row (zero before the first).
         self.sent = np.zeros((1, len(plant.command_names(sc.dim))))
         self.differentiators = [PoseDifferentiator(params['pose_filter_tau']) for _ in range(n)]
@@ -228,6 +240,15 @@ class RobotAgentNode(Node):
             return header.stamp.sec + header.stamp.nanosec * 1e-9
         return time.monotonic()
 
+    def taken_at(self, header) -> float:
+        """Return when a state was measured, on the steady clock: now, less the transport
+        lag its stamp tells against this node's ROS clock when that lag is plausible (from 0
+        to ``stale_after``: the clocks agree), else now (the lag is unknown)."""
+        received = time.monotonic()
+        lag = self.get_clock().now().nanoseconds * 1e-9 - (header.stamp.sec
+                                                           + header.stamp.nanosec * 1e-9)
+        return received - lag if 0.0 <= lag <= self.params['stale_after'] else received
+
     def in_world_frame(self, topic: str, frame_id: str) -> bool:
         """Return whether a message is in the world frame; log the first refusal of a topic."""
         if frame_id == self.world_frame:
@@ -262,6 +283,8 @@ class RobotAgentNode(Node):
                                      orientation, velocity, yaw_rate)
         self.positions[j] = position
         self.stamps[j] = at
+        if self.predicting:
+            self.taken[j] = self.taken_at(msg.header)
 
     def on_leader_odom(self, msg: Odometry) -> None:
         """Store the leader's position and velocity (both in the world frame: the contract)."""
@@ -299,9 +322,15 @@ class RobotAgentNode(Node):
         fresh = [j for j in range(sc.n_agents) if j != i and self.states[j] is not None
                  and now - self.stamps[j] <= stale]
         x_self = self.states[i][None]
+        if self.predicting:
+            t = time.monotonic()
+            x_self = self.history.predict(x_self, self.taken[i], t)
         q_self, p_self = (a[0] for a in plant.law_state(x_self))
         if fresh:
-            q_nb, p_nb = plant.law_state(np.array([self.states[j] for j in fresh]))
+            x_nb = np.array([self.states[j] for j in fresh])
+            if self.predicting:
+                x_nb = extrapolate(plant, x_nb, t - self.taken[fresh])
+            q_nb, p_nb = plant.law_state(x_nb)
             near = np.linalg.norm(q_nb - q_self, axis=1) < sc.law.radius
             q_nb, p_nb = q_nb[near], p_nb[near]
         else:
@@ -313,6 +342,7 @@ class RobotAgentNode(Node):
                           self.agent, sc.dt)
         x_cmd = from_command(plant.name, x_self, self.sent) if self.from_sent else x_self
         cmd = plant.command(x_cmd, u[None], self.period)
+        self.x_now = x_self
         linear, angular = plant.twist(x_self, cmd, self.twist_frame)
         return linear[0], float(angular[0, 2])
 
@@ -322,6 +352,7 @@ class RobotAgentNode(Node):
         i = self.agent_id
         linear, yaw_rate = np.zeros(3), 0.0
         ready = self.states[i] is not None and self.leader_odom is not None
+        self.x_now = None
         if ready:
             with np.errstate(all='ignore'):
                 linear, yaw_rate = self.law_command(now)
@@ -333,9 +364,12 @@ class RobotAgentNode(Node):
                                       else 'safety: moving')
             self.last_stop = verdict.stop
         if self.states[i] is not None:
-            self.sent = self.plant.from_twist(self.states[i][None], verdict.linear[None],
+            x = self.states[i][None] if self.x_now is None else self.x_now
+            self.sent = self.plant.from_twist(x, verdict.linear[None],
                                               np.array([[0.0, 0.0, verdict.yaw_rate]]),
                                               self.twist_frame)
+            if self.predicting:
+                self.history.sent(time.monotonic(), self.sent)
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.linear.z = (float(v) for v in verdict.linear)
         msg.angular.z = verdict.yaw_rate
