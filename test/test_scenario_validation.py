@@ -1,6 +1,13 @@
-"""Bad scenario input: one-line errors naming the key, exit status 2, no traceback."""
+"""Bad scenario input: one-line errors naming the key, exit status 2, no traceback.
+
+The commands' one-line errors are checked in this process (:func:`run_tool`: the command's
+``main(argv)``, its standard error captured), which is what the executable runs; one test per
+command still starts the real executable (see run_tool), so that what a shell sees is checked
+too.
+"""
 
 import copy
+import importlib
 import subprocess
 import sys
 
@@ -280,9 +287,36 @@ def test_packing_degree():
     assert packing_degree(2.0, 2.0, 3) == 26
 
 
-def run_sim(*args, cwd=None):
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', *args],
-                          capture_output=True, text=True, timeout=120, cwd=cwd)
+# The tests that start a command as a real process (``python -m flock_swarm.cli.TOOL``), one
+# per command: test_an_empty_out_is_refused (sim, swarm, sweep, analyze, reproduce) and
+# test_tools_bad_arguments_are_one_line_exit_2 (replay); the others call its ``main(argv)``
+# in this process (run_tool).
+
+
+def run_tool(tool: str, args, capsys, real: bool = False) -> subprocess.CompletedProcess:
+    """Run command ``tool`` (``sim``, ``swarm``...) with ``args``; return its exit status and
+    standard error as :func:`subprocess.run` would.
+
+    :param capsys: the test's capture of this process's output.
+    :param real: start the executable as a process instead of calling its ``main(argv)`` in
+        this process (an exit by ``SystemExit``, argparse's, gives its code).
+    """
+    if real:
+        return subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', *args],
+                              capture_output=True, text=True, timeout=120)
+    capsys.readouterr()
+    main = importlib.import_module(f'flock_swarm.cli.{tool}').main
+    try:
+        status = main(list(args))
+    except SystemExit as end:
+        status = end.code
+    out = capsys.readouterr()
+    return subprocess.CompletedProcess([tool, *args], status, out.out, out.err)
+
+
+def run_sim(capsys, *args):
+    """Run ``sim`` with ``args`` in this process (:func:`run_tool`)."""
+    return run_tool('sim', args, capsys)
 
 
 @pytest.mark.parametrize('args, key', [
@@ -298,8 +332,8 @@ def run_sim(*args, cwd=None):
     (['su2009_fig6', '--set', 'metrics.headline=[eta, com]'], 'metrics.headline[1]'),
     (['su2009_fig6', '--set', 'metrics.claim=[1, 2]'], 'metrics.claim'),
 ])
-def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path):
-    res = run_sim(*args, '--out', str(tmp_path / 'o'))
+def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path, capsys):
+    res = run_sim(capsys, *args, '--out', str(tmp_path / 'o'))
     assert res.returncode == 2, res.stderr
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
@@ -308,27 +342,27 @@ def test_cli_bad_input_is_one_line_exit_2(args, key, tmp_path):
     assert not (tmp_path / 'o' / 'summary.json').exists()
 
 
-def test_cli_invalid_yaml_file(tmp_path):
+def test_cli_invalid_yaml_file(tmp_path, capsys):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('dim: [2\n')
-    res = run_sim(str(bad), '--out', str(tmp_path / 'o'))
+    res = run_sim(capsys, str(bad), '--out', str(tmp_path / 'o'))
     assert res.returncode == 2
     assert res.stderr.startswith('sim: error: scenario:') and 'invalid YAML' in res.stderr
 
 
-def test_cli_unknown_key_in_file(tmp_path):
+def test_cli_unknown_key_in_file(tmp_path, capsys):
     data = dict(BASE, colour='red')
     path = tmp_path / 'extra.yaml'
     path.write_text(yaml.safe_dump(data))
-    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    res = run_sim(capsys, str(path), '--out', str(tmp_path / 'o'))
     assert res.returncode == 2
     assert res.stderr.startswith('sim: error: colour: unknown key')
 
 
-def test_cli_unwritable_output(tmp_path):
+def test_cli_unwritable_output(tmp_path, capsys):
     blocker = tmp_path / 'file'
     blocker.write_text('not a directory')
-    res = run_sim('demo', '--out', str(blocker / 'sub'))
+    res = run_sim(capsys, 'demo', '--out', str(blocker / 'sub'))
     assert res.returncode == 2
     assert res.stderr.startswith('sim: error: --out:')
     assert len(res.stderr.strip().splitlines()) == 1
@@ -365,9 +399,8 @@ def test_exponents_in_files_are_numbers(tmp_path):
     ('sweep', ['su2009_fig3', '--seeds', 'x'], "sweep: error: --seeds: invalid int value: 'x'"),
     ('sweep', ['nope'], "sweep: error: spec: unknown sweeps preset 'nope'"),
 ])
-def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start):
-    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', *args],
-                         capture_output=True, text=True, timeout=60)
+def test_tools_bad_arguments_are_one_line_exit_2(tool, args, start, capsys):
+    res = run_tool(tool, args, capsys, real=tool == 'replay')
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith(start), res.stderr
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
@@ -388,10 +421,10 @@ def billion_laughs(field: str) -> str:
 
 
 @pytest.mark.parametrize('field', ['description', 'dt'])
-def test_yaml_aliases_expanding_too_far_are_one_line(field, tmp_path):
+def test_yaml_aliases_expanding_too_far_are_one_line(field, tmp_path, capsys):
     path = tmp_path / 'laughs.yaml'
     path.write_text(billion_laughs(field))
-    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    res = run_sim(capsys, str(path), '--out', str(tmp_path / 'o'))
     assert res.returncode == 2, res.stderr
     assert res.stderr.startswith(f'sim: error: scenario: {path}: invalid YAML at line 2: '
                                  'aliases would expand the document by ')
@@ -416,10 +449,10 @@ def test_a_node_that_contains_itself_is_refused():
         parse_value('&a [1, *a]')
 
 
-def test_duplicate_yaml_keys_are_refused_with_their_line(tmp_path):
+def test_duplicate_yaml_keys_are_refused_with_their_line(tmp_path, capsys):
     path = tmp_path / 'twice.yaml'
     path.write_text(yaml.safe_dump(BASE) + 'dt: 0.02\n')
-    res = run_sim(str(path), '--out', str(tmp_path / 'o'))
+    res = run_sim(capsys, str(path), '--out', str(tmp_path / 'o'))
     assert res.returncode == 2
     assert res.stderr.strip() == (f"sim: error: scenario: {path}: invalid YAML at line "
                                   f"{len(path.read_text().splitlines())}: duplicate key 'dt' "
@@ -451,10 +484,8 @@ def test_one_seed_range_for_every_front_end(seed, ok):
 
 
 @pytest.mark.parametrize('tool', ['sim', 'swarm'])
-def test_a_seed_beyond_int64_is_one_line_in_sim_and_swarm(tool, tmp_path):
-    res = subprocess.run([sys.executable, '-m', f'flock_swarm.cli.{tool}', 'demo', '--seed',
-                          str(2 ** 64), '--out', str(tmp_path / 'o')],
-                         capture_output=True, text=True, timeout=60)
+def test_a_seed_beyond_int64_is_one_line_in_sim_and_swarm(tool, tmp_path, capsys):
+    res = run_tool(tool, ['demo', '--seed', str(2 ** 64), '--out', str(tmp_path / 'o')], capsys)
     assert res.returncode == 2, res.stderr
     assert res.stderr.strip() == (f'{tool}: error: seed: must be <= 2**63 - 1 (a ROS int64 '
                                   f'parameter), got {2 ** 64}')
@@ -487,9 +518,9 @@ def test_explicit_initial_state_and_its_box_are_refused_together(given, box):
     assert err.value.key == f'initial.{box}' and f'initial.{given}' in err.value.reason
 
 
-def test_a_scenario_path_that_is_a_directory_says_so(tmp_path):
+def test_a_scenario_path_that_is_a_directory_says_so(tmp_path, capsys):
     (tmp_path / 'dir.yaml').mkdir()
-    res = run_sim(str(tmp_path / 'dir.yaml'))
+    res = run_sim(capsys, str(tmp_path / 'dir.yaml'))
     assert res.returncode == 2
     assert res.stderr.strip() == (f'sim: error: scenario: {tmp_path / "dir.yaml"} is a '
                                   'directory, not a YAML file')
