@@ -625,3 +625,61 @@ def test_a_lost_scheduler_is_one_line_and_the_rerun_reuses_the_cache(long_serial
                               '--no-plots'], capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
     assert f'{len(kept)} reused' in resumed.stderr
+
+
+@pytest.mark.parametrize('value', ['7', str(2 ** 70)])
+def test_set_seed_is_refused_with_where_the_seeds_come_from(value, tmp_path, capsys):
+    """``--set seed=...`` was replaced by each run's seed (0, 1, ...) without a word."""
+    err = sweep_error(tmp_path, capsys, SMALL, '--set', f'seed={value}')
+    assert err == ("sweep: error: --set: seed: every run takes its seed from the spec's seeds; "
+                   'give --seeds R (0 .. R-1) or the spec key seeds (a list, or {first, '
+                   'count})')
+
+
+@pytest.mark.parametrize('key, axis', [('n_agents', 'n_agents'),
+                                       ('informed', 'informed.fraction'),
+                                       ('initial.position_box', 'initial.position_box')],
+                         ids=['axis', 'holding-an-axis', 'derived'])
+def test_a_specs_set_key_the_points_set_is_refused(key, axis, tmp_path, capsys):
+    """A key of the spec's ``set:`` that is also an axis (or a derived value) was silently
+    replaced by the point's value."""
+    fixed = {'duration': 1.0, key: {'fraction': 0.5} if key == 'informed' else 12}
+    err = sweep_error(tmp_path, capsys, {**SMALL, 'set': fixed})
+    kind = 'a derived value' if key == 'initial.position_box' else 'an axis'
+    assert err == (f'sweep: error: set.{key}: is also set per point ({kind}: {axis}), whose '
+                   'value would replace it; remove it from set')
+
+
+def test_a_specs_set_seed_is_refused(tmp_path, capsys):
+    err = sweep_error(tmp_path, capsys, {**SMALL, 'set': {'duration': 1.0, 'seed': 3}})
+    assert err == ('sweep: error: set.seed: every run takes its seed from the spec key seeds '
+                   '(a count, a list, or {first, count}); move it there')
+
+
+def test_a_signal_while_a_large_grid_is_planned_is_one_line_and_its_status(tmp_path):
+    """SIGTERM while the 10,000 points of a grid are checked: one line, status 143 (it was
+    KeyboardInterrupt's traceback, and Ctrl-C's 130 for SIGTERM too)."""
+    values = [round(0.1 * k, 1) for k in range(1, 11)]
+    spec = write_spec(tmp_path / 'big.yaml', {
+        'name': 'big', 'scenario': 'demo', 'grid': {
+            'protocol.c1': values, 'protocol.c2': values, 'protocol.a': values,
+            'duration': [float(k) for k in range(1, 11)]}})
+    proc = sweep_process(str(spec), '--jobs', '1', '--out', str(tmp_path / 'out'))
+    try:
+        line = proc.stderr.readline()
+        assert line.startswith('[sweep] planning: 1000/10000 points checked'), line
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == EXIT_SIGNAL[signal.SIGTERM], err
+    assert err.splitlines()[-1] == 'sweep: interrupted before any run started', err
+    assert 'Traceback' not in err
+
+
+def test_jobs_beyond_four_per_core_are_refused(tmp_path, capsys):
+    from flock_swarm.cli.sweep import max_jobs
+    err = sweep_error(tmp_path, capsys, SMALL, '--jobs', '100000')
+    assert err == (f'sweep: error: --jobs: at most {max_jobs()} (four per core of this machine, '
+                   '64 at least), got 100000')

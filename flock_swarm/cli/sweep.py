@@ -27,6 +27,14 @@ def spec_path(name_or_path: str) -> Path:
     return resolve(name_or_path, 'sweeps', 'spec')
 
 
+def max_jobs() -> int:
+    """Return the most worker processes ``--jobs`` may ask for: four per core, 64 at least.
+
+    Each is a Python process with NumPy and SciPy; ``--jobs 100000`` would start them all.
+    """
+    return max(64, 4 * (os.cpu_count() or 1))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``sweep``."""
     parser = OneLineParser(prog='sweep', description='Run a parameter study over a scenario.')
@@ -59,7 +67,12 @@ def main(argv: list[str] | None = None) -> int:
     that signal's: :data:`~flock_swarm.console.EXIT_SIGNAL`)."""
     # SIGTERM and SIGHUP stop the sweep as Ctrl-C does: every finished run stays cached.
     with StopSignals(interrupt=True) as stop:
-        return _main(argv, stop)
+        try:
+            return _main(argv, stop)
+        except KeyboardInterrupt:
+            # Before the runs (while the spec is read or the grid planned): nothing to keep.
+            print('sweep: interrupted before any run started', file=sys.stderr)
+            return stop.status(EXIT_INTERRUPTED)
 
 
 def _main(argv: list[str] | None, stop: StopSignals) -> int:
@@ -81,6 +94,9 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
         (lambda line: print(line, file=sys.stderr, flush=True))
     if args.jobs < 1:
         return fail(f'--jobs: must be >= 1, got {args.jobs}')
+    if args.jobs > max_jobs():
+        return fail(f'--jobs: at most {max_jobs()} (four per core of this machine, 64 at '
+                    f'least), got {args.jobs}')
     if args.seeds is not None and args.seeds < 1:
         return fail(f'--seeds: must be >= 1, got {args.seeds}')
     if not 0 < args.connect_timeout < float('inf'):

@@ -257,6 +257,7 @@ def parse_spec(data: dict, overrides: tuple[str, ...] = ()) -> SweepSpec:
         derived.append((key, expr))
         known.add(key)
     _check_overrides(overrides, keys, [key for key, _ in derived])
+    _check_fixed(fixed, keys, [key for key, _ in derived])
     seeds = _seeds(data.get('seeds', 1))
     count = math.prod(len(a.values) for a in grid) * (len(zipped[0].values) if zipped else 1)
     if count > MAX_POINTS:
@@ -296,11 +297,34 @@ def _check_overrides(overrides: tuple[str, ...], axes: list[str], derived: list[
     """
     for assignment in overrides:
         key = assignment.split('=', 1)[0].strip()
+        if key == 'seed':
+            # It was replaced by each run's seed without a word (any value, even > 2**64).
+            raise ScenarioError('--set', 'seed: every run takes its seed from the spec\'s '
+                                'seeds; give --seeds R (0 .. R-1) or the spec key seeds (a '
+                                'list, or {first, count})')
         for kind, names in (('an axis', axes), ('a derived value', derived)):
             for name in names:
                 if key == name or key.startswith(f'{name}.') or name.startswith(f'{key}.'):
                     raise ScenarioError('--set', f'{key} is set per point by the spec ({kind}: '
                                         f'{name}); change the spec instead')
+
+
+def _check_fixed(fixed: tuple[tuple[str, Any], ...], axes: list[str],
+                 derived: list[str]) -> None:
+    """Refuse a key of the spec's ``set:`` that the spec also sets per point (or ``seed``).
+
+    The point's value (or the run's seed) would replace it silently.
+    """
+    for key, _ in fixed:
+        if key == 'seed':
+            raise ScenarioError('set.seed', 'every run takes its seed from the spec key seeds '
+                                '(a count, a list, or {first, count}); move it there')
+        for kind, names in (('an axis', axes), ('a derived value', derived)):
+            for name in names:
+                if key == name or key.startswith(f'{name}.') or name.startswith(f'{key}.'):
+                    raise ScenarioError(f'set.{key}', f'is also set per point ({kind}: '
+                                        f'{name}), whose value would replace it; remove it '
+                                        'from set')
 
 
 def _paths(section: Any, key: str) -> dict[str, Any]:
