@@ -53,6 +53,13 @@ def summaries():
         failed = simulate(sc).summary
     assert failed['status'] == 'failed'
     out.append(failed)
+    # sim --backend mujoco: the engine tells the robots' contacts.
+    from functools import partial
+
+    from flock_swarm.engine.backend import EngineBackend
+    from test_robots_ros import FLEET_FILE
+    out.append(simulate(load(str(FLEET_FILE), ['duration=0.2']),
+                        integrator=partial(EngineBackend, 'unicycle')).summary)
     return out
 
 

@@ -330,7 +330,8 @@ def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
         plant's initial state, returning what integrates the agents instead: an object with
         ``state()`` (the state rows it starts from) and the plant's ``step(x, cmd, dt)``
         (the physics engine, :class:`flock_swarm.engine.backend.EngineBackend`: ``sim
-        --backend mujoco``, as the world's ``backend``).
+        --backend mujoco``, as the world's ``backend``), and optionally ``summary()``: summary
+        keys of its own (the engine's ``robot_contacts``).
     :return: the result; ``summary['status']`` is ``completed``, ``interrupted``,
         ``diverged`` (the state stopped being finite) or ``failed`` (a fault of the law or
         the leader model: ``summary['failure']`` tells it in one line).
@@ -389,10 +390,12 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
             raise RunFault(stack.failures[g], 'raised', step)
         series = log.rec.arrays()
         failure = {'failure': stack.failures[g]} if g in stack.failures else {}
+        # An integrator may tell summary keys of its own (the engine: robot_contacts).
+        told = getattr(stack.integrator, 'summary', None)
         summary = build_summary(
             s, real, series, log.metrics, step, status,
             pseudo_leader_reselections=0 if stack.reselector is None else stack.reselector.count,
-            wall_time_s=round(wall, 3), **failure)
+            wall_time_s=round(wall, 3), **failure, **(told() if told else {}))
         results.append(SimResult(summary, series))
     return results
 

@@ -285,8 +285,9 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
     _K('wall_time_s', PROVENANCE, 'wall-clock time of the run [s]', sim_only=True,
        writers=(SIM, WORLD)),
     _K('bag', BOOKKEEPING, 'the bag\'s path (null: not recorded)', writers=(WORLD, ANALYZE)),
-    _K('robot_contacts', WHOLE_RUN, 'the world\'s `backend: mujoco`: distinct pairs of robots '
-       'that touched in the physics engine over the run (absent otherwise)', writers=(WORLD,)),
+    _K('robot_contacts', WHOLE_RUN, '`backend: mujoco` (sim\'s and the world\'s): distinct '
+       'pairs of robots that touched in the physics engine over the run (absent otherwise)',
+       writers=(SIM, WORLD)),
     _K('complete_steps', BOOKKEEPING, 'steps of the bag with every agent\'s state',
        writers=(ANALYZE,)),
     _K('bag_warning', BOOKKEEPING, 'what was wrong with the bag (a cut recording), or null',

@@ -49,6 +49,11 @@ class EngineBackend:
         """Return the robot pairs that have touched since the start."""
         return self.world.contacts_run
 
+    def summary(self) -> dict:
+        """Return the summary keys the engine tells (``sim --backend mujoco``'s, as the
+        world's): ``robot_contacts``, the robot pairs that touched over the run."""
+        return {'robot_contacts': len(self.world.contacts_run)}
+
     def state(self) -> np.ndarray:
         """Return the robots' state rows ``(n, 6)`` as the unicycle plant holds them."""
         poses, vels = self.world.poses(), self.world.velocities()
