@@ -20,6 +20,15 @@ from flock_swarm.core.scenario import Realization, Scenario, parse_scenario, rea
 from flock_swarm.scenario_yaml import apply_override, read_yaml_file
 
 PACKAGE = 'flock_swarm'
+#: Most steps of a run (``duration / dt``): beyond, a run would not end in a lifetime
+#: (``duration=2147483000 dt=1e-9`` is 2e18 steps) and was accepted without a word.
+MAX_STEPS = 100_000_000
+#: Most interacting agent pairs at the start of a run: the law's work and memory of every
+#: step grow with them (about 1.3 us a pair at the start check, measured at N = 10,000), so
+#: ``n_agents=1000000`` in a box of 30 agents' size (5e10 pairs) hung without a word.
+MAX_PAIRS = 10_000_000
+#: Agents sampled to estimate the pairs of a larger swarm (every k-th agent).
+PAIR_SAMPLE = 5000
 
 
 def config_dirs() -> list[Path]:
@@ -198,10 +207,56 @@ def prepare(scenario: str | os.PathLike | Mapping[str, Any], overrides: Iterable
     else:
         data = load_mapping(os.fspath(scenario))
     sc = parse_scenario(_resolved(data, overrides, seed, extra))
+    if sc.steps > MAX_STEPS:
+        raise ScenarioError('duration', f'{sc.duration:g} s in steps of dt = {sc.dt:g} s is '
+                            f'{sc.steps:.3g} steps: at most {MAX_STEPS:.0e} a run (a longer '
+                            'dt or a shorter duration)')
     real = realize(sc)
+    check_pairs(sc, real)
     check_law_output(sc, real)
     if not allow_unstable:
         violations = check_step(sc, real)
         if violations:
             raise StepError(sc.dt, violations)
     return sc, real
+
+
+def initial_pairs(sc: Scenario, real: Realization) -> int:
+    """Return the number of interacting agent pairs at the start (estimated above
+    :data:`PAIR_SAMPLE` agents, from every k-th agent, scaled to the whole swarm).
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :return: the pairs of the fixed graph, of an all-pairs law, or within the law's radius.
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    n = sc.n_agents
+    if real.adjacency is not None:
+        return int(np.count_nonzero(np.triu(real.adjacency, 1)))  # symmetric (checked)
+    if sc.law.all_pairs:
+        return n * (n - 1) // 2
+    stride = -(-n // PAIR_SAMPLE)
+    sample = real.q0[::stride]
+    m = len(sample)
+    tree = cKDTree(sample)
+    within = (int(tree.count_neighbors(tree, sc.law.radius)) - m) // 2
+    return within if stride == 1 else round(within * n * (n - 1) / (m * (m - 1)))
+
+
+def check_pairs(sc: Scenario, real: Realization) -> None:
+    """Refuse a swarm whose agents interact in more than :data:`MAX_PAIRS` pairs at the start.
+
+    :param sc: the scenario.
+    :param real: its realisation.
+    :raises ScenarioError: naming ``n_agents``, with the estimated pairs.
+    """
+    n = sc.n_agents
+    if n * (n - 1) // 2 <= MAX_PAIRS:
+        return
+    pairs = initial_pairs(sc, real)
+    if pairs > MAX_PAIRS:
+        raise ScenarioError('n_agents', f'{n} agents interact in about {pairs:.2g} pairs at '
+                            f'the start (radius {sc.law.radius:g} m): at most {MAX_PAIRS:.0e} '
+                            'a step; spread them out (initial.position_box) or take fewer')

@@ -535,3 +535,34 @@ def test_an_empty_out_is_refused(tool, args, tmp_path):
     assert res.returncode == 2, res.stderr
     assert '--out: must name a directory, got an empty path' in res.stderr
     assert 'Traceback' not in res.stderr and list(tmp_path.iterdir()) == []
+
+
+def test_a_run_of_more_steps_than_the_bound_is_refused_at_once(tmp_path, capsys):
+    """``duration=2147483000 dt=1e-9`` (2e18 steps) was accepted and hung."""
+    res = run_sim(capsys, 'demo', '--set', 'duration=2147483000', '--set', 'dt=1e-9',
+                  '--allow-unstable', '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr == ('sim: error: duration: 2.14748e+09 s in steps of dt = 1e-09 s is '
+                          '2.15e+18 steps: at most 1e+08 a run (a longer dt or a shorter '
+                          'duration)\n')
+    assert not (tmp_path / 'o').exists()
+
+
+def test_a_million_agents_in_the_default_box_are_refused_at_once(tmp_path, capsys):
+    """``n_agents=1000000`` in the preset's box (every agent within reach of most): no output
+    for 60 s and SIGTERM ignored before; now one line naming ``n_agents`` and the pairs."""
+    res = run_sim(capsys, 'demo', '--set', 'n_agents=1000000', '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr == ('sim: error: n_agents: 1000000 agents interact in about 5.3e+10 '
+                          'pairs at the start (radius 4 m): at most 1e+07 a step; spread them '
+                          'out (initial.position_box) or take fewer\n')
+
+
+def test_many_agents_spread_out_are_not_refused():
+    """The bound is on the pairs, not on the agents: 100,000 agents 300 m apart pass."""
+    from flock_swarm.presets import check_pairs, initial_pairs
+    sc = parse_scenario(with_value('n_agents', 100_000) | {
+        'initial': {'position_box': [[0, 1e5], [0, 1e5]], 'velocity_box': [[0, 1], [0, 1]]}})
+    real = realize(sc)
+    assert initial_pairs(sc, real) < 1000
+    check_pairs(sc, real)
