@@ -36,8 +36,9 @@ import pytest
 from flock_swarm.core.summary import sim_only_keys
 # The harness imports no rclpy, NumPy or YAML until a run starts (this plugin is loaded by
 # every pytest run of the environment).
-from flock_swarm.nodes.harness import (DOMAIN_SPAN, InProcessSwarm, RUN_TIMEOUT,  # noqa: F401
-                                       SwarmRun, release_domain, unique_domain)
+from flock_swarm.nodes.harness import (DOMAIN_SPAN, DOMAINS_VARIABLE,  # noqa: F401
+                                       InProcessSwarm, RUN_TIMEOUT, SwarmRun, domain_ranges,
+                                       release_domain, unique_domain)
 
 #: The environment variable that limits DDS discovery, and the value the fixtures default to:
 #: a test never talks to, or hears from, another host.
@@ -333,6 +334,15 @@ def _plain(value: Any) -> Any:
 
 
 # -- the pytest plugin -----------------------------------------------------------------------
+
+def pytest_configure(config) -> None:
+    """Refuse, before any test, a ``$FLOCK_SWARM_TEST_DOMAINS`` the fixtures cannot use: one
+    line naming the variable and exit status 2, instead of an error in every ROS test."""
+    try:
+        domain_ranges(os.environ.get(DOMAINS_VARIABLE))
+    except ValueError as err:
+        pytest.exit(f'error: {err}', returncode=2)
+
 
 @pytest.fixture
 def ros_domain(monkeypatch) -> int:

@@ -5,7 +5,10 @@ The generic ones (``ros_domain``, ``other_ros_domain``, ``flock_swarm_run``,
 plugin every user's tests get too.
 """
 
+import ast
 import contextlib
+import functools
+import json
 import os
 from pathlib import Path
 import shutil
@@ -165,3 +168,255 @@ def quick_reproduction(tmp_path_factory) -> Path:
             assert status == 0
             done.touch()
     return root
+
+
+# -- tiers: the markers ``ros`` and ``slow``, scripts/test --quick --------------------------------
+
+#: The tests' measured durations in seconds, the source of the ``slow`` marker:
+#: ``{file: {test name within the file: [setup, call and teardown together, setup]}}``.
+#: Written by ``scripts/test --record-durations`` (README, "Tests"), which updates the tests
+#: it ran and keeps the others'.
+DURATIONS = REPO / 'test' / 'durations.json'
+#: A test measured at this many seconds or more is ``slow``; so is every test that uses a
+#: fixture shared by several tests (scope ``module`` or ``session``) whose set-up took this
+#: long in one of them: the tier that runs them pays it.
+SLOW = 1.0
+#: The fixtures that give a test a ROS domain (and, with it, DDS): a test that uses one,
+#: directly or through another fixture, is ``ros``.
+ROS_FIXTURES = frozenset({'ros_domain', 'other_ros_domain', 'ros_context', 'flock_swarm_run',
+                          'in_process_swarm'})
+#: Names whose use starts DDS: rclpy, the harness's runs and the node executables; a test is
+#: ``ros`` when it, a fixture it uses or a function of its module it calls names one.
+DDS_NAMES = frozenset({'rclpy', 'unique_domain', 'start_nodes', 'run_swarm', 'Swarm',
+                       'InProcessSwarm', 'assert_matches_sim', 'executable', 'run_in_process',
+                       'run_processes', 'run_installed'})
+#: The executables (and the modules of the commands) that start DDS, as a test's command line
+#: or one of its parameters names them.
+DDS_COMMANDS = frozenset({'swarm', 'world', 'leader', 'agent', 'agents', 'foxglove_server',
+                          'replay', 'robot_agent', 'flock_swarm.cli.swarm',
+                          'flock_swarm.cli.replay', 'scripts/demo'})
+#: ``scripts/test --quick`` runs the tests that are not ``slow`` and these: one lockstep ROS
+#: run equal to ``sim`` bit for bit per front-end feature (network, plant, obstacles,
+#: engine). A test named here that is not collected is an error of the quick tier.
+QUICK = (
+    'test/test_network_ros.py::test_delay_loss_and_noise_match_sim_in_every_layout[one process]',
+    'test/test_plants_ros.py::test_a_robot_plant_through_cmd_vel_matches_sim[unicycle-one '
+    'process]',
+    'test/test_obstacles_ros.py::test_a_run_with_obstacles_matches_sim_in_every_layout[one '
+    'process]',
+    'test/test_engine_world.py::test_six_engine_robots_follow_a_circling_leader_in_lockstep',
+)
+
+
+def pytest_addoption(parser):
+    """The tier options: ``--quick`` and ``--record-durations``."""
+    group = parser.getgroup('flock_swarm tiers')
+    group.addoption('--quick', action='store_true',
+                    help='run the fast tier (no test measured at >= 1 s in '
+                         'test/durations.json) and the lockstep equivalences of QUICK')
+    group.addoption('--record-durations', metavar='PATH', nargs='?', const=str(DURATIONS),
+                    default=None,
+                    help='write the durations of the tests that ran into PATH (default '
+                         'test/durations.json), keeping the other tests\' entries')
+
+
+def load_durations(path: Path = DURATIONS) -> dict[str, tuple[float, float]]:
+    """Return the recorded ``(total, setup)`` durations by node id (``{}`` without the
+    file)."""
+    if not path.exists():
+        return {}
+    return {f'{file}::{name}': (total, setup)
+            for file, tests in json.loads(path.read_text()).items()
+            for name, (total, setup) in tests.items()}
+
+
+def write_durations(durations: dict[str, tuple[float, float]], path: Path = DURATIONS) -> None:
+    """Write ``{node id: (total, setup)}`` as ``{file: {name: [total, setup]}}``, sorted,
+    rounded to 10 ms."""
+    grouped: dict[str, list[str]] = {}
+    for nodeid, times in sorted(durations.items()):
+        file, _, name = nodeid.partition('::')
+        grouped.setdefault(file, []).append(
+            f'{json.dumps(name)}: {json.dumps([round(t, 2) for t in times])}')
+    path.write_text('{\n' + ',\n'.join(f'{json.dumps(file)}: {{\n' + ',\n'.join(lines) + '\n}'
+                                       for file, lines in grouped.items()) + '\n}\n')
+
+
+def _names(node: ast.AST) -> tuple[set[str], set[str]]:
+    """Return the names a function's body (not its decorators) uses: bare names and
+    attributes, and string constants."""
+    names, strings = set(), set()
+    for stmt in getattr(node, 'body', []):
+        for sub in ast.walk(stmt):
+            if isinstance(sub, ast.Name):
+                names.add(sub.id)
+            elif isinstance(sub, ast.Attribute) and sub.attr != 'executable':  # sys.executable
+                names.add(sub.attr)
+            elif isinstance(sub, ast.Constant) and isinstance(sub.value, str):
+                strings.add(sub.value)
+    return names, strings
+
+
+#: Names whose use starts a process: a test whose parameter names a command starts DDS only
+#: if it starts a process (``tool='swarm'`` in a command line, not ``which='swarm'``).
+PROCESS_NAMES = frozenset({'subprocess', 'Popen', 'run_installed'})
+
+
+@functools.cache
+def dds_functions(path: str) -> tuple[frozenset[str], frozenset[str]]:
+    """Return the functions and classes of a test module (``Class.method`` for methods) that
+    start DDS: they name one of :data:`DDS_NAMES` or a command line or path of
+    :data:`DDS_COMMANDS`, or call a function of the module that does; and those that start
+    a process (:data:`PROCESS_NAMES`, or calling a function of the module that does).
+    """
+    tree = ast.parse(Path(path).read_text(), path)
+    defs: dict[str, ast.AST] = {}
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defs[node.name] = node
+        if isinstance(node, ast.ClassDef):
+            for sub in node.body:
+                if isinstance(sub, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    defs[f'{node.name}.{sub.name}'] = sub
+    uses = {name: _names(node) for name, node in defs.items()}
+
+    def closure(starts: set[str]) -> frozenset[str]:
+        while True:  # what calls a function that starts one starts one too
+            more = {name for name, (names, _) in uses.items()
+                    if name not in starts and names & {s.split('.')[-1] for s in starts}}
+            if not more:
+                return frozenset(starts)
+            starts |= more
+
+    return (closure({name for name, (names, strings) in uses.items()
+                     if names & DDS_NAMES or any(names_command(s, bare=False)
+                                                 for s in strings)}),
+            closure({name for name, (names, _) in uses.items() if names & PROCESS_NAMES}))
+
+
+def names_command(value, bare: bool = True) -> bool:
+    """Return whether ``value`` (a string, or a list or tuple of them) names a command that
+    starts DDS: its first word, or that word's last path component (``/venv/bin/swarm``), is
+    one of :data:`DDS_COMMANDS`.
+
+    :param bare: whether a lone word counts (a test's parameter ``'swarm'``); else only a
+        command line (``'swarm demo'``) or a path (``bin/swarm``) does, not the word
+        ``'world'`` a frame id or a directory name uses.
+    """
+    if isinstance(value, (list, tuple)):
+        return bool(value) and names_command(value[0], bare)
+    if not isinstance(value, str) or not value.strip():
+        return False
+    first = value.split()[0]
+    if value in DDS_COMMANDS and '.' in value:  # a module: flock_swarm.cli.swarm
+        return True
+    if not bare and first == value and '/' not in value:
+        return False
+    return bool({first, first.rsplit('/', 1)[-1]} & DDS_COMMANDS)
+
+
+def starts_dds(item) -> bool:
+    """Return whether a test starts DDS (its ``ros`` marker): it uses one of
+    :data:`ROS_FIXTURES`, or it (or a fixture or function of its module it uses) does by
+    :func:`dds_functions`, or it starts a process and one of its parameters names a command
+    that starts DDS."""
+    fixtures = set(getattr(item, 'fixturenames', ()))
+    if ROS_FIXTURES & fixtures:
+        return True
+    path = str(item.path)
+    if not path.endswith('.py'):
+        return False
+    dds, processes = dds_functions(path)
+    name = getattr(item, 'originalname', item.name)
+    cls = getattr(item, 'cls', None)
+    own = {f'{cls.__name__}.{name}' if cls is not None else name} | fixtures
+    if own & dds:
+        return True
+    callspec = getattr(item, 'callspec', None)
+    return bool(own & processes and callspec
+                and any(names_command(v) for v in callspec.params.values()))
+
+
+def is_core_module(path: Path) -> bool:
+    """Return whether a test module is core's: it imports from flock_swarm only its ROS-free,
+    process-free core (``flock_swarm.core``) and starts no processes."""
+    modules = imported_modules(path)
+    ours = {m for m in modules if m == 'flock_swarm' or m.startswith('flock_swarm.')}
+    return (all(m.startswith('flock_swarm.core') for m in ours)
+            and not modules & {'subprocess', 'multiprocessing', 'rclpy'})
+
+
+def shared_fixtures(item) -> set[str]:
+    """Return the fixtures of this directory a test uses that several tests share (scope
+    ``module``, ``package`` or ``session``), by ``file::name``."""
+    info = getattr(item, '_fixtureinfo', None)
+    found = set()
+    for name, defs in (info.name2fixturedefs.items() if info else ()):
+        for fixture in defs:
+            where = Path(fixture.func.__code__.co_filename)
+            if fixture.scope != 'function' and where.parent == REPO / 'test':
+                found.add(f'{where.name}::{name}')
+    return found
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark each test ``ros`` (:func:`starts_dds`) and ``slow``: measured at >= :data:`SLOW` in
+    :data:`DURATIONS`, or using a shared fixture whose set-up was (:func:`shared_fixtures`);
+    a test without a measurement is slow unless its module is core's. With ``--quick``, keep
+    the tests that are not slow and those of :data:`QUICK`."""
+    durations = load_durations()
+    core = functools.cache(is_core_module)
+    slow_fixtures = set()
+    for item in items:
+        if durations.get(item.nodeid, (0.0, 0.0))[1] >= SLOW:
+            slow_fixtures |= shared_fixtures(item)
+    for item in items:
+        if starts_dds(item):
+            item.add_marker(pytest.mark.ros)
+        measured = durations.get(item.nodeid)
+        if measured is None:
+            slow = not core(item.path)
+        else:
+            slow = measured[0] >= SLOW or bool(shared_fixtures(item) & slow_fixtures)
+        if slow:
+            item.add_marker(pytest.mark.slow)
+    if not config.getoption('quick'):
+        return
+    ids = {item.nodeid for item in items}
+    missing = [nodeid for nodeid in QUICK if nodeid not in ids]
+    if missing:
+        raise pytest.UsageError(f'--quick: {missing[0]} is not a collected test (renamed? '
+                                'update QUICK in test/conftest.py)')
+    keep = [item for item in items
+            if item.nodeid in QUICK or not item.get_closest_marker('slow')]
+    config.hook.pytest_deselected(items=[item for item in items if item not in keep])
+    items[:] = keep
+
+
+class DurationRecorder:
+    """Sum each test's setup, call and teardown durations; write them at the session's end
+    (in the controller under pytest-xdist, which receives every worker's reports)."""
+
+    def __init__(self, path: Path) -> None:
+        """Record into ``path``."""
+        self.path = path
+        self.durations: dict[str, tuple[float, float]] = {}
+
+    def pytest_runtest_logreport(self, report) -> None:
+        """Add a phase's duration to its test's (the set-up's to both numbers)."""
+        total, setup = self.durations.get(report.nodeid, (0.0, 0.0))
+        self.durations[report.nodeid] = (total + report.duration,
+                                         setup + (report.duration if report.when == 'setup'
+                                                  else 0.0))
+
+    def pytest_sessionfinish(self, session) -> None:
+        """Merge the durations into the file's."""
+        if self.durations:
+            write_durations({**load_durations(self.path), **self.durations}, self.path)
+
+
+def pytest_configure(config):
+    """Record durations with ``--record-durations`` (not in an xdist worker)."""
+    path = config.getoption('record_durations')
+    if path and not hasattr(config, 'workerinput'):
+        config.pluginmanager.register(DurationRecorder(Path(path)), 'flock_swarm_durations')

@@ -50,8 +50,12 @@ RUN_TIMEOUT = 240.0
 #: Ids 102-214 can clash with the ephemeral ports the OS hands out, and ids above 232 overflow
 #: the DDS port range.
 DOMAIN_RANGES = ((1, 101), (223, 232))
-#: How many ids :func:`unique_domain` hands out before one repeats.
+#: How many ids :func:`unique_domain` hands out before one repeats (with the default ranges).
 DOMAIN_SPAN = sum(hi - lo + 1 for lo, hi in DOMAIN_RANGES)
+#: The environment variable that replaces :data:`DOMAIN_RANGES`: ``lo-hi[,lo-hi...]``, each
+#: range within 0-232 (``FLOCK_SWARM_TEST_DOMAINS=30-59``: two test sessions on one machine
+#: that must not share ids, or a network whose other users hold the default ranges).
+DOMAINS_VARIABLE = 'FLOCK_SWARM_TEST_DOMAINS'
 
 _domains = itertools.count()
 #: The domain ids this process holds, with the open lock file of each (see unique_domain).
@@ -62,7 +66,8 @@ _fallback = itertools.count()
 
 def unique_domain() -> int:
     """Return a ROS domain id not handed out before in this process, in 1-101 or 223-232
-    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges), and held by no other process
+    (:data:`DOMAIN_RANGES`: within ROS's recommended ranges) or in the ranges
+    ``$FLOCK_SWARM_TEST_DOMAINS`` names (:func:`domain_ranges`), and held by no other process
     of this machine.
 
     Ids are spread over the ranges by process id, and each is held with a lock file (under
@@ -71,13 +76,44 @@ def unique_domain() -> int:
     one machine (discovery is limited to it) must not meet. When every id is held, the next
     one is shared (111 ids a process before one repeats).
     """
-    for _ in range(DOMAIN_SPAN):
-        domain = _domain_at(os.getpid() * 37 + next(_domains))
+    ranges = domain_ranges(os.environ.get(DOMAINS_VARIABLE))
+    for _ in range(sum(hi - lo + 1 for lo, hi in ranges)):
+        domain = _domain_at(os.getpid() * 37 + next(_domains), ranges)
         if _hold(domain):
             return domain
     # Every id is held by another process: the next of this process's own sequence (so two
     # calls still differ).
-    return _domain_at(os.getpid() * 37 + next(_fallback))
+    return _domain_at(os.getpid() * 37 + next(_fallback), ranges)
+
+
+def domain_ranges(text: str | None) -> tuple[tuple[int, int], ...]:
+    """Return the domain id ranges :func:`unique_domain` hands out: ``text`` read as
+    ``lo-hi[,lo-hi...]`` (the value of :data:`DOMAINS_VARIABLE`), or :data:`DOMAIN_RANGES`
+    when it is unset or blank.
+
+    :param text: the variable's value, or ``None``.
+    :return: the ranges, inclusive, in the given order.
+    :raises ValueError: one line naming the variable and the part it cannot use (not
+        ``lo-hi``, ``lo > hi``, outside 0-232, two ranges overlapping).
+    """
+    if text is None or not text.strip():
+        return DOMAIN_RANGES
+    ranges: list[tuple[int, int]] = []
+    for part in text.split(','):
+        bounds = part.strip().split('-')
+        if len(bounds) != 2 or not all(b.strip().isdigit() for b in bounds):
+            raise ValueError(f'{DOMAINS_VARIABLE}: {part.strip()!r} is not a range lo-hi of '
+                             f'domain ids (expected lo-hi[,lo-hi...], e.g. 30-59,223-232)')
+        lo, hi = (int(b) for b in bounds)
+        if not 0 <= lo <= hi <= 232:
+            raise ValueError(f'{DOMAINS_VARIABLE}: {part.strip()!r}: a range lo-hi needs '
+                             '0 <= lo <= hi <= 232 (higher ids overflow the DDS port range)')
+        for other in ranges:
+            if lo <= other[1] and other[0] <= hi:
+                raise ValueError(f'{DOMAINS_VARIABLE}: {part.strip()!r} overlaps '
+                                 f'{other[0]}-{other[1]}')
+        ranges.append((lo, hi))
+    return tuple(ranges)
 
 
 def release_domain(domain: int) -> None:
@@ -87,11 +123,14 @@ def release_domain(domain: int) -> None:
         lock.close()
 
 
-def _domain_at(index: int) -> int:
-    """Return the domain id at position ``index`` (modulo their number) of the ranges."""
-    n = index % DOMAIN_SPAN
-    (lo, hi), (second, _) = DOMAIN_RANGES
-    return lo + n if n <= hi - lo else second + n - (hi - lo + 1)
+def _domain_at(index: int, ranges=DOMAIN_RANGES) -> int:
+    """Return the domain id at position ``index`` (modulo their number) of ``ranges``."""
+    n = index % sum(hi - lo + 1 for lo, hi in ranges)
+    for lo, hi in ranges:
+        if n <= hi - lo:
+            return lo + n
+        n -= hi - lo + 1
+    raise AssertionError('unreachable: n is below the ranges\' total')
 
 
 def _hold(domain: int) -> bool:
