@@ -43,7 +43,10 @@ def check_recording(out) -> None:
 
 def test_six_engine_robots_follow_a_circling_leader_in_lockstep(fleet, tmp_path, ros_domain):
     """The agent nodes as they are (sim's conversion), the world stepping the engine: the run
-    equals ``sim --backend mujoco`` bit for bit (the engine is deterministic)."""
+    equals ``sim --backend mujoco`` bit for bit (the engine is deterministic), with the
+    agents' latency prediction on (their default, named here: in lockstep each state is of
+    the step its command applies at, so the prediction is the identity), and sim's summary
+    counts the same robot contacts."""
     from functools import partial
 
     from flock_swarm.core.run import simulate
@@ -52,10 +55,12 @@ def test_six_engine_robots_follow_a_circling_leader_in_lockstep(fleet, tmp_path,
     from flock_swarm.testing import compare_runs, SIM_ONLY
     out = tmp_path / 'lockstep'
     run = run_swarm(fleet, out, ['duration=10.0'], domain_id=ros_domain,
-                    world_params={'backend': 'mujoco'}, timeout=120.0)
+                    world_params={'backend': 'mujoco'}, agent_params={'latency': 'predict'},
+                    timeout=120.0)
     flocked(run, 0.02)
     ref = simulate(run.scenario, integrator=partial(EngineBackend, 'unicycle'))
     want = {k: v for k, v in json.loads(json_text(ref.summary)).items() if k not in SIM_ONLY}
+    assert want['robot_contacts'] == 0
     assert compare_runs(want, ref.series, run.summary, run.timeseries(), 0.0) == []
     series = run.timeseries()
     # The series hold the engine's robots as the plant state, heading included.
