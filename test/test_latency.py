@@ -5,15 +5,18 @@ in realtime only."""
 
 import copy
 import math
+import os
+import subprocess
 
 import numpy as np
 import pytest
 
 from flock_swarm.core.latency import CommandHistory, extrapolate, hold
 from flock_swarm.core.plants.models import DoubleIntegrator, Unicycle, VelocityLag
+from flock_swarm.nodes.harness import executable
 from flock_swarm.nodes.controller import AgentController
 from flock_swarm.presets import prepare
-from test_robots_ros import FLEET
+from test_robots_ros import FLEET, FLEET_FILE
 
 RNG = np.random.default_rng(36)
 #: Two states of each plant: a robot at rest and one moving (and turning).
@@ -190,3 +193,14 @@ def test_the_controller_predicts_in_realtime_only():
     # A timer that fires late (1.3 periods after the odometry): the command applies at 6.
     c.realtime_answer(100.0 + 1.3 * c.sc.dt)
     assert c.apply_at == 6 * c.sc.dt
+
+
+def test_a_bad_latency_is_one_line(ros_domain):
+    """The agents' ``latency`` parameter: one line naming it, exit status 2."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    res = subprocess.run(executable('agents') + ['--ros-args', '-p', f'scenario:={FLEET_FILE}',
+                                                 '-p', 'latency:=ahead'],
+                         env=env, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip().splitlines() == [
+        "agents: error: latency: must be 'predict' or 'off', got 'ahead'"]

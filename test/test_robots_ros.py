@@ -357,7 +357,8 @@ def test_bad_bridge_parameters_are_one_line(fleet, ros_domain):
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
     for param, key in (('geofence:=1,2,3', 'geofence'), ('robots:=a,b', 'robots'),
                        ('max_speed:=-1.0', 'max_speed'), ('mode:=lockstep', 'mode'),
-                       ('twist_frame:=sideways', 'twist_frame'), ('agent_id:=6', 'agent_id')):
+                       ('twist_frame:=sideways', 'twist_frame'), ('agent_id:=6', 'agent_id'),
+                       ('integrate_from:=ahead', 'integrate_from')):
         res = subprocess.run(executable('robot_agent') + [
             '--ros-args', '-p', f'scenario:={fleet}', '-p', param], env=env,
             capture_output=True, text=True, timeout=60)
