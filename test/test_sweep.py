@@ -300,57 +300,84 @@ def test_local_pool_gives_the_same_tables(small_serial):
         == (small_serial / 'serial' / 'summary.csv').read_bytes()
 
 
+#: The environment of the Dask processes.
+DASK_ENV = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON='False')
+
+
+def dask_worker(address: str) -> subprocess.Popen:
+    """Start a real ``dask worker`` process of the scheduler at ``address``."""
+    # --no-nanny: a worker is one process, so that a SIGKILL really ends it.
+    return subprocess.Popen([str(BIN / 'dask'), 'worker', address, '--nthreads', '1',
+                             '--no-nanny', '--host', '127.0.0.1', '--no-dashboard'],
+                            env=DASK_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
 @contextlib.contextmanager
 def dask_cluster(tmp_path: Path, workers: int = 2):
     """Run a real ``dask scheduler`` and ``workers`` ``dask worker`` processes on 127.0.0.1.
 
-    :return: (context) the scheduler's address, the worker processes and the scheduler's.
+    :return: (context) the scheduler's address, the list of the worker processes (a worker
+        appended to it is stopped with the others) and the scheduler's process.
     """
     info = tmp_path / 'scheduler.json'
-    env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON='False')
-    procs = [subprocess.Popen([str(BIN / 'dask'), 'scheduler', '--host', '127.0.0.1',
-                               '--port', '0', '--no-dashboard', '--scheduler-file', str(info)],
-                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    scheduler = subprocess.Popen([str(BIN / 'dask'), 'scheduler', '--host', '127.0.0.1',
+                                  '--port', '0', '--no-dashboard', '--scheduler-file',
+                                  str(info)],
+                                 env=DASK_ENV, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+    started: list[subprocess.Popen] = []
     try:
         wait_for(info.exists, 60.0, 'the Dask scheduler file')
         address = json.loads(info.read_text())['address']
         assert address.startswith('tcp://127.0.0.1:')
-        for _ in range(workers):
-            # --no-nanny: a worker is one process, so that a SIGKILL really ends it.
-            procs.append(subprocess.Popen(
-                [str(BIN / 'dask'), 'worker', address, '--nthreads', '1', '--no-nanny',
-                 '--host', '127.0.0.1', '--no-dashboard'],
-                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        yield address, procs[1:], procs[0]
+        started.extend(dask_worker(address) for _ in range(workers))
+        yield address, started, scheduler
     finally:
-        for proc in reversed(procs):
-            proc.terminate()
-        for proc in procs:
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                # A worker's graceful close can outwait a busy machine; the test is done.
-                proc.kill()
-                proc.wait()
+        # SIGKILL: the tests are done with the cluster, and a graceful close of a worker
+        # took up to a 20 s bound per process on a busy machine, for nothing a test reads.
+        for proc in [*started, scheduler]:
+            proc.kill()
+            proc.wait(timeout=20)
 
 
-def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path):
-    with dask_cluster(tmp_path) as (address, _, _):
-        out = tmp_path / 'dask'
-        assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
-                     '--out', str(out), '--quiet', '--no-plots']) == 0
+@pytest.fixture(scope='session')
+def session_cluster(tmp_path_factory):
+    """One real Dask cluster of two workers for the session's tests that use a working one
+    (:func:`shared_cluster`); started once: a new cluster's workers took seconds to start
+    and to import the simulator at their first task."""
+    with dask_cluster(tmp_path_factory.mktemp('dask')) as (address, workers, scheduler):
+        yield address, workers, scheduler
+
+
+@pytest.fixture
+def shared_cluster(session_cluster):
+    """Return the session's cluster (address, workers, scheduler), with two live workers: one
+    that an earlier test killed is replaced."""
+    address, workers, scheduler = session_cluster
+    assert scheduler.poll() is None, 'the session\'s Dask scheduler exited'
+    for k, proc in enumerate(workers):
+        if proc.poll() is not None:
+            workers[k] = dask_worker(address)
+    return session_cluster
+
+
+def test_a_dask_cluster_gives_the_same_tables(small_serial, tmp_path, shared_cluster):
+    address, _, _ = shared_cluster
+    out = tmp_path / 'dask'
+    assert main([str(small_serial / 'small.yaml'), '--scheduler', address,
+                 '--out', str(out), '--quiet', '--no-plots']) == 0
     assert read_csv(out / 'runs.csv') == read_csv(small_serial / 'serial' / 'runs.csv')
     assert (out / 'summary.csv').read_bytes() \
         == (small_serial / 'serial' / 'summary.csv').read_bytes()
 
 
-def test_a_killed_dask_worker_has_its_runs_redone(long_serial, tmp_path):
+def test_a_killed_dask_worker_has_its_runs_redone(long_serial, tmp_path, shared_cluster):
     out = tmp_path / 'dask-killed'
-    with dask_cluster(tmp_path) as (address, workers, _):
-        status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1,
-                                    lambda proc: workers[0].kill(),
-                                    '--scheduler', address)
-        assert workers[0].wait(timeout=30) == -signal.SIGKILL
+    address, workers, _ = shared_cluster
+    killed = workers[0]
+    status, err = hit_mid_sweep(long_serial / 'long.yaml', out, 1, lambda proc: killed.kill(),
+                                '--scheduler', address)
+    assert killed.wait(timeout=30) == -signal.SIGKILL
     assert status == 0, err
     assert len(read_cache(out / 'runs.jsonl')) == 16
     assert cache_lines(out / 'runs.jsonl') == 16
