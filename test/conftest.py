@@ -128,15 +128,17 @@ def imported_modules(path) -> set[str]:
     return found
 
 
-#: How long a pytest-xdist worker waits for another's quick reproduction (it takes about a
-#: minute alone, two or three beside the other worker's tests).
+#: How long a pytest-xdist worker waits for another's quick reproduction (it took 31 s in one
+#: process on a loaded machine, 78 s on two worker processes, whose start per study dominated).
 QUICK_REPRODUCTION_WAIT = 600.0
 
 
 @pytest.fixture(scope='session')
 def quick_reproduction(tmp_path_factory) -> Path:
-    """Run ``python -m flock_swarm.reproduce --quick --skip-ros`` once for the whole session
-    (about a minute) into a temporary directory: ``out/``, ``report.md``, ``figures/``.
+    """Run ``python -m flock_swarm.reproduce --quick --skip-ros --jobs 1`` once for the whole
+    session into a temporary directory: ``out/``, ``report.md``, ``figures/``. In this process:
+    its runs take a few seconds, and starting two worker processes for each of its studies
+    took longer than all of them (the pool is test_reproduce_seeds's and test_sweep's).
 
     Read-only for the tests that share it; a test that runs the reproduction again copies
     ``out/`` first (test_reproduce_seeds). Under pytest-xdist (scripts/test's default) the
@@ -161,7 +163,7 @@ def quick_reproduction(tmp_path_factory) -> Path:
             f'another worker held {lock.name} for {QUICK_REPRODUCTION_WAIT:.0f} s')
         if not done.exists():
             shutil.rmtree(root, ignore_errors=True)  # what a failed attempt left
-            status = reproduce.main(['--quick', '--skip-ros', '--jobs', '2',
+            status = reproduce.main(['--quick', '--skip-ros', '--jobs', '1',
                                      '--out', str(root / 'out'),
                                      '--report', str(root / 'report.md'),
                                      '--figures', str(root / 'figures')])
