@@ -7,10 +7,12 @@ from flock_swarm.reproduce.experiments.network_study import NetworkFig2
 #: The section's opening line.
 BEYOND_PLANTS = (
     '*Beyond the papers.* The papers\' agents are double integrators. Here the same law flies '
-    'robots (`plant:`, `docs/plants.md`): the law\'s acceleration integrated over the step '
-    'into a velocity setpoint for a robot under a velocity controller with a first-order lag, '
-    'or turned into forward speed and yaw rate for a differential-drive robot through the '
-    'point ahead of its axle. Seeds 1 .. 20 of each are the same draws as the double '
+    'robots (`plant:`, `docs/plants.md`): the law\'s acceleration turned into a velocity '
+    'setpoint for a robot under a velocity controller with a first-order lag, or into forward '
+    'speed and yaw rate for a differential-drive robot through the point ahead of its axle, '
+    'by the exact conversion (one step delivers the law\'s velocity change) and by the naive '
+    'one (the velocity p + u dt handed over as it is). Seeds 1 .. 20 of each are the same '
+    'draws as the double '
     'integrators\' seeds 1 .. 20; the criterion is the paper\'s own, asked of each plant.')
 
 
@@ -41,7 +43,13 @@ class Fig2Plants(NetworkFig2):
         labels = {
             ("{'model': 'velocity_lag', 'tau': 0.1}",): 'velocity lag, tau = 0.1 s',
             ("{'model': 'velocity_lag', 'tau': 0.5}",): 'velocity lag, tau = 0.5 s',
-            ("{'model': 'unicycle', 'ell': 0.1}",): 'unicycle, ell = 0.1 m'}
+            ("{'model': 'unicycle', 'ell': 0.1}",): 'unicycle, ell = 0.1 m',
+            ("{'model': 'velocity_lag', 'tau': 0.1, 'conversion': 'naive'}",):
+                'velocity lag, tau = 0.1 s, naive conversion',
+            ("{'model': 'velocity_lag', 'tau': 0.5, 'conversion': 'naive'}",):
+                'velocity lag, tau = 0.5 s, naive conversion',
+            ("{'model': 'unicycle', 'ell': 0.1, 'conversion': 'naive'}",):
+                'unicycle, ell = 0.1 m, naive conversion'}
         return (SetUp('reproduce_su2009_fig2', 'double integrator (the Fig. 2 study)'),
                 SetUp(self.spec, labels=labels))
 
