@@ -73,7 +73,8 @@ def from_command(model: str, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
     (``v_sp = p + u T``): a deadbeat velocity loop, exact in ``sim``, which oscillates when the
     measured velocity arrives late (a real robot's odometry: 50-150 ms). Integrating from the
     last command sent instead (``v_sp = v_sp_prev + u T``, the robot's own velocity controller
-    closing the loop) is what the robot agent does by default (``integrate_from``).
+    closing the loop) is the robot agent's ``integrate_from:=command``; its default,
+    ``predict``, predicts the whole state instead (:mod:`flock_swarm.core.latency`).
 
     :param model: ``'velocity_lag'`` or ``'unicycle'``.
     :param x: state rows ``(n, S)`` (:func:`plant_state`).
