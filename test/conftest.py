@@ -412,9 +412,11 @@ class DurationRecorder:
                                                   else 0.0))
 
     def pytest_sessionfinish(self, session) -> None:
-        """Merge the durations into the file's."""
+        """Merge the durations into the file's (whose entries of deleted files go)."""
         if self.durations:
-            write_durations({**load_durations(self.path), **self.durations}, self.path)
+            kept = {nodeid: times for nodeid, times in load_durations(self.path).items()
+                    if (REPO / nodeid.partition('::')[0]).exists()}
+            write_durations({**kept, **self.durations}, self.path)
 
 
 def pytest_configure(config):
