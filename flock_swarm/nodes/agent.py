@@ -29,6 +29,12 @@ A robot plant (``plant:``, docs/plants.md) commanded by velocity (``cmd_vel``, t
 converted from the law's acceleration by the plant's own ``command`` and ``twist`` (the
 core's, as in ``sim``), as ``geometry_msgs/Twist`` on ``agent_<i>/cmd_vel``: once per step,
 never repeated (it carries no stamp: the world takes it as the open step's).
+
+In realtime the agents act on every state predicted to the world's tick their commands apply
+at (``latency:=predict``, the default; :meth:`AgentController.predicted
+<flock_swarm.nodes.controller.AgentController.predicted>`, docs/robots.md): the hosted agents'
+through the commands they were sent, the others' at constant velocity. In lockstep the states
+are current and the prediction is the identity.
 """
 
 import dataclasses
@@ -446,7 +452,8 @@ def run_agents(name: str, factory, args: list[str] | None) -> int:
     """
     built: list[AgentNode] = []
     status = run_node(name, lambda: built.append(factory()) or built[0], args,
-                      until=lambda node: node.world_finished() or node.failure is not None)
+                      until=lambda node: node.world_finished() or node.failure is not None,
+                      completed=lambda node: node.world_finished.completed())
     return 1 if status == 0 and built and built[0].failure is not None else status
 
 
