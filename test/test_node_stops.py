@@ -5,6 +5,7 @@ import json
 import os
 import signal
 import subprocess
+import time
 
 import pytest
 
@@ -100,3 +101,62 @@ def test_swarm_processes_run_ends_cleanly(tmp_path, ros_domain):
     assert res.returncode == 0, res.stderr[-3000:]
     assert 'FATAL' not in res.stderr and 'Traceback' not in res.stderr, res.stderr[-3000:]
     assert json.loads((out / 'summary.json').read_text())['status'] == 'completed'
+
+
+def launch_processes(tmp_path, out, env) -> list[subprocess.Popen]:
+    """Start the processes of ``ros2 launch flock_swarm swarm_launch.py n_agents:=4
+    informed_count:=2 overrides:=...`` as launch_ros starts them (the launch plan's
+    executables, node names and parameters in a params file), each with its own log in
+    ``tmp_path``; the world first."""
+    import yaml
+
+    from flock_swarm.launch_plan import swarm_processes
+    specs = swarm_processes(n_agents='4', informed_count='2', out_dir=str(out),
+                            overrides='duration=2; dt=0.05')
+    procs = []
+    for spec in specs:
+        params = tmp_path / f'{spec.name}.params.yaml'
+        params.write_text(yaml.safe_dump({'/**': {'ros__parameters': spec.parameters}}))
+        log = open(tmp_path / f'{spec.name}.log', 'w')
+        procs.append(subprocess.Popen(
+            executable(spec.executable) + ['--ros-args', '-r', f'__node:={spec.name}',
+                                           '--params-file', str(params)],
+            env=env, stdout=log, stderr=log))
+        log.close()
+    assert [spec.name for spec in specs] == ['world', 'leader', 'agents']
+    return procs
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_after_the_end_of_the_run_leaves_status_0(tmp_path, ros_domain, sig):
+    """Issue 38: ``ros2 launch`` reported a leader and agents that had finished cleanly as
+    dead of the SIGINT it sends them when the world exits (exit code -2): it came after
+    their stop handlers were restored, or before they had taken the world's ``completed``.
+    Here the signal goes to the world from the moment it has written its summary, to the
+    leader and the agents from the world's exit (as launch sends it), and again every 5 ms
+    until each has exited: while the nodes close and after. Every status is 0, no
+    traceback."""
+    out = tmp_path / 'run'
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    procs = launch_processes(tmp_path, out, env)
+    world = procs[0]
+    summary = out / 'summary.json'
+    try:
+        wait_for(lambda: summary.is_file() and summary.stat().st_size > 0, RUN_TIMEOUT,
+                 'the world to write its summary')
+        statuses = {}
+        deadline = time.monotonic() + 60
+        while len(statuses) < len(procs):
+            assert time.monotonic() < deadline, f'still running: {statuses}'
+            for i, proc in enumerate(procs):
+                if i not in statuses and (proc is world or world.poll() is not None):
+                    proc.send_signal(sig)
+                    try:
+                        statuses[i] = proc.wait(timeout=0.005)
+                    except subprocess.TimeoutExpired:
+                        pass
+    finally:
+        reap(procs)
+    assert [statuses[i] for i in range(len(procs))] == [0, 0, 0], statuses
+    assert json.loads(summary.read_text())['status'] == 'completed'
+    assert_clean(tmp_path)

@@ -1,8 +1,9 @@
 """What ROS users do by habit (issue 24, item 4): ``use_sim_time``, a waiting world that says
 who it waits for, a second world on the same domain, parameters that read back the values in
-use."""
+use; issue 38: byte-reproducible bags, the world's end logged under ``ros2 run``."""
 
 import json
+import signal
 import subprocess
 
 import pytest
@@ -222,3 +223,46 @@ def test_identical_lockstep_runs_write_byte_identical_bags(tmp_path, ros_domain)
                                                                   'metadata.yaml']
     for name in files:
         assert (bags[0] / name).read_bytes() == (bags[1] / name).read_bytes(), name
+
+
+@pytest.mark.parametrize('stop', [None, signal.SIGINT])
+def test_the_world_logs_its_end_once_under_ros2_run(tmp_path, ros_domain, stop):
+    """Issue 38: a world started by hand (``ros2 run``) logged nothing at its end, not even
+    after SIGINT, and its progress lines read ``[world]: [world] t = ...``. It now ends its
+    log with how the run ended and the files written (as ``swarm`` prints them), completed
+    or interrupted, and names itself once per line."""
+    import os
+    import re
+
+    from test_node_stops import SMALL, reap, start_all
+    from flock_swarm.nodes.harness import resolve_scenario
+    from flock_swarm.testing import wait_for
+    out = tmp_path / 'run'
+    duration = 'duration=2' if stop is None else 'duration=1000'
+    scenario = resolve_scenario('demo', SMALL + [duration], None, out)
+    procs = start_all(scenario, out, dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)),
+                      tmp_path, agents=2)
+    world, log = procs[-1], tmp_path / 'node3.log'
+    try:
+        if stop is not None:
+            # Its first progress line comes after two seconds of stepping.
+            wait_for(lambda: '[world]: t = ' in log.read_text(), RUN_TIMEOUT,
+                     "the world's progress line")
+            world.send_signal(stop)
+        statuses = [proc.wait(timeout=RUN_TIMEOUT) for proc in procs]
+    finally:
+        reap(procs)
+    assert statuses == [0, 0, 0, 0 if stop is None else 130], statuses
+    text = log.read_text()
+    assert '[world] ' not in text, text
+    if stop is not None:
+        assert re.search(r'\[INFO\] \[[\d.]+\] \[world\]: t = [\d.]+/1000 s  step ', text)
+    lines = text.splitlines()
+    status = 'completed' if stop is None else 'interrupted'
+    level = 'INFO' if stop is None else 'WARN'
+    assert re.fullmatch(rf'\[{level}\] \[[\d.]+\] \[world\]: {status} at t = [\d.]+ s: eta = '
+                        r'.*, collisions = 0, missed commands = 0 \([\d.]+ s wall\)',
+                        lines[-2]), lines[-2:]
+    assert re.fullmatch(rf'\[INFO\] \[[\d.]+\] \[world\]: wrote {re.escape(str(out / "bag"))}, '
+                        rf'{re.escape(str(out / "timeseries.npz"))}, '
+                        rf'{re.escape(str(out / "summary.json"))}', lines[-1]), lines[-1]

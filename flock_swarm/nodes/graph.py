@@ -102,7 +102,9 @@ def follow_world(node: Node, keep_running: bool) -> Callable[[], bool]:
 
     :param node: a leader or agent node.
     :param keep_running: the node's ``keep_running`` parameter.
-    :return: a predicate, true once the world finished and the node is not to keep running.
+    :return: a predicate, true once the world finished and the node is not to keep running;
+        its ``completed()`` says whether the world announced ``completed`` (its run ended by
+        itself, not by a signal or a failure).
     """
     from std_msgs.msg import String
     ended: list[str] = []
@@ -113,4 +115,8 @@ def follow_world(node: Node, keep_running: bool) -> Callable[[], bool]:
             node.get_logger().info(f'the world finished its run ({msg.data})' +
                                    ('' if keep_running else '; exiting'))
     node.create_subscription(String, STATUS, on_status, qos_profile(STATUS_QOS))
-    return lambda: bool(ended) and not keep_running
+
+    def finished() -> bool:
+        return bool(ended) and not keep_running
+    finished.completed = lambda: ended == ['completed']
+    return finished

@@ -156,7 +156,8 @@ def main(args: list[str] | None = None) -> int:
     """Run the leader node (``ros2 run flock_swarm leader``)."""
     built: list[LeaderNode] = []
     status = run_node('leader', lambda: built.append(LeaderNode()) or built[0], args,
-                      until=lambda node: node.world_finished() or node.failure is not None)
+                      until=lambda node: node.world_finished() or node.failure is not None,
+                      completed=lambda node: node.world_finished.completed())
     return 1 if status == 0 and built and built[0].failure is not None else status
 
 

@@ -37,6 +37,11 @@ def middleware_defaults(environ=None) -> None:
     (os.environ if environ is None else environ).setdefault(name, value)
 
 
+#: The most events a node stopped by a signal takes to learn whether its run had ended by
+#: itself (:func:`run_node`'s ``completed``).
+SETTLE_EVENTS = 100
+
+
 def make_executor(context=None):
     """Return the executor every node and runner spins: rclpy's ``EventsExecutor``.
 
@@ -66,7 +71,8 @@ def wall_timer(node: Node, period: float, callback: Callable[[], None]):
 
 def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = None,
              until: Callable[[Node], bool] | None = None,
-             on_fail: Callable[[Node], None] | None = None) -> int:
+             on_fail: Callable[[Node], None] | None = None,
+             completed: Callable[[Node], bool] | None = None) -> int:
     """Run one node as in ros2/demos: init, spin, clean shutdown; return the exit status.
 
     Invalid configuration is reported as one line on stderr with exit status 2. The node
@@ -75,8 +81,9 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     node is being built too): the context stays valid until the node is closed and
     destroyed, so no callback meets an invalid context (rclpy's own handlers shut it down
     under a running callback), and the exit status is the signal's
-    (:data:`~flock_swarm.console.EXIT_SIGNAL`: 130, 143, 129), unless the run had ended by
-    itself (``until``) when it came.
+    (:data:`~flock_swarm.console.EXIT_SIGNAL`: 130, 143, 129), unless ``completed`` says
+    the node's run had ended by itself: the messages it had received when the signal came
+    are taken first (at most :data:`SETTLE_EVENTS`).
 
     Run as a process (``args`` is ``None``: the command line), the node ignores stop signals
     from the end of its run to the exit: ``ros2 launch`` sends SIGINT to the leader and the
@@ -91,28 +98,28 @@ def run_node(name: str, factory: Callable[[], Node], args: list[str] | None = No
     :param on_fail: when given, :data:`~flock_swarm.console.FAIL_SIGNAL` (a supervisor saw
         another process of the run die) ends the spin too: ``on_fail`` gets the node before
         it is closed, and the exit status is :data:`~flock_swarm.console.EXIT_FAILURE`.
+    :param completed: whether the node's run has ended by itself (the leader and the agents:
+        the world announced ``completed``); a stop signal then leaves the exit status 0.
     :return: the exit status.
     """
     failed: list[int] = []
     previous = None
     if on_fail is not None:
         previous = signal.signal(FAIL_SIGNAL, lambda number, frame: failed.append(number))
-    process = args is None
+    stop = StopSignals().__enter__()
     try:
-        with StopSignals() as stop:
-            try:
-                status, stopped = _spin(name, factory, args, until,
-                                        lambda: bool(stop.received or failed),
-                                        lambda node: on_fail(node) if failed else None)
-            finally:
-                if process:
-                    # Held from here until ignored: none is lost between the handlers.
-                    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-        if process:
-            ignore_stop_signals()
+        status, stopped = _spin(name, factory, args, until,
+                                lambda: bool(stop.received or failed),
+                                lambda node: on_fail(node) if failed else None,
+                                None if completed is None else
+                                lambda node: not failed and completed(node))
     finally:
-        if process:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+        if args is None:
+            # The process's node: its handlers replaced at once, never restored (a signal
+            # between the two would raise KeyboardInterrupt).
+            ignore_stop_signals()
+        else:
+            stop.__exit__(None, None, None)
         if previous is not None:
             signal.signal(FAIL_SIGNAL, previous)
     # A signal that comes while the node closes after its run ended by itself changes nothing.
@@ -131,10 +138,11 @@ def ignore_stop_signals() -> None:
 
 def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
           until: Callable[[Node], bool] | None, signalled: Callable[[], bool],
-          before_close: Callable[[Node], None]) -> tuple[int, bool]:
+          before_close: Callable[[Node], None],
+          completed: Callable[[Node], bool] | None = None) -> tuple[int, bool]:
     """:func:`run_node` with its signal handlers installed: return the exit status and
     whether a signal ended the spin (``signalled``: whether one came; ``before_close`` gets
-    the node before it is closed)."""
+    the node before it is closed; ``completed``: see :func:`run_node`)."""
     import rclpy
     from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.logging import LoggingSeverity, get_logger_level, set_logger_level
@@ -174,8 +182,14 @@ def _spin(name: str, factory: Callable[[], Node], args: list[str] | None,
         executor.add_node(node)
         while not (stopped := signalled()) and rclpy.ok() and (until is None or not until(node)):
             executor.spin_once(timeout_sec=0.1)
-        if stopped and until is not None and until(node):
-            stopped = False     # the run had ended by itself: the signal changes nothing
+        if stopped and completed is not None:
+            # ros2 launch signals the leader and the agents when the world exits: its
+            # announcement of the end came before, perhaps not yet taken.
+            for _ in range(SETTLE_EVENTS):
+                if completed(node):
+                    break
+                executor.spin_once(timeout_sec=0.0)
+            stopped = not completed(node)
     except ScenarioError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
         status = EXIT_USAGE

@@ -47,6 +47,7 @@ from flock_swarm.contract import (CLOCK, CLOCK_QOS, FAULTS, FAULTS_QOS, FRAME, L
 from flock_swarm.console import EXIT_USAGE
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import NON_FINITE
+from flock_swarm.core.headline import result_line
 from flock_swarm.core.network import USAGE_LABELS
 from flock_swarm.core.summary import with_failure
 from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
@@ -433,7 +434,10 @@ class WorldNode(RecordedNode):
         self.telemetry.emit(obs, self.guard.counts())
         line = self.stepper.progress_line(time.monotonic())
         if line is not None:
-            (self.progress or self.get_logger().info)(line)
+            if self.progress is not None:
+                self.progress(line)
+            else:   # the logger names the node itself: no second [world]
+                self.get_logger().info(line.removeprefix('[world] '))
         if obs.last:
             self.finish('completed')
         elif not self.done and not self.stepper.advance(obs.u):
@@ -631,6 +635,20 @@ class WorldNode(RecordedNode):
             self.outputs_failed(exc)
         else:
             self.spool.discard()
+        if self.progress is None:
+            self.log_end(recorded)
+
+    def log_end(self, recorded: bool) -> None:
+        """Log how the run ended and the files written, as ``swarm`` prints them: a world
+        logging its progress (``ros2 run``, ``swarm --processes``) ends its log with them,
+        after a stop signal too."""
+        log = self.get_logger()
+        summary = self.result.summary
+        line = result_line(summary, self.scenario.headline, ('collisions', 'missed_commands'))
+        (log.info if summary.get('status') == 'completed' else log.warning)(line)
+        paths = ([self.out / 'bag'] if recorded else []) + [
+            path for path in self.written if path.name != 'scenario.json']
+        log.info('wrote ' + ', '.join(str(path) for path in paths))
 
     def outputs_failed(self, exc: OSError) -> None:
         """A file of the outputs could not be written: log one line naming it, keep the
@@ -698,7 +716,8 @@ def main(args: list[str] | None = None) -> int:
     built: list[WorldNode] = []
     status = run_node('world', lambda: built.append(WorldNode()) or built[0], args,
                       until=lambda node: node.done or node.refusal is not None,
-                      on_fail=WorldNode.peer_died)
+                      on_fail=WorldNode.peer_died,
+                      completed=lambda node: node.done and node.stepper.status == 'completed')
     if built and built[0].refusal is not None:
         print(f'world: error: {built[0].refusal}', file=sys.stderr)
         return EXIT_USAGE
