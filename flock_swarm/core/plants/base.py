@@ -51,7 +51,9 @@ class Plant:
     :meth:`state_names`, :meth:`command_names`, :meth:`initial_state`, :meth:`law_state`,
     :meth:`command` and :meth:`step`; velocity plants also :meth:`twist` and
     :meth:`from_twist`. Fields annotated ``float`` are required parameters unless they have
-    a default; a default of ``None`` means "no limit".
+    a default; a default of ``None`` means "no limit". Every plant has the keyword-only field
+    :attr:`conversion` (``plant.conversion``), one of the class's :attr:`conversions`, which
+    :meth:`command` reads.
     """
 
     #: Scenario name of the model (``plant.model``).
@@ -147,7 +149,8 @@ class Plant:
         raise NotImplementedError
 
     def command(self, x: np.ndarray, u: np.ndarray, period: float) -> np.ndarray:
-        """Return the command ``(n, C)`` the plant executes for the law's acceleration ``u``.
+        """Return the command ``(n, C)`` the plant executes for the law's acceleration ``u``,
+        by the model's :attr:`conversion`.
 
         :param x: the measured state ``(n, S)``.
         :param u: the law's accelerations ``(n, dim)``.
