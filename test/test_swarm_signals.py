@@ -189,10 +189,13 @@ def test_swarm_processes_killed_child_fails_the_run(tmp_path, ros_domain):
     assert proc.returncode == 1, err[-3000:]
     summary = assert_finalised(out, 'failed')
     errors = [line for line in err.splitlines() if line.startswith('swarm: error: ')]
+    log = out / 'logs' / 'agents.log'
+    # The log's tail follows, or the line says the log is empty (never a colon and nothing).
     assert errors[0] == (
         f'swarm: error: agents (pid {agents[0]}) was killed by SIGKILL during the run; the '
-        f'world ended the run as failed at step {summary["steps"]}; the last lines of '
-        f'{out / "logs" / "agents.log"}:'), err[-3000:]
+        f'world ended the run as failed at step {summary["steps"]}; '
+        + (f'the last lines of {log}:' if log.read_text() else f'its log {log} is empty')
+    ), err[-3000:]
     assert [pid for pid in pids if alive(pid)] == []
 
 
@@ -361,3 +364,61 @@ def test_a_second_run_on_a_busy_domain_is_refused_at_once(tmp_path, ros_domain, 
     assert replay_status == 2 and replay_err == f'replay: error: ROS_DOMAIN_ID: {busy}'
     assert proc.returncode == EXIT_SIGNAL[signal.SIGINT], err[-3000:]
     assert_finalised(first)
+
+
+def world_of(pids: set[int]) -> int:
+    """Return the pid of the world among a run's processes."""
+    worlds = [pid for pid in pids if b'/world\0' in Path(f'/proc/{pid}/cmdline').read_bytes()]
+    assert len(worlds) == 1, worlds
+    return worlds[0]
+
+
+def test_sigint_to_the_world_alone_says_why_swarm_exits_1(tmp_path, ros_domain):
+    """SIGINT to the world process only: the run is finalised as interrupted and swarm exits
+    1 (the run did not complete, swarm was not signalled) with a last line saying why (it
+    said nothing)."""
+    out = tmp_path / 'run'
+    proc, pids = swarm_under_way(out, ros_domain, container=True)
+    try:
+        os.kill(world_of(pids), signal.SIGINT)
+    finally:
+        err = finish(proc)
+    assert proc.returncode == 1, err[-3000:]
+    summary = assert_finalised(out)
+    assert err.splitlines()[-1] == (
+        'swarm: error: the world was stopped by a signal sent to it, not to swarm; the run is '
+        f'interrupted at t = {summary["t_final"]:g} s'), err[-3000:]
+    assert [pid for pid in pids if alive(pid)] == []
+
+
+def test_sigkill_of_the_world_names_how_it_died_and_its_log(tmp_path, ros_domain):
+    """SIGKILL to the world: besides 'wrote no summary.json', one line says the world was
+    killed by SIGKILL, followed by its log's last lines."""
+    out = tmp_path / 'run'
+    proc, pids = swarm_under_way(out, ros_domain, container=True)
+    world = world_of(pids)
+    try:
+        os.kill(world, signal.SIGKILL)
+    finally:
+        err = finish(proc)
+    assert proc.returncode == 1, err[-3000:]
+    lines = err.splitlines()
+    first = lines.index(f'swarm: error: world (pid {world}) was killed by SIGKILL before it '
+                        f'wrote {out / "summary.json"}; the last lines of '
+                        f'{out / "logs" / "world.log"}:')
+    assert lines[first + 1].startswith('  | '), err[-3000:]
+    assert lines[-1] == f'swarm: error: the world wrote no {out / "summary.json"}'
+    assert [pid for pid in pids if alive(pid)] == []
+
+
+def test_a_dead_child_with_an_empty_log_is_said_so(tmp_path, capsys):
+    """'the last lines of agent_1.log:' was followed by nothing for a child that wrote none."""
+    from flock_swarm.nodes.supervisor import Child, report_death
+    log = tmp_path / 'agent_1.log'
+    log.write_text('')
+    child = Child('agent_1', subprocess.Popen(['sh', '-c', 'exit 3']), log)
+    child.proc.wait(timeout=TIMEOUT)
+    report_death(child, 12)
+    assert capsys.readouterr().err == (
+        f'swarm: error: agent_1 (pid {child.proc.pid}) exited with status 3 during the run; '
+        f'the world ended the run as failed at step 12; its log {log} is empty\n')

@@ -255,6 +255,10 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
     say('[swarm] wrote ' + ', '.join(str(path) for path in written))
     if summary.get('failure'):
         print(f'swarm: error: {summary["failure"]}', file=sys.stderr)
+    elif summary['status'] == 'interrupted' and not stop.stopped:
+        # The status 1 needs its reason: a stop signal reached the world, not swarm.
+        print('swarm: error: the world was stopped by a signal sent to it, not to swarm; the '
+              f'run is interrupted at t = {summary["t_final"]:g} s', file=sys.stderr)
     return stop.status(status)
 
 

@@ -248,9 +248,23 @@ def report_death(child: Child, step, say: Callable[[str], None] = None) -> None:
     :param step: the step the run ended at (the world's summary), or ``None``.
     :param say: where the lines go (default: stderr).
     """
-    say = say or (lambda line: print(line, file=sys.stderr, flush=True))
     at = '' if step is None else f' at step {step}'
-    say(f'swarm: error: {child.name} (pid {child.proc.pid}) {child.exit_text()} during the '
-        f'run; the world ended the run as failed{at}; the last lines of {child.log}:')
-    for line in child.tail():
+    report_exit(child, f'during the run; the world ended the run as failed{at}', say)
+
+
+def report_exit(child: Child, what: str, say: Callable[[str], None] = None) -> None:
+    """Print one line naming ``child``, how it exited and ``what`` followed, then the tail of
+    its log (or that its log is empty: the line no longer ends in a colon with nothing after).
+
+    :param child: the child that exited.
+    :param what: what its exit meant, after how it exited (``during the run; ...``).
+    :param say: where the lines go (default: stderr).
+    """
+    say = say or (lambda line: print(line, file=sys.stderr, flush=True))
+    tail = child.tail()
+    where = (f'the last lines of {child.log}:' if tail
+             else f'its log {child.log} is empty')
+    say(f'swarm: error: {child.name} (pid {child.proc.pid}) {child.exit_text()} {what}; '
+        f'{where}')
+    for line in tail:
         say(f'  | {line}')
