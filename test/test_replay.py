@@ -213,6 +213,39 @@ def test_clock_follows_bag_time_and_replaces_the_recorded_clock(tmp_path, ros_co
         listener.destroy_node()
 
 
+@pytest.mark.parametrize('wait', [0, 1])
+def test_a_subscriber_there_before_the_replay_gets_its_first_message(
+        tmp_path, ros_domain, ros_context, wait):
+    """Issue 38: with ``--rate 2 --clock`` a subscriber ready before the replay (another
+    participant: a process of its own) missed the first seconds of the bag, unless ``-d``
+    was given; and ``--wait-for-subscribers 1`` waited for a subscriber on every publisher.
+    Without any option the player now waits for discovery to settle; with 1 it waits for one
+    subscriber of any topic (the listener subscribes to two of the three topics and to
+    /clock), then for discovery to settle. Every message arrives, from the first."""
+    import rclpy
+    from rclpy.context import Context
+
+    bag = write_bag(tmp_path / 'bag')
+    other = Context()
+    rclpy.init(context=other, domain_id=ros_domain)
+    listener = Listener([A, B], clock=True, context=other)
+    player = None
+    try:
+        # The listener is there (its own participant) before the player is made.
+        player = Player(bag, rate=2.0, clock=True, wait_subscribers=wait, wait_timeout=10.0,
+                        context=ros_context)
+        recorded = bag_messages(bag, [A, B])
+        result = play(other, player, listener, len(recorded))
+        assert result.matched
+        assert by_topic(listener.received) == by_topic(recorded)
+        assert listener.clock[0][0] == T0_NS  # the first tick of the bag, too
+    finally:
+        if player is not None:
+            player.destroy_node()
+        listener.destroy_node()
+        rclpy.try_shutdown(context=other)
+
+
 def test_recorded_clock_is_replayed_without_clock_and_refused_with_it(tmp_path, ros_context):
     bag = write_bag(tmp_path / 'bag', clock_values=[1.0, 2.0])
     notes = []

@@ -63,10 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--clock-rate', type=float, default=100.0, metavar='HZ',
                         help='/clock publications per second with --clock (default 100)')
     parser.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
-                        help='before playing, wait until every publisher has N subscribers')
+                        help='before playing, wait until a replayed topic has N subscribers '
+                        '(then for discovery to settle, as always)')
     parser.add_argument('--wait-timeout', type=float, default=10.0, metavar='S',
-                        help='longest wait for those subscribers, then play anyway '
-                        '(default 10)')
+                        help='longest wait for those subscribers and for discovery to '
+                        'settle, then play anyway (default 10; 0: at once)')
     parser.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
                         help='wait S seconds before the first message (time for discovery)')
     parser.add_argument('-q', '--quiet', action='store_true',

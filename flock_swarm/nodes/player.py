@@ -50,6 +50,13 @@ REPLAY_DEPTH = 100
 CLOCK_QOS = qos_profile(contract.CLOCK_QOS)
 #: Longest single wait (s): bounds the reaction time to Ctrl-C and :meth:`Player.stop`.
 MAX_WAIT = 0.05
+#: Before its first message the player waits for discovery to settle (a subscriber that was
+#: there before the replay missed its first seconds: discovery matches it only a while after
+#: the player's publishers were made): at least DISCOVERY_MIN s after the publishers were
+#: made, and until neither the nodes of the graph nor the matched subscriptions of the
+#: publishers have changed for DISCOVERY_QUIET s; all within ``--wait-timeout``.
+DISCOVERY_MIN = 1.0
+DISCOVERY_QUIET = 0.5
 #: Final stretch (s) of a wait that is slept rather than spent in the executor: rcl's wait
 #: overshoots its timeout by up to ~3.5 ms now and then on these machines, time.sleep by ~0.1 ms.
 SLEEP_MARGIN = 0.005
@@ -280,9 +287,13 @@ class Player(Node):
     :param clock: publish /clock (rosgraph_msgs/Clock) from bag time; a recorded /clock is
         then not replayed.
     :param clock_rate: /clock publications per wall second.
-    :param wait_subscribers: before the start, wait until every publisher (/clock included)
-        has this many matched subscriptions.
-    :param wait_timeout: longest wait (s) for those subscribers; then play anyway.
+    :param wait_subscribers: before the start, wait until a replayed topic (or /clock) has
+        this many matched subscriptions (one subscriber of any topic, for 1); in any case
+        the player waits for discovery to settle (:data:`DISCOVERY_MIN`,
+        :data:`DISCOVERY_QUIET`), so a subscriber that was there before gets the first
+        message.
+    :param wait_timeout: longest wait (s) for those subscribers and discovery; then play
+        anyway (0: at once).
     :param delay: wall seconds to wait before the first message (after the subscribers).
     :param progress: stream for the progress line (None: no progress).
     :param say: receives warning and information lines (default: stderr).
@@ -372,6 +383,7 @@ class Player(Node):
         self._next_clock = math.inf
         self._next_progress = 0.0
         self._progress_shown = False
+        self._created = time.monotonic()
 
     @property
     def topics(self) -> list[str]:
@@ -438,22 +450,32 @@ class Player(Node):
         return result
 
     def _wait_for_subscribers(self) -> bool:
+        """Wait until a topic has the subscribers asked for and discovery has settled (see
+        :class:`Player`'s ``wait_subscribers``); return whether the subscribers came."""
         publishers = list(self._topic_pubs.values())
         if self._clock_pub is not None:
             publishers.append(self._clock_pub)
         needed = self._wait_subscribers
-        deadline = time.monotonic() + self._wait_timeout
+        start = time.monotonic()
+        deadline = start + self._wait_timeout
+        seen, changed = None, start
         while not self._stop.is_set():
-            short = [pub for pub in publishers if pub.get_subscription_count() < needed]
-            if not short:
+            now = time.monotonic()
+            counts = [pub.get_subscription_count() for pub in publishers]
+            graph = (counts, sorted(self.get_node_names_and_namespaces()))
+            if graph != seen:
+                seen, changed = graph, now
+            reached = max(counts) >= needed
+            if reached and now >= max(self._created + DISCOVERY_MIN,
+                                      changed + DISCOVERY_QUIET):
                 return True
-            if time.monotonic() >= deadline:
-                names = ', '.join(f'{pub.topic_name} ({pub.get_subscription_count()})'
-                                  for pub in short)
-                self._say(f'replay: warning: after {self._wait_timeout:g} s, fewer than '
-                          f'{needed} subscribers on {names}; playing anyway')
+            if now >= deadline:
+                if reached:
+                    return True
+                self._say(f'replay: warning: after {self._wait_timeout:g} s, no replayed '
+                          f'topic has {needed} subscriber(s); playing anyway')
                 return False
-            self._spin_once(min(MAX_WAIT, deadline - time.monotonic()))
+            self._spin_once(min(MAX_WAIT, deadline - now))
         return False
 
     def _bag_now(self, wall: float) -> int:
