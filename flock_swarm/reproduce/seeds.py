@@ -244,7 +244,11 @@ def attach_held_out(res: dict, exp, groups: list[tuple[str, list[dict], int]]) -
     for setup, (label, records, planned) in zip(res['setups'], groups):
         judged = exp.criterion.judge(records)
         setup['held_out'] = {'label': label, 'seeds': len(records), 'planned': planned,
-                             'judged': judged, 'questions': {
+                             'judged': judged,
+                             'stats': {key: distribution([r['metrics'].get(key)
+                                                          for r in records])
+                                       for _, key, _ in exp.columns},
+                             'questions': {
                                  key: mean_with_interval([r['metrics'].get(key)
                                                           for r in records])
                                  for key in question_keys()}}
@@ -413,6 +417,15 @@ def answered(setup: dict) -> tuple[dict | None, str]:
         if q and q['whole_linked']['count']:
             return q, which
     return None, ''
+
+
+def column_stats(setup: dict, key: str) -> dict | None:
+    """Return the distribution of a column's metric over a set-up's seeds from 1, or over
+    its held-out seeds where the first set's cached records lack it (``None``: neither)."""
+    for stats in (setup.get('stats'), (setup.get('held_out') or {}).get('stats')):
+        if stats and key in stats and stats[key]['count']:
+            return stats[key]
+    return None
 
 
 def questions_cell(res: dict | None) -> str:

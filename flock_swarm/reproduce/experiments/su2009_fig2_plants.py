@@ -1,8 +1,12 @@
 """Beyond the papers: Su 2009 Fig. 2 as double integrators, velocity-lag robots and
 unicycles (issue 26)."""
 
+from flock_swarm.core.scenario import Scenario
+from flock_swarm.reproduce.common import fmt
 from flock_swarm.reproduce.experiment import ETA_MARGIN, MeanClaim, SetUp
 from flock_swarm.reproduce.experiments.network_study import NetworkFig2
+from flock_swarm.reproduce.mechanisms import lag_fraction, run_delivered_fraction
+from flock_swarm.reproduce.seeds import column_stats
 
 #: The section's opening line.
 BEYOND_PLANTS = (
@@ -36,6 +40,41 @@ class Fig2Plants(NetworkFig2):
         why='Fig. 2\'s criterion (the paper\'s 86 of 100 taken as typical, a mean within 5 '
         'agents of it), asked of each plant: the first set-up is the papers\' double '
         'integrator.')
+
+    columns = NetworkFig2.columns + (
+        ('delivered fraction of the law\'s velocity change per step', 'delivered_fraction',
+         '1 (double integrator)'),
+        ('its prediction', 'predicted_fraction', '-'),
+        ('delivered change across the law\'s, relative', 'delivered_residual', '0'))
+
+    def analyse(self, sc: Scenario, summary: dict, series: dict) -> dict:
+        """Return Fig. 2's numbers and, for a robot plant, the mechanism: the fraction of
+        the law's velocity change a step delivers over the run's recorded states, and its
+        prediction (:mod:`flock_swarm.reproduce.mechanisms`)."""
+        out = super().analyse(sc, summary, series)
+        plant = sc.plant.model
+        if sc.plant.default or 'plant_state' not in series:
+            return out
+        out['delivered_fraction'], out['delivered_residual'] = run_delivered_fraction(
+            plant, series, sc.dt)
+        if plant.name == 'velocity_lag':
+            out['predicted_fraction'] = lag_fraction(plant.tau, sc.dt, plant.conversion,
+                                                     plant.conversion_tau)
+        return out
+
+    def mechanism(self, res: dict) -> str:
+        """Return each plant's delivered fraction (measured [predicted])."""
+        parts = []
+        for s in (res.get('seeds') or {}).get('setups', [])[1:]:
+            measured = column_stats(s, 'delivered_fraction')
+            if measured is None:
+                continue
+            predicted = column_stats(s, 'predicted_fraction')
+            parts.append(f'{s["label"]}: {fmt(measured["mean"])}'
+                         + (f' (predicted {fmt(predicted["mean"])})' if predicted else ''))
+        if not parts:
+            return ''
+        return 'delivered fraction of u dt per step - ' + '; '.join(parts)
 
     @property
     def setups(self) -> tuple[SetUp, ...]:
