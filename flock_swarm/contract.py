@@ -38,6 +38,11 @@ LEADER_ODOM = 'leader/odom'
 LEADER_ACCEL = 'leader/accel'
 MARKERS = 'swarm/markers'
 METRICS = 'swarm/metrics'
+#: Where rqt_robot_monitor and diagnostic_aggregator look (REP 107's aggregator input,
+#: absolute): the world publishes every ``/swarm/metrics`` message there too, the same
+#: bytes, type :data:`METRICS_TYPE`, QoS :data:`TELEMETRY_QOS`; not recorded (the bag holds
+#: them on ``/swarm/metrics``).
+DIAGNOSTICS = '/diagnostics'
 STATUS = 'swarm/status'
 #: The run's scenario, seed and informed set (what the bag's ``flock_swarm`` MCAP metadata
 #: record holds) as a YAML mapping, published once, latched, and recorded at t = 0: it

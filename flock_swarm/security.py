@@ -12,9 +12,9 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (CLOCK, FAULTS, LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS,
-                                  OBSTACLES, SCENARIO, STATUS, cmd_topic, cmd_vel_topic,
-                                  network_topic, odom_topic, state_topic)
+from flock_swarm.contract import (CLOCK, DIAGNOSTICS, FAULTS, LEADER_ACCEL, LEADER_ODOM,
+                                  MARKERS, METRICS, OBSTACLES, SCENARIO, STATUS, cmd_topic,
+                                  cmd_vel_topic, network_topic, odom_topic, state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -39,7 +39,7 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     """
     odom = [odom_topic(i) for i in range(n_agents)]
     out = {
-        'world': ([CLOCK, *odom, MARKERS, METRICS, STATUS, SCENARIO, OBSTACLES],
+        'world': ([CLOCK, *odom, MARKERS, METRICS, DIAGNOSTICS, STATUS, SCENARIO, OBSTACLES],
                   [*(cmd_topic(i) for i in range(n_agents)),
                    *(state_topic(i) for i in range(n_agents)),
                    *(network_topic(i) for i in range(n_agents)),

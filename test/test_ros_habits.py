@@ -5,6 +5,7 @@ use; issue 38: byte-reproducible bags, the world's end logged under ``ros2 run``
 import json
 import signal
 import subprocess
+import time
 
 import pytest
 
@@ -266,3 +267,30 @@ def test_the_world_logs_its_end_once_under_ros2_run(tmp_path, ros_domain, stop):
     assert re.fullmatch(rf'\[INFO\] \[[\d.]+\] \[world\]: wrote {re.escape(str(out / "bag"))}, '
                         rf'{re.escape(str(out / "timeseries.npz"))}, '
                         rf'{re.escape(str(out / "summary.json"))}', lines[-1]), lines[-1]
+
+
+def test_the_metrics_reach_slash_diagnostics(tmp_path, ros_domain):
+    """Issue 38: ``/swarm/metrics`` was a DiagnosticArray on a topic of its own, so
+    rqt_robot_monitor and diagnostic_aggregator (which read ``/diagnostics``) saw nothing.
+    A subscriber of ``/diagnostics`` (reliable, as those tools subscribe) now gets every
+    metrics message of the run, the bytes the bag holds on ``/swarm/metrics``."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import QoSProfile
+    from rclpy.serialization import deserialize_message
+
+    from flock_swarm.contract import DIAGNOSTICS, METRICS_STATUS
+    received = []
+    with Swarm('demo', tmp_path / 'run', SMALL, domain_id=ros_domain) as swarm:
+        probe = swarm.add(rclpy.create_node('diagnostics_probe', context=swarm.context))
+        probe.create_subscription(DiagnosticArray, DIAGNOSTICS, received.append,
+                                  QoSProfile(depth=1000), raw=True)
+        swarm.spin_until(lambda: swarm.world.telemetry.diagnostics_pub
+                         .get_subscription_count() >= 1, RUN_TIMEOUT, 'the probe to match')
+        swarm.spin_to_end(RUN_TIMEOUT)
+        recorded = [m.data for m in swarm.result().bag().messages('/swarm/metrics')]
+        deadline = time.monotonic() + RUN_TIMEOUT
+        while len(received) < len(recorded) and time.monotonic() < deadline:
+            swarm.executor.spin_once(timeout_sec=0.1)
+    assert len(recorded) > 1 and received == recorded
+    assert deserialize_message(received[0], DiagnosticArray).status[0].name == METRICS_STATUS

@@ -46,8 +46,9 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     # obstacle map of a scenario with obstacles (the same).
     # A law or leader model failing mid-run is reported on swarm/faults, to the world.
     faults = {contract.FAULTS}
+    # The metrics go to /diagnostics too (rqt_robot_monitor, diagnostic_aggregator).
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO,
-                        contract.OBSTACLES} | odom | status,
+                        contract.OBSTACLES, contract.DIAGNOSTICS} | odom | status,
                        cmds | states | reports | twists | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):

@@ -19,7 +19,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 from flock_swarm.core.graphs import EdgeList
 from flock_swarm.core.headline import Headline, lead_with
 from flock_swarm.core.obstacles import ObstacleSpec
-from flock_swarm.contract import FRAME, MARKERS, METRICS, TELEMETRY_QOS, qos_profile
+from flock_swarm.bag.writer import serialize
+from flock_swarm.contract import (DIAGNOSTICS, FRAME, MARKERS, METRICS, TELEMETRY_QOS,
+                                  qos_profile)
 from flock_swarm.nodes.wire import CdrWriter
 
 UNINFORMED = ColorRGBA(r=0.2, g=0.45, b=0.9, a=1.0)
@@ -256,6 +258,8 @@ class Telemetry:
         qos = qos_profile(TELEMETRY_QOS)
         self.marker_pub = node.recorded_publisher(MarkerArray, MARKERS, qos)
         self.metrics_pub = node.recorded_publisher(DiagnosticArray, METRICS, qos)
+        #: The same messages on /diagnostics, for ROS's diagnostics tools (not recorded).
+        self.diagnostics_pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS, qos)
 
     def emit(self, obs, rejected: dict) -> None:
         """Publish the markers and metrics due for an observed step.
@@ -272,6 +276,8 @@ class Telemetry:
         if obs.metrics is not None:
             values = lead_with(dict(obs.metrics, rejected_messages=json.dumps(rejected)),
                                self.headline)
-            node.publish_recorded(self.metrics_pub, metrics_message(
-                values, clock.stamp(obs.k), WARN if obs.problems else OK,
-                ', '.join(obs.problems) or 'ok'), t_ns)
+            data = serialize(metrics_message(values, clock.stamp(obs.k),
+                                             WARN if obs.problems else OK,
+                                             ', '.join(obs.problems) or 'ok'))
+            node.publish_recorded(self.metrics_pub, data, t_ns)
+            self.diagnostics_pub.publish(data)
