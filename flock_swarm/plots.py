@@ -53,7 +53,10 @@ def plot_timeseries(series: dict[str, np.ndarray], out: Path, title: str,
         ax.set_ylim(ylim)
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
-    ax.set_aspect('equal', adjustable='datalim')
+    # With obstacles the limits are fixed (above): the box keeps the aspect, where 'datalim'
+    # made matplotlib warn "Ignoring fixed x limits ..." at every draw.
+    fixed = obstacles is not None and obstacles.active
+    ax.set_aspect('equal', adjustable='box' if fixed else 'datalim')
     ax.set_title(f'{title}: trajectories (x-y projection)')
     ax.legend(loc='best', fontsize=8)
     fig.tight_layout()

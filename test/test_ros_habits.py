@@ -294,3 +294,17 @@ def test_the_metrics_reach_slash_diagnostics(tmp_path, ros_domain):
             swarm.executor.spin_once(timeout_sec=0.1)
     assert len(recorded) > 1 and received == recorded
     assert deserialize_message(received[0], DiagnosticArray).status[0].name == METRICS_STATUS
+
+
+def test_an_obstacle_run_draws_its_figures_without_matplotlib_warnings(tmp_path):
+    """Issue 38: ``sim --plots`` of a scenario with obstacles printed matplotlib's "Ignoring
+    fixed x limits to fulfill fixed data aspect with adjustable data limits." twice (the
+    figure's limits are fixed around the paths, its aspect was adjusted on the data)."""
+    from conftest import subprocess_env
+    run = subprocess.run(
+        ['sim', 'demo', '--set', BYTES_RUN[-1], '--set', 'duration=2', '--plots', '--out',
+         str(tmp_path / 'run')], env=subprocess_env(), capture_output=True, text=True,
+        timeout=RUN_TIMEOUT)
+    assert run.returncode == 0, run.stderr
+    assert (tmp_path / 'run' / 'trajectories.png').is_file()
+    assert [line for line in run.stderr.splitlines() if not line.startswith('[sim] ')] == []
