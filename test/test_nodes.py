@@ -428,12 +428,22 @@ def _stepped(out) -> bool:
     ({}, ['-p', 'bag_max_duration:=-0.5'], 'bag_max_duration'),
 ])
 def test_world_bad_configuration_is_one_line_exit_2(tmp_path, ros_domain, extra_env, args,
-                                                    key):
+                                                    key, monkeypatch, capfd):
+    """A real world process for the package index's cases (what a process finds under
+    AMENT_PREFIX_PATH at its start); the world's main in this process, its output captured at
+    the file descriptors, for the parameters (a process each took a second or two)."""
     out = tmp_path / 'never'
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), **extra_env)
-    res = subprocess.run(executable('world') + ['--ros-args', '-p', 'scenario:=demo', '-p',
-                                                f'out_dir:={out}'] + args,
-                         env=env, capture_output=True, text=True, timeout=60)
+    argv = ['--ros-args', '-p', 'scenario:=demo', '-p', f'out_dir:={out}'] + args
+    if extra_env:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), **extra_env)
+        res = subprocess.run(executable('world') + argv, env=env, capture_output=True,
+                             text=True, timeout=60)
+    else:
+        from flock_swarm.nodes.world import main
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+        capfd.readouterr()
+        status = main(['world', *argv])
+        res = subprocess.CompletedProcess(argv, status, *capfd.readouterr())
     assert res.returncode == 2, res.stderr
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f'world: error: {key}'), res.stderr
