@@ -75,3 +75,40 @@ def run_delivered_fraction(plant: Plant, series: dict, dt: float) -> tuple[float
     x, u = series['plant_state'], series['u']
     return delivered_fraction(plant, x.reshape(-1, x.shape[-1]), u.reshape(-1, u.shape[-1]),
                               dt)
+
+
+#: The drag's measurement: a patch of Su 2009 Fig. 2's alpha-lattice (a hexagon of the
+#: triangular lattice at the preset's d), every agent uninformed, moving at 1 m/s along x.
+DRAG_AGENTS, DRAG_SPEED = 37, 1.0
+
+
+def delay_drag(delay: float, compensation: str = 'none') -> dict:
+    """Return the drag of a communication delay on a translating flock, measured by a
+    ``sim`` run of Fig. 2's law beside the first-order prediction
+    (:func:`flock_swarm.core.delay_drag.predict_drag`).
+
+    The run: :data:`DRAG_AGENTS` agents on the lattice patch at :data:`DRAG_SPEED` m/s, no
+    informed agent, ``network: {delay, compensation}``; the braking rate of the first step
+    that uses the delayed messages is ``(v_bar[d] - v_bar[d + 1]) / (dt v_bar[d])``.
+
+    :param delay: the delay [s] (a whole number of Fig. 2's steps).
+    :param compensation: ``none`` or ``predict``.
+    :return: ``{'measured': rate [1/s], 'predicted': beta_0 [1/s]}`` (the prediction is that
+        of no compensation; with ``predict`` the drag's cause is removed, so 0 is its
+        prediction).
+    """
+    from flock_swarm.core import delay_drag as dd
+    from flock_swarm.core.run import simulate
+    from flock_swarm.presets import prepare
+    fig2, _ = prepare('su2009_fig2')
+    q = dd.triangular_lattice(DRAG_AGENTS, fig2.law.d)
+    steps = round(delay / fig2.dt)
+    sc, _ = prepare('su2009_fig2', extra={
+        'n_agents': DRAG_AGENTS, 'duration': (steps + 2) * fig2.dt, 'record_every': 1,
+        'informed': {'select': 'first', 'count': 0},
+        'initial': {'positions': q.tolist(), 'velocities': [[DRAG_SPEED, 0.0]] * DRAG_AGENTS},
+        'network': {'delay': delay, 'compensation': compensation}})
+    v = simulate(sc).series['p'].mean(axis=1)[:, 0]
+    predicted = dd.predict_drag(fig2.law, q, [DRAG_SPEED, 0.0], delay).rate
+    return {'measured': float((v[steps] - v[steps + 1]) / fig2.dt / v[steps]),
+            'predicted': 0.0 if compensation == 'predict' else float(predicted)}
