@@ -466,11 +466,20 @@ def test_agent_id_out_of_range(ros_domain):
     ('0,x', "agent_ids: expected ids and ranges such as '0-9,12', got '0,x'"),
     ('[0, 30]', 'agent_ids: must be in [0, 29] (n_agents = 30), got 30'),
 ])
-def test_container_bad_agent_ids(ros_domain, agent_ids, message):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
-    res = subprocess.run(executable('agents') + ['--ros-args', '-p', 'scenario:=demo', '-p',
-                                                 f'agent_ids:={agent_ids}'],
-                         env=env, capture_output=True, text=True, timeout=60)
+def test_container_bad_agent_ids(ros_domain, agent_ids, message, monkeypatch, capfd):
+    """The first case in a real ``agents`` process, the others through its main in this
+    process (output captured at the file descriptors)."""
+    argv = ['--ros-args', '-p', 'scenario:=demo', '-p', f'agent_ids:={agent_ids}']
+    if agent_ids == '0-3,2':
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+        res = subprocess.run(executable('agents') + argv, env=env, capture_output=True,
+                             text=True, timeout=60)
+    else:
+        from flock_swarm.nodes.agent import container_main
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain))
+        capfd.readouterr()
+        status = container_main(['agents', *argv])
+        res = subprocess.CompletedProcess(argv, status, *capfd.readouterr())
     assert res.returncode == 2
     assert res.stderr.strip() == f'agents: error: {message}'
 
