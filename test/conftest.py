@@ -259,9 +259,10 @@ def _names(node: ast.AST) -> tuple[set[str], set[str]]:
     return names, strings
 
 
-#: Names whose use starts a process: a test whose parameter names a command starts DDS only
-#: if it starts a process (``tool='swarm'`` in a command line, not ``which='swarm'``).
-PROCESS_NAMES = frozenset({'subprocess', 'Popen', 'run_installed'})
+#: Names whose use runs a command: a test whose parameter names a command starts DDS only if
+#: it starts a process or imports a module by name to run its main (``tool='swarm'`` in a
+#: command line, not ``which='swarm'``).
+PROCESS_NAMES = frozenset({'subprocess', 'Popen', 'run_installed', 'import_module'})
 
 
 @functools.cache
