@@ -46,6 +46,9 @@ MESSAGE_ENCODING = 'cdr'
 SERVER_NAME = 'flock_swarm'
 #: Longest wait [s] for the server to stop when the run ends (:meth:`LiveServer.close`).
 CLOSE_TIMEOUT = 2.0
+#: A viewer subscribes channel by channel: :meth:`LiveServer.wait_for_viewer` returns once
+#: no further subscription has come for this long [s] after the first.
+VIEWER_SETTLE = 0.5
 
 
 _NS = 10**9
@@ -98,11 +101,15 @@ class LiveServer:
         self.latched: dict[str, tuple[bytes, int] | None] = {}
         #: Set once a client has subscribed to a channel (:meth:`wait_for_viewer`).
         self.viewer = threading.Event()
+        #: When the last subscription came (monotonic) [s].
+        self.subscribed_at = 0.0
         viewer = self.viewer
         resend = self._resend
+        server = self
 
         class Listener(foxglove.ServerListener):
             def on_subscribe(self, client, channel) -> None:
+                server.subscribed_at = time.monotonic()
                 viewer.set()
                 resend(channel.topic)
         try:
@@ -181,16 +188,28 @@ class LiveServer:
             channel.log(last[0], log_time=last[1])
 
     def wait_for_viewer(self, timeout: float | None = None) -> bool:
-        """Wait until a client has subscribed to a channel (``swarm --wait-for-viewer``).
+        """Wait until a client has subscribed to a channel, and then until its further
+        subscriptions have come (none for :data:`VIEWER_SETTLE` s): ``swarm
+        --wait-for-viewer`` starts the run then, so every channel the viewer subscribes to is
+        served from step 0 (a viewer subscribes channel by channel; the run used to start at
+        its first subscription).
 
         :param timeout: seconds to wait at most (``None``: no limit; Ctrl-C still ends it).
-        :return: whether a viewer subscribed.
+        :return: whether a viewer subscribed and its subscriptions settled.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
-        while not self.viewer.wait(0.2):
-            if deadline is not None and time.monotonic() > deadline:
+        while True:
+            now = time.monotonic()
+            quiet = now - self.subscribed_at
+            if self.viewer.is_set() and quiet >= VIEWER_SETTLE:
+                return True
+            if deadline is not None and now >= deadline:
                 return False
-        return True
+            step = 0.2 if deadline is None else min(0.2, deadline - now)
+            if self.viewer.is_set():
+                time.sleep(min(step, VIEWER_SETTLE - quiet))
+            else:
+                self.viewer.wait(step)
 
     def set_time(self, t_ns: int) -> None:
         """Broadcast ``t_ns`` as the server's time, unless it is the time last broadcast."""

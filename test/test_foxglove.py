@@ -437,6 +437,36 @@ def test_swarm_waits_for_the_first_viewer(tmp_path, ros_domain):
     assert clock and clock[0] == 0 and clock[-1] == 100_000_000
 
 
+def test_the_run_waits_for_every_subscription_of_the_viewer(tmp_path, ros_domain):
+    """Issue 38: ``--wait-for-viewer`` started the run at a viewer's first subscription; an
+    app subscribes channel by channel, so the channels it subscribed to next missed the
+    start. The run now starts once the viewer's subscriptions have settled: here one channel
+    every 0.1 s, and every channel gets every message of the run."""
+    out = tmp_path / 'run'
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = announced(proc, r'live view on (ws://\S+)').group(1)
+        client = FoxgloveClient(url)
+        client.pump_until(lambda: set(CONTRACT) <= set(client.topics()), TIMEOUT, 'advertise')
+        for topic in CONTRACT:
+            client.subscribe([topic])
+            client.pump(0.1)  # returns after 0.1 s without a frame
+        client.pump(TIMEOUT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    served = collections.Counter(topic for topic, _, _ in client.messages)
+    recorded = collections.Counter(topic for topic, _ in bag_messages(out / 'bag')[0]
+                                   if topic in CONTRACT)
+    assert served == recorded and set(served) == set(CONTRACT)
+
+
 @pytest.mark.parametrize('argv, message', [
     (['--pace', '-1'], '--pace: must be finite and >= 0, got -1.0'),
     (['--pace', 'inf'], '--pace: must be finite and >= 0, got inf'),
