@@ -176,3 +176,23 @@ def test_the_plant_study_measures_its_mechanism_on_a_run(plant, expected):
     assert m['delivered_residual'] < 1e-6
     if 'velocity_lag' in plant:
         assert m['predicted_fraction'] == pytest.approx(m['delivered_fraction'], rel=1e-9)
+
+
+def test_the_mean_age_under_loss_is_p_over_one_plus_p_on_a_lattice_at_rest():
+    from flock_swarm.core import delay_drag as dd
+    from flock_swarm.core.run import simulate
+    from flock_swarm.reproduce.mechanisms import held_age
+    fig2, _ = prepare('su2009_fig2')
+    q = dd.triangular_lattice(37, fig2.law.d)
+    sc, _ = prepare('su2009_fig2', extra={
+        'n_agents': 37, 'duration': 4.0, 'record_every': 1,
+        'informed': {'select': 'first', 'count': 0},
+        'initial': {'positions': q.tolist(), 'velocities': [[0.0, 0.0]] * 37},
+        'network': {'loss': 0.2}})
+    summary = simulate(sc).summary
+    # Every link persists (the lattice is at equilibrium, at rest): of about 40,000 uses the
+    # mean age is p / (1 + p) = 1/6 step, to sampling error (about 0.003). (The summary
+    # averages the recorded instants' means, each instant's tally since the last: one
+    # record per step weighs every step alike.)
+    assert summary['network_age_mean'] / sc.dt == pytest.approx(held_age(0.2), abs=0.01)
+    assert summary['network_delivered'] == pytest.approx(0.8, abs=0.01)

@@ -112,3 +112,16 @@ def delay_drag(delay: float, compensation: str = 'none') -> dict:
     predicted = dd.predict_drag(fig2.law, q, [DRAG_SPEED, 0.0], delay).rate
     return {'measured': float((v[steps] - v[steps + 1]) / fig2.dt / v[steps]),
             'predicted': 0.0 if compensation == 'predict' else float(predicted)}
+
+
+def held_age(loss: float) -> float:
+    """Return the mean age [steps] of the neighbour states used under Bernoulli loss ``loss``
+    with a message every step and a state kept through one lost refresh (``max_age`` 1).
+
+    Of a link present at two steps in a row, the current message is used with probability
+    ``1 - p`` (age 0), the previous one with ``p (1 - p)`` (age 1), none with ``p^2``: the
+    mean age of the states used is ``p (1 - p) / ((1 - p) + p (1 - p)) = p / (1 + p)``.
+
+    :param loss: the loss probability ``p`` in ``[0, 1)``.
+    """
+    return loss / (1.0 + loss)

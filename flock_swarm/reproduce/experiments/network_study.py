@@ -112,6 +112,15 @@ class NetworkFig2(Fig2):
         why='Fig. 2\'s criterion (the paper\'s 86 of 100 taken as typical, a mean within 5 '
         'agents of it), asked of each network: the first set-up is the ideal network.')
 
+    def analyse(self, sc, summary: dict, series: dict) -> dict:
+        """Return Fig. 2's numbers and the network's statistics of the run (the fraction of
+        messages delivered, the mean age [s] of the neighbour states the law used)."""
+        out = super().analyse(sc, summary, series)
+        for key in ('network_delivered', 'network_age_mean'):
+            if isinstance(summary.get(key), (int, float)) and np.isfinite(summary[key]):
+                out[key] = float(summary[key])
+        return out
+
     @property
     def setups(self) -> tuple[SetUp, ...]:
         """Return the one set-up: the spec, its points labelled by the axis value."""
