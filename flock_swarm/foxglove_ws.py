@@ -49,6 +49,12 @@ CLOSE_TIMEOUT = 2.0
 #: A viewer subscribes channel by channel: :meth:`LiveServer.wait_for_viewer` returns once
 #: no further subscription has come for this long [s] after the first.
 VIEWER_SETTLE = 0.5
+#: The pace [simulated s per wall s] of a one-process lockstep run while a viewer watches
+#: every channel, unless ``--pace`` gives one (:attr:`LiveSink.pace`): unpaced, the server
+#: outran such a viewer and dropped its oldest messages (issue 38).
+LIVE_PACE = 1.0
+#: How often [s] a :class:`LiveSink` looks whether every channel is watched.
+WATCH_PERIOD = 0.2
 
 
 _NS = 10**9
@@ -211,6 +217,11 @@ class LiveServer:
             else:
                 self.viewer.wait(step)
 
+    @property
+    def watched(self) -> bool:
+        """Whether every channel has a subscriber (a viewer watches everything)."""
+        return bool(self.channels) and all(c.has_sinks() for c in self.channels.values())
+
     def set_time(self, t_ns: int) -> None:
         """Broadcast ``t_ns`` as the server's time, unless it is the time last broadcast."""
         if t_ns != self.time_ns:
@@ -258,6 +269,19 @@ class LiveSink:
     def __init__(self, live: LiveServer) -> None:
         """Serve on ``live``."""
         self.live = live
+        self._pace = 0.0
+        self._looked = -WATCH_PERIOD
+
+    @property
+    def pace(self) -> float:
+        """The pace the world takes unless it has one of its own (``--pace``):
+        :data:`LIVE_PACE` while every channel is watched, so the viewer gets the whole run
+        (the lossless live mode), else 0 (as fast as it goes)."""
+        now = time.monotonic()
+        if now - self._looked >= WATCH_PERIOD:
+            self._looked = now
+            self._pace = LIVE_PACE if self.live.watched else 0.0
+        return self._pace
 
     def add_topic(self, name: str, msg_type, qos) -> None:
         """Advertise a topic the world creates (a no-op for one already advertised), latched

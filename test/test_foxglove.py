@@ -327,9 +327,10 @@ def test_a_stalled_client_does_not_stall_the_world(tmp_path, ros_domain):
             wait_for(lambda: all(c.has_sinks() for c in live.channels.values()), TIMEOUT,
                      'the subscriptions to reach the server')
             return None
+        # A pace of its own: a client of every channel would pace the run at LIVE_PACE.
         summary, _, bag = fly(tmp_path, ros_domain, live,
                               overrides=['n_agents=10', 'informed.count=3', 'duration=30'],
-                              connect=connect)
+                              connect=connect, world_params={'pace': 1000.0})
     finally:
         started = time.monotonic()
         live.close()
@@ -435,6 +436,26 @@ def test_swarm_waits_for_the_first_viewer(tmp_path, ros_domain):
             proc.wait()
     clock = [t for topic, t, _ in client.messages if topic == '/clock']
     assert clock and clock[0] == 0 and clock[-1] == 100_000_000
+
+
+def test_a_viewer_of_every_channel_paces_the_run_and_gets_all_of_it(tmp_path, ros_domain):
+    """Issue 38: unpaced, the server outran a viewer subscribed to everything and dropped
+    its oldest messages. A one-process lockstep run whose every channel is watched now takes
+    LIVE_PACE (real time) unless ``--pace`` gives a pace: at least its duration of wall time,
+    and the viewer gets every message of the run."""
+    from flock_swarm.foxglove_ws import LIVE_PACE
+    with start_live(port=0) as live:
+        def connect(swarm):
+            client = subscribed_client(live.url, list(live.channels))
+            wait_for(lambda: live.watched, TIMEOUT, 'the subscriptions to reach the server')
+            return client
+        summary, client, bag = fly(tmp_path, ros_domain, live, connect=connect)
+    client.close()
+    # 50 steps of 0.02 s: the last begins 0.98 s after the first at real time.
+    assert LIVE_PACE == 1.0 and summary['wall_time_s'] >= 0.97
+    recorded = collections.Counter(topic for topic, _ in bag_messages(bag)[0]
+                                   if topic in CONTRACT)
+    assert collections.Counter(topic for topic, _, _ in client.messages) == recorded
 
 
 def test_the_run_waits_for_every_subscription_of_the_viewer(tmp_path, ros_domain):

@@ -148,6 +148,10 @@ class WorldNode(RecordedNode):
         self.pace = params['pace']
         #: Lockstep with ``pace``: the next step is held until its wall time.
         self.paced = False
+        #: The pace in force (:meth:`pace_now`) and the step and wall time it counts from
+        #: (``None``: the start of the run).
+        self.pace_in_force = self.pace
+        self.pace_anchor: tuple[int, float] | None = None
         self.created = self.wait_logged = time.monotonic()
         #: Why the world refused to start (another world on the domain), or ``None``.
         self.refusal: ScenarioError | None = None
@@ -554,14 +558,26 @@ class WorldNode(RecordedNode):
         if not self.done:
             self.fail(self.stepper.silent_agents(obs.k, lambda i: self.hosts.get(i, '')))
         if not self.done:
-            if self.pace and time.monotonic() < self.pace_due():
+            pace = self.pace_now()
+            if pace != self.pace_in_force:
+                self.pace_in_force, self.pace_anchor = pace, (self.k, time.monotonic())
+            if pace and time.monotonic() < self.pace_due():
                 self.paced = True  # the lockstep timer begins it when due
                 return
             self.begin_step()
 
+    def pace_now(self) -> float:
+        """Return the pace in force: ``pace`` when given, else a sink's (a live view whose
+        every channel a viewer watches: :attr:`flock_swarm.foxglove_ws.LiveSink.pace`),
+        else 0 (as fast as it goes)."""
+        if self.pace:
+            return self.pace
+        return max((getattr(sink, 'pace', 0.0) for sink in self.sinks), default=0.0)
+
     def pace_due(self) -> float:
-        """Return the monotonic time at which ``pace`` lets the open step begin."""
-        return self.stepper.t_wall0 + self.k * self.scenario.dt / self.pace
+        """Return the monotonic time at which the pace in force lets the open step begin."""
+        k0, wall0 = self.pace_anchor or (0, self.stepper.t_wall0)
+        return wall0 + (self.k - k0) * self.scenario.dt / self.pace_in_force
 
     # -- realtime -----------------------------------------------------------------------------
 
