@@ -321,18 +321,20 @@ def long_bag(tmp_path_factory):
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_a_signal_while_reading_ends_analyze_with_its_status_and_no_verdict(
         long_bag, tmp_path, sig):
-    # The signal comes once the first progress line says the messages are being decoded:
-    # most of that time is spent in rclpy's deserialisation, where the handler's
-    # KeyboardInterrupt used to surface as a TypeError taken for an undecodable message,
-    # after which the run was analysed without it and verified (exit 0).
+    # The signal comes as soon as analyze catches it, while the bag is read: a handler's
+    # KeyboardInterrupt raised in rclpy's deserialisation used to surface as a TypeError
+    # taken for an undecodable message, after which the run was analysed without it and
+    # verified (exit 0).
+    from flock_swarm.nodes.supervisor import catches
+    from flock_swarm.testing import wait_for
     out = tmp_path / 'out'
     process = subprocess.Popen(
         [sys.executable, '-m', 'flock_swarm.cli.analyze', str(long_bag), '--no-anim',
          '--verify', '--out', str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        first = process.stderr.readline()
-        assert first.startswith('[analyze] reading '), first
+        # SIGTERM: Python catches SIGINT from its start; analyze's handlers catch SIGTERM too.
+        wait_for(lambda: catches(process.pid, signal.SIGTERM), RUN_TIMEOUT, 'the handlers')
         process.send_signal(sig)
         stdout, stderr = process.communicate(timeout=60)
     finally:
@@ -343,3 +345,39 @@ def test_a_signal_while_reading_ends_analyze_with_its_status_and_no_verdict(
     assert 'do not decode' not in stderr and 'completed' not in stderr, stderr
     assert 'verify' not in stdout
     assert not (out / 'summary.json').exists()
+
+
+def test_messages_off_their_topics_layout_and_undecodable_ones_read_as_before(flat, tmp_path):
+    """The swarm's messages are read a topic's batch at a time straight from their bytes
+    (issue 38: analyze --verify within 2x of sim); one whose layout differs from its topic's
+    (a longer frame id) is read on its own with the same values, and bytes that
+    do not decode are skipped with the note, as when rclpy read every message."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from nav_msgs.msg import Odometry
+    run, _, _ = flat
+    reader = BagReader(run / 'bag')
+    target = tmp_path / 'bag'
+    odom = [m for m in reader.messages('/agent_1/odom')]
+    changed, broken = odom[5].log_time_ns, odom[9].log_time_ns
+    with BagWriter(target) as writer:
+        writer.add_metadata('flock_swarm', reader.metadata('flock_swarm'))
+        for topic, type_name in reader.topics().items():
+            writer.add_topic(topic, type_name)
+        for message in reader.messages():
+            data = message.data
+            if message.topic == '/agent_1/odom' and message.log_time_ns == changed:
+                msg = deserialize_message(data, Odometry)
+                msg.header.frame_id = 'a_frame_id_longer_than_the_others'
+                data = serialize_message(msg)
+            elif message.topic == '/agent_1/odom' and message.log_time_ns == broken:
+                data = data[:40]
+            writer.write_serialized(message.topic, data, message.log_time_ns)
+    before, after = load_run(run / 'bag'), load_run(target)
+    assert after.notes[0].startswith("1 message(s) that do not decode as their type skipped (a "
+                                     "faulty writer's, recorded as received; first: "
+                                     f'/agent_1/odom at {broken} ns (')
+    assert 'odometry skipped' in after.notes[1]
+    kept = np.isin(before.steps, after.steps)
+    assert kept.sum() == len(before.steps) - 1
+    np.testing.assert_array_equal(after.q, before.q[kept])
+    np.testing.assert_array_equal(after.p, before.p[kept])

@@ -12,16 +12,21 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 import json
 from pathlib import Path
+import struct
 import time
+from typing import Any
 
 import numpy as np
 import yaml
 
 from flock_swarm import contract
-from flock_swarm.bag import BagError, BagReader
+from flock_swarm.bag import BagError, BagMessage, BagReader
+from flock_swarm.bag.reader import UndecodableMessage
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.network import STATISTICS
 from flock_swarm.core.scenario import Scenario, parse_scenario, realize
+from flock_swarm.nodes.wire import (decode_accel, decode_odometry_state, decode_state,
+                                    MalformedMessage, POSE_BYTES)
 from flock_swarm.scenario_yaml import parse_yaml
 
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
@@ -411,6 +416,158 @@ class _Messages:
     undecodable: list[str] = field(default_factory=list)
 
 
+#: How the swarm's message types are read: straight from their CDR bytes
+#: (:mod:`flock_swarm.nodes.wire`, a few microseconds a message), and, for bytes that reader
+#: refuses, from rclpy's object (the same values; or the reason they do not decode).
+_FAST = {
+    contract.ODOMETRY_TYPE: decode_odometry_state,
+    contract.ACCEL_TYPE: lambda data: (lambda ns, _, a: (ns, a))(*decode_accel(data)),
+    contract.STATE_TYPE: lambda data: (lambda ns, _, names, values: (ns, (names, values)))(
+        *decode_state(data)),
+}
+
+
+def _from_object(msg: Any) -> tuple[int, tuple]:
+    """Return :func:`_fields`' values of an rclpy message object."""
+    stamp = _stamp_ns(msg.header.stamp)
+    if hasattr(msg, 'pose'):
+        pos, vel = msg.pose.pose.position, msg.twist.twist.linear
+        turn, spin = msg.pose.pose.orientation, msg.twist.twist.angular
+        return stamp, (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z, turn.x, turn.y, turn.z,
+                       turn.w, spin.x, spin.y, spin.z)
+    if hasattr(msg, 'accel'):
+        lin = msg.accel.linear
+        return stamp, (lin.x, lin.y, lin.z)
+    return stamp, (tuple(msg.name), tuple(msg.position))
+
+
+def _fields(reader: BagReader, message: BagMessage) -> tuple[int, tuple]:
+    """Return the header stamp [ns] and the values analyze takes of an odometry (13: see
+    :func:`~flock_swarm.nodes.wire.decode_odometry_state`), a command (3) or a state (labels,
+    values) message.
+
+    :raises UndecodableMessage: when its bytes do not decode as its type.
+    """
+    fast = _FAST.get(message.type_name)
+    if fast is not None:
+        try:
+            return fast(message.data)
+        except MalformedMessage:
+            pass  # rclpy's word on it: the same values, or why it does not decode
+    return _from_object(reader.decode(message))
+
+
+#: Messages of a topic decoded at once (:func:`_decode_batch`).
+DECODE_BATCH = 4096
+
+
+def _align(offset: int, size: int) -> int:
+    """Return ``offset`` aligned to ``size`` relative to the CDR payload (after 4 bytes)."""
+    return 4 + ((offset - 4 + size - 1) & -size)
+
+
+def _layout_of(type_name: str, data: bytes) -> tuple[int, list[tuple[int, int]], tuple]:
+    """Return where the values of a little-endian message of ``type_name`` lie: the offset
+    where its strings and counts end, the ``(offset, count)`` of its float64 runs, and
+    its joint names (a state's; else empty).
+
+    :raises ValueError: for bytes this walk cannot follow (the caller decodes them one by
+        one instead).
+    """
+    u32 = struct.Struct('<I')
+
+    def string_end(offset: int) -> int:
+        return offset + 4 + u32.unpack_from(data, offset)[0]
+
+    if data[:2] != b'\x00\x01':
+        raise ValueError('not little-endian CDR')
+    end = string_end(12)
+    if type_name == contract.ODOMETRY_TYPE:
+        pose = _align(string_end(_align(end, 4)), 8)
+        twist = pose + POSE_BYTES
+        return pose, [(pose, 3), (twist, 3), (pose + 24, 4), (twist + 24, 3)], ()
+    if type_name == contract.ACCEL_TYPE:
+        accel = _align(end, 8)
+        return accel, [(accel, 3)], ()
+    count_at = _align(end, 4)
+    (count,) = u32.unpack_from(data, count_at)
+    names, end = [], count_at + 4
+    for _ in range(min(count, len(data))):
+        start = _align(end, 4)
+        end = string_end(start)
+        names.append(data[start + 4:end - 1].decode())
+    count_at = _align(end, 4)
+    (count,) = u32.unpack_from(data, count_at)
+    values = _align(count_at + 4, 8) if count else count_at + 4
+    return values, [(values, count)], tuple(names)
+
+
+def _decode_batch(reader: BagReader, records: list[tuple]
+                  ) -> list[tuple | UndecodableMessage]:
+    """Return :func:`_fields`' stamp and values (or why it does not decode) of each message
+    of one topic (:meth:`BagReader.records`), those of one layout read at once with NumPy.
+
+    The messages of one topic share their layout: the same length and the same bytes where
+    the frame ids, names and counts are (only the stamp and the values differ). Those are
+    read as columns of one byte array, after the first one's values were checked against
+    :mod:`flock_swarm.nodes.wire`'s; every other message is decoded on its own
+    (:func:`_fields`).
+    """
+    datas = [record[2] for record in records]
+    found: list[tuple | UndecodableMessage | None] = [None] * len(records)
+    log_time, (topic, type_name, qos), data, publish_time = records[0]
+    first = BagMessage(topic, type_name, log_time, data, qos, publish_time)
+    try:
+        head, runs, names = _layout_of(first.type_name, first.data)
+        stamp, values = _fields(reader, first)
+        size = len(first.data)
+        if max(offset + 8 * count for offset, count in runs) > size:
+            raise ValueError('values past the end')
+        flat = np.concatenate([np.frombuffer(first.data, '<f8', count, offset)
+                               for offset, count in runs])
+        if names:
+            ok = values == (names, tuple(flat))
+        else:
+            ok = np.array_equal(np.asarray(values, dtype=float), flat, equal_nan=True)
+        if not ok or stamp != _stamp_ns_of(first.data):
+            raise ValueError('the layout does not read as the message')
+    except (ValueError, struct.error, IndexError, UnicodeDecodeError, UndecodableMessage,
+            MalformedMessage):
+        head = None
+    if head is not None:
+        rows = [j for j, data in enumerate(datas) if len(data) == size]
+        table = np.frombuffer(b''.join(datas[j] for j in rows) if len(rows) < len(datas)
+                              else b''.join(datas), np.uint8).reshape(len(rows), size)
+        same = ((table[:, :4] == table[0, :4]).all(axis=1)
+                & (table[:, 12:head] == table[0, 12:head]).all(axis=1))
+        secs = table[:, 4:8].copy().view('<i4')[:, 0].astype(np.int64)
+        nanos = table[:, 8:12].copy().view('<u4')[:, 0].astype(np.int64)
+        stamps = secs * 1_000_000_000 + nanos
+        columns = np.concatenate([table[:, offset:offset + 8 * count].copy().view('<f8')
+                                  for offset, count in runs], axis=1)
+        values = ([(names, tuple(row)) for row in columns.tolist()] if names
+                  else list(columns))
+        for r, (j, stamp, same_layout) in enumerate(zip(rows, stamps.tolist(),
+                                                        same.tolist())):
+            if same_layout:
+                found[j] = (stamp, values[r])
+    for j, item in enumerate(found):
+        if item is None:
+            log_time, (topic, type_name, qos), data, publish_time = records[j]
+            try:
+                found[j] = _fields(reader, BagMessage(topic, type_name, log_time, data, qos,
+                                                      publish_time))
+            except UndecodableMessage as exc:
+                found[j] = exc
+    return found
+
+
+def _stamp_ns_of(data: bytes) -> int:
+    """Return the header stamp [ns] of a little-endian CDR message with a header."""
+    sec, nanosec = struct.unpack_from('<iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def _read_messages(reader: BagReader, topics: SwarmTopics,
                    progress: Progress | None) -> _Messages:
     """Decode the swarm's topics of the bag."""
@@ -427,45 +584,68 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
     out = _Messages()
     tick = Ticker(progress)
     read = 0
-    bad: list[str] = []
+    bad: list[tuple[int, str]] = []
+    pending: dict[str, list[tuple]] = {}
 
-    def undecodable(message, reason: str) -> None:
-        bad.append(f'{message.topic} at {message.log_time_ns} ns ({reason})')
-
-    for message, msg in reader.decoded(list(kinds), undecodable):
-        kind, i = kinds[message.topic]
-        stamp = _stamp_ns(msg.header.stamp)
-        if kind == 'odom' or kind == 'leader_odom':
-            pos, vel = msg.pose.pose.position, msg.twist.twist.linear
-            if kind == 'leader_odom':
-                out.leader_odom[stamp] = (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z)
-            else:
+    def flush(topic: str) -> None:
+        kind, i = kinds[topic]
+        for found in _decode_batch(reader, pending.pop(topic)):
+            if isinstance(found, UndecodableMessage):
+                bad.append((found.message.log_time_ns, f'{topic} at '
+                            f'{found.message.log_time_ns} ns ({found.reason})'))
+                continue
+            stamp, values = found
+            if kind == 'odom':
                 # The whole odometry: a robot plant's state needs the heading and the yaw
                 # rate besides (Plant.from_odometry).
-                turn, spin = msg.pose.pose.orientation, msg.twist.twist.angular
                 entry = out.odom.get(stamp)
                 if entry is None:
                     entry = out.odom[stamp] = (np.zeros((n, ODOM_COLUMNS)),
                                                np.zeros(n, dtype=bool))
-                entry[0][i] = (pos.x, pos.y, pos.z, vel.x, vel.y, vel.z, turn.x, turn.y,
-                               turn.z, turn.w, spin.x, spin.y, spin.z)
+                entry[0][i] = values
                 entry[1][i] = True
-        elif kind == 'cmd' or kind == 'leader_accel':
-            lin = msg.accel.linear
-            if kind == 'cmd':
-                out.cmd.append((stamp, i, (lin.x, lin.y, lin.z)))
+            elif kind == 'leader_odom':
+                out.leader_odom[stamp] = tuple(values[:6])
+            elif kind == 'cmd':
+                out.cmd.append((stamp, i, values))
+            elif kind == 'leader_accel':
+                out.leader_accel[stamp] = tuple(values)
             else:
-                out.leader_accel[stamp] = (lin.x, lin.y, lin.z)
-        elif kind == 'state':
-            out.state.append((stamp, i, tuple(msg.name), tuple(msg.position)))
+                out.state.append((stamp, i, *values))
+
+    # Each topic's messages are decoded in batches, in the bag's order (what is kept of a
+    # topic depends on that order only: the last message of a stamp wins).
+    metrics_topic = topics.metrics
+    for record in reader.records(list(kinds)):
+        read += 1
+        if not read & 1023:
+            tick(lambda: f'[analyze] reading {reader.path}: {read}/{total} messages '
+                         f'({100 * read / max(total, 1):.0f} %)')
+        topic = record[1][0]
+        if topic != metrics_topic:
+            batch = pending.get(topic)
+            if batch is None:
+                batch = pending[topic] = []
+            batch.append(record)
+            if len(batch) == DECODE_BATCH:
+                flush(topic)
         else:
+            log_time, (_, type_name, qos), data, publish_time = record
+            message = BagMessage(topic, type_name, log_time, data, qos, publish_time)
+            try:
+                msg = reader.decode(message)
+            except UndecodableMessage as exc:
+                bad.append((message.log_time_ns,
+                            f'{message.topic} at {message.log_time_ns} ns ({exc.reason})'))
+                continue
+            stamp = _stamp_ns(msg.header.stamp)
             for status in msg.status:
                 if status.name == METRICS_STATUS:
                     out.metrics.append((stamp, {kv.key: kv.value for kv in status.values}))
-        read += 1
-        tick(lambda: f'[analyze] reading {reader.path}: {read}/{total} messages '
-                     f'({100 * read / max(total, 1):.0f} %)')
-    out.undecodable = bad
+    for topic in list(pending):
+        flush(topic)
+    bad.sort(key=lambda item: item[0])
+    out.undecodable = [text for _, text in bad]
     return out
 
 
@@ -631,10 +811,24 @@ def _commands(cmds: list, steps: np.ndarray, index: dict[int, int],
                 position += 1
             u[row] = held
         return u
-    for stamp, i, a in cmds:
-        row = index.get(step_of(stamp))
-        if row is not None:
-            u[row, i] = a[:dim]
+    if cmds:
+        # Vectorised, with the same outcome as one by one in bag order: each command goes
+        # to its step's row (when that step is complete), the last one for an agent and
+        # step wins.
+        stamps = np.fromiter((c[0] for c in cmds), np.int64, len(cmds))
+        ids = np.fromiter((c[1] for c in cmds), np.int64, len(cmds))
+        values = np.array([c[2][:dim] for c in cmds], dtype=float).reshape(len(cmds), dim)
+        ks = np.array([step_of(int(stamp)) for stamp in np.unique(stamps)], dtype=np.int64)
+        ks = ks[np.searchsorted(np.unique(stamps), stamps)]
+        rows = np.searchsorted(steps, ks)
+        rows[rows >= len(steps)] = 0
+        known = steps[rows] == ks if len(steps) else np.zeros(len(ks), dtype=bool)
+        slot = rows * n + ids
+        keep = np.flatnonzero(known)
+        # The last command of each (row, agent): the first in the reversed order.
+        _, last = np.unique(slot[keep][::-1], return_index=True)
+        chosen = keep[::-1][last]
+        u.reshape(-1, dim)[slot[chosen]] = values[chosen]
     for k, ids in missed.items():
         # The world applied zero: the command came after the step's timeout.
         u[index[k], ids] = 0.0

@@ -7,6 +7,7 @@ up, the copy was cut short) is scanned record by record up to its last complete 
 reader says so in :attr:`BagReader.recovered` and :attr:`BagReader.warning`.
 """
 
+import bisect
 from collections import Counter
 from dataclasses import dataclass, field
 import heapq
@@ -21,7 +22,7 @@ from mcap.opcode import Opcode
 from mcap.records import (
     Channel, Chunk, ChunkIndex, Footer, Header, McapRecord, Message, Metadata, MetadataIndex,
     Schema, Statistics)
-from mcap.stream_reader import breakup_chunk
+from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
@@ -43,6 +44,22 @@ _KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
 
 class BagError(ValueError):
     """The path is not a readable ROS 2 MCAP bag; the message is one line."""
+
+
+class UndecodableMessage(BagError):
+    """A message whose bytes do not decode as its type (a faulty writer's, recorded as
+    received).
+
+    :ivar message: the message.
+    :ivar reason: why, in one line.
+    """
+
+    def __init__(self, message: 'BagMessage', reason: str) -> None:
+        """Create the error (one line: topic, time, type, reason)."""
+        super().__init__(f'message on {message.topic} at {message.log_time_ns} ns does not '
+                         f'decode as {message.type_name} ({reason})')
+        self.message = message
+        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -350,6 +367,24 @@ def _scan_chunk(chunk: Chunk, offset: int, mcap: _McapFile) -> None:
     mcap.chunks.append(_ChunkRef(offset, chunk.message_start_time, frozenset(channel_ids)))
 
 
+# A message record's fields before its data: channel id, sequence, log time, publish time.
+_MESSAGE_HEAD = struct.Struct('<HIQQ')
+
+
+def _message_key(found: tuple[int, int, int, int, bytes]) -> tuple[int, int]:
+    return found[0], found[1]
+
+
+@dataclass
+class _Run:
+    """An opened chunk's wanted messages, sorted, and the position of the next one."""
+
+    messages: list[tuple[int, int, int, int, bytes]]
+    position: int
+    #: The messages' log times (sorted).
+    times: list[int]
+
+
 def _index_suffix(path: Path) -> tuple[str, int]:
     match = re.search(r'_(\d+)$', path.stem)
     if match is None:
@@ -493,12 +528,27 @@ class BagReader:
         :return: an iterator of :class:`BagMessage`.
         :raises BagError: if a chunk of a finished file turns out damaged.
         """
+        return (BagMessage(topic, type_name, log_time, data, qos, publish_time)
+                for log_time, (topic, type_name, qos), data, publish_time
+                in self.records(topics))
+
+    def records(self, topics: Iterable[str] | str | None = None
+                ) -> Iterator[tuple[int, tuple[str, str, str], bytes, int]]:
+        """Iterate over the messages as :meth:`messages` does, as plain tuples (for a reader
+        of millions of messages: no object a message).
+
+        :param topics: only these topics; all when None.
+        :return: an iterator of ``(log time [ns], (topic, type name, offered QoS profiles),
+            data, publish time [ns])``; the middle tuple is the same object for every
+            message of a topic.
+        :raises BagError: if a chunk of a finished file turns out damaged.
+        """
         wanted = {topics} if isinstance(topics, str) else (
             None if topics is None else set(topics))
         streams = [self._file_messages(file, wanted) for file in self._files]
         if len(streams) == 1:
             return streams[0]
-        return heapq.merge(*streams, key=lambda message: message.log_time_ns)
+        return heapq.merge(*streams, key=lambda record: record[0])
 
     def decoded(self, topics: Iterable[str] | str | None = None,
                 undecodable: Callable[[BagMessage, str], None] | None = None
@@ -514,32 +564,56 @@ class BagReader:
             (without ``undecodable``).
         """
         for message in self.messages(topics):
-            cls = self._classes.get(message.type_name)
-            if cls is None:
-                try:
-                    cls = message_class(message.type_name)
-                except (DefinitionNotFoundError, ValueError) as exc:
-                    raise BagError(f'cannot decode topic {message.topic}: {exc}') from None
-                self._classes[message.type_name] = cls
             try:
-                decoded = deserialize_message(message.data, cls)
-            except Exception as exc:
-                _reraise_interrupt(exc)
+                decoded = self.decode(message)
+            except UndecodableMessage as exc:
                 if undecodable is None:
-                    raise BagError(f'message on {message.topic} at {message.log_time_ns} ns '
-                                   f'does not decode as {message.type_name} '
-                                   f'({_one_line(exc)})') from None
-                undecodable(message, _one_line(exc))
+                    raise
+                undecodable(message, exc.reason)
                 continue
             yield message, decoded
 
+    def decode(self, message: BagMessage) -> Any:
+        """Return the deserialised rclpy object of one message of this bag.
+
+        :param message: a message from :meth:`messages`.
+        :return: the message object.
+        :raises BagError: if its type is not installed.
+        :raises UndecodableMessage: if its bytes do not decode as its type.
+        :raises KeyboardInterrupt: a stop signal that came during the deserialisation.
+        """
+        cls = self._classes.get(message.type_name)
+        if cls is None:
+            try:
+                cls = message_class(message.type_name)
+            except (DefinitionNotFoundError, ValueError) as exc:
+                raise BagError(f'cannot decode topic {message.topic}: {exc}') from None
+            self._classes[message.type_name] = cls
+        try:
+            return deserialize_message(message.data, cls)
+        except Exception as exc:
+            _reraise_interrupt(exc)
+            raise UndecodableMessage(message, _one_line(exc)) from None
+
     def _file_messages(self, file: _McapFile, wanted: set[str] | None
-                       ) -> Iterator[BagMessage]:
-        """Merge one file's chunks by time, as the mcap library's indexed reader does."""
+                       ) -> Iterator[tuple[int, tuple[str, str, str], bytes, int]]:
+        """Merge one file's chunks by time, as the mcap library's indexed reader does.
+
+        The messages come in the order of ``(log time, file offset of their chunk, index of
+        the record in the chunk)``. A chunk's wanted messages, sorted so, are read off in a
+        run for as long as no other chunk has an earlier one (chunks of one recording follow
+        each other in time: one heap operation a chunk rather than two a message).
+        """
         channels = {channel_id: channel for channel_id, channel in file.channels.items()
                     if wanted is None or channel.topic in wanted}
+        described = {}
+        for channel_id, channel in channels.items():
+            schema = file.schemas.get(channel.schema_id)
+            described[channel_id] = (channel.topic, schema.name if schema else '',
+                                     channel.metadata.get('offered_qos_profiles', ''))
         # Heap entries: (time, file offset, index in chunk, item); -1 marks an unopened chunk,
-        # which sorts before the messages of chunks further on at the same time.
+        # which sorts before the messages of chunks further on at the same time. An opened
+        # chunk's entry is its sorted messages with the position of the next one (_Run).
         heap: list[tuple[int, int, int, Any]] = []
         for chunk in file.chunks:
             if chunk.channel_ids is None or not chunk.channel_ids.isdisjoint(channels):
@@ -553,26 +627,64 @@ class BagReader:
             while heap:
                 _, offset, _, item = heapq.heappop(heap)
                 if isinstance(item, _ChunkRef):
-                    for index, record in enumerate(self._chunk_records(stream, size, item, file)):
-                        if isinstance(record, Message) and record.channel_id in channels:
-                            heapq.heappush(heap, (record.log_time, offset, index, record))
+                    found = self._chunk_messages(stream, size, item, file, channels)
+                    if found:
+                        found.sort(key=_message_key)
+                        heapq.heappush(heap, (found[0][0], offset, found[0][1],
+                                              _Run(found, 0, [m[0] for m in found])))
                     continue
-                channel = channels[item.channel_id]
-                schema = file.schemas.get(channel.schema_id)
-                yield BagMessage(
-                    topic=channel.topic, type_name=schema.name if schema else '',
-                    log_time_ns=item.log_time, data=item.data,
-                    offered_qos_profiles=channel.metadata.get('offered_qos_profiles', ''),
-                    publish_time_ns=item.publish_time)
+                if isinstance(item, Message):
+                    yield (item.log_time, described[item.channel_id], item.data,
+                           item.publish_time)
+                    continue
+                found, position, times = item.messages, item.position, item.times
+                end = len(found)
+                if heap:
+                    # Up to the first message the heap's next entry comes before: one of a
+                    # chunk further on (offset > ours) goes after ours at the same time.
+                    after, other = heap[0][0], heap[0][1]
+                    end = (bisect.bisect_right if other > offset else bisect.bisect_left)(
+                        times, after, position)
+                    end = max(end, position + 1)
+                for log_time, _, channel_id, publish_time, data in found[position:end]:
+                    yield log_time, described[channel_id], data, publish_time
+                if end < len(found):
+                    heapq.heappush(heap, (found[end][0], offset, found[end][1],
+                                          _Run(found, end, times)))
 
     @staticmethod
-    def _chunk_records(stream: BinaryIO, size: int, chunk: _ChunkRef,
-                       file: _McapFile) -> list[McapRecord]:
+    def _chunk_messages(stream: BinaryIO, size: int, chunk: _ChunkRef, file: _McapFile,
+                        channels: dict[int, Channel]) -> list[tuple[int, int, int, int, bytes]]:
+        """Return ``(log time, record index, channel id, publish time, data)`` of the messages
+        of ``channels`` in a chunk, read straight from its (decompressed, CRC-checked) bytes.
+
+        :raises BagError: if the chunk is damaged.
+        """
         record = _read_record(stream, chunk.offset, size)
         try:
             if record is None or record[0] != Opcode.CHUNK:
                 raise ValueError('no chunk record there')
-            return breakup_chunk(_parse(*record), validate_crc=True)
+            body, length = get_chunk_data_stream(_parse(*record), validate_crc=True)
+            data = body.read(length)
+            found = []
+            offset = index = 0
+            while offset < length:
+                opcode, record_length = _PREFIX.unpack_from(data, offset)
+                start = offset + _PREFIX.size
+                offset = start + record_length
+                if offset > length:
+                    raise ValueError(f'a record of {record_length} bytes runs past the end '
+                                     'of the chunk')
+                if opcode == Opcode.MESSAGE:
+                    if record_length < _MESSAGE_HEAD.size:
+                        raise ValueError(f'a message record of {record_length} bytes')
+                    channel_id, _, log_time, publish_time = _MESSAGE_HEAD.unpack_from(data,
+                                                                                      start)
+                    if channel_id in channels:
+                        found.append((log_time, index, channel_id, publish_time,
+                                      data[start + _MESSAGE_HEAD.size:offset]))
+                index += 1
+            return found
         except Exception as exc:
             _reraise_interrupt(exc)
             raise BagError(f'{file.path}: chunk at byte {chunk.offset} is damaged '

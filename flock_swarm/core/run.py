@@ -320,7 +320,9 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
 
 
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
-             progress_every: float = 2.0, integrator: Callable | None = None) -> SimResult:
+             progress_every: float = 2.0, integrator: Callable | None = None,
+             on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None
+             ) -> SimResult:
     """Run a scenario to its end and return the summary and the recorded time series.
 
     :param sc: the validated scenario.
@@ -332,16 +334,21 @@ def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
         (the physics engine, :class:`flock_swarm.engine.backend.EngineBackend`: ``sim
         --backend mujoco``, as the world's ``backend``), and optionally ``summary()``: summary
         keys of its own (the engine's ``robot_contacts``).
+    :param on_step: called with every step's number, positions and velocities (views of
+        the state the next step overwrites: copy what is kept), whatever ``record_every``
+        records: ``analyze --verify`` compares every step without the metrics of each.
     :return: the result; ``summary['status']`` is ``completed``, ``interrupted``,
         ``diverged`` (the state stopped being finite) or ``failed`` (a fault of the law or
         the leader model: ``summary['failure']`` tells it in one line).
     """
-    return simulate_stack([sc], progress, progress_every, integrator)[0]
+    return simulate_stack([sc], progress, progress_every, integrator, on_step)[0]
 
 
 def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | None = None,
                    progress_every: float = 2.0,
-                   integrator: Callable | None = None) -> list[SimResult]:
+                   integrator: Callable | None = None,
+                   on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None
+                   ) -> list[SimResult]:
     """Run independent realisations side by side in one vectorised state; return each result.
 
     A Monte Carlo sweep pays the per-step cost of Python once for the whole stack instead of
@@ -359,6 +366,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
         roughly every ``progress_every`` seconds.
     :param progress_every: wall-clock seconds between progress lines.
     :param integrator: :func:`simulate`'s (a single realisation only: it holds one swarm).
+    :param on_step: :func:`simulate`'s (with a stack: the stacked rows).
     :return: one result per scenario, in order; ``summary['wall_time_s']`` is the stack's
         wall time divided among its realisations.
     :raises ValueError: when the scenarios cannot share a stack.
@@ -378,7 +386,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
     started = time.monotonic()
     # Divergence is detected explicitly below, so NumPy's overflow warnings would only repeat it.
     with np.errstate(over='ignore', invalid='ignore'):
-        _run_loop(stack, leader, intrinsic, progress, progress_every)
+        _run_loop(stack, leader, intrinsic, progress, progress_every, on_step)
     wall = (time.monotonic() - started) / len(scenarios)
     results = []
     for g, (s, real) in enumerate(zip(scenarios, reals)):
@@ -636,7 +644,8 @@ def stack_agents(parts: list[AgentData]) -> AgentData:
     return AgentData.concatenate(parts)
 
 
-def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every):
+def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progress_every,
+              on_step=None):
     """Advance the stack to the end (or divergence or failure of all, or Ctrl-C); record how
     each ended."""
     sc = stack.scenarios[0]
@@ -669,6 +678,8 @@ def _run_loop(stack: _Stack, leader: VirtualLeader, intrinsic, progress, progres
             if u.shape[0] != n_rows:
                 edges = stack.edges()
             q, p, m = stack.q, stack.p, stack.size
+            if on_step is not None:
+                on_step(step, q, p)
             covered, radius = whole_run_pairs(sc, q, stack.static, edges)
             logs = [stack.logs[g] for g in stack.active]
             update_stacked_from_edges([log.metrics for log in logs], q, covered, radius,

@@ -112,6 +112,20 @@ def decode_odometry(data: bytes) -> tuple[int, str, str, tuple, tuple]:
             lay.vec3.unpack_from(data, pose + POSE_BYTES))
 
 
+def decode_odometry_state(data: bytes) -> tuple[int, tuple[float, ...]]:
+    """Return ``(stamp_ns, values)`` of a serialised ``nav_msgs/Odometry``: its 13 values
+    position, linear velocity, orientation (x, y, z, w), angular velocity (what ``analyze``
+    rebuilds a step of a plant from, in microseconds instead of rclpy's object tree).
+
+    :raises MalformedMessage: when ``data`` is not one.
+    """
+    lay, ns, _, _, pose = _odometry(data)
+    vec3 = lay.vec3
+    return ns, (vec3.unpack_from(data, pose) + vec3.unpack_from(data, pose + POSE_BYTES)
+                + struct.unpack_from(lay.order + '4d', data, pose + 24)
+                + vec3.unpack_from(data, pose + POSE_BYTES + 24))
+
+
 def _odometry(data: bytes) -> tuple[_Layout, int, str, str, int]:
     """Return ``(layout, stamp_ns, frame_id, child_frame_id, offset of the pose)`` of a
     serialised ``nav_msgs/Odometry``, checked long enough for its pose and twist."""
