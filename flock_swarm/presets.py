@@ -79,8 +79,10 @@ def resolve(name_or_path: str, folder: str = '', key: str = 'scenario') -> Path:
     if candidate.suffix in ('.yaml', '.yml') or os.sep in name_or_path:
         if candidate.is_dir():
             raise ScenarioError(key, f'{name_or_path} is a directory, not a YAML file')
-        if not candidate.is_file():
+        if not candidate.exists():
             raise ScenarioError(key, f'no such file: {name_or_path}')
+        # A device or a pipe (/dev/null, a shell's <(...)) is read as it is: what it holds
+        # is judged as a file's content would be (/dev/null: an empty file).
         return candidate
     for d in config_dirs():
         path = d / folder / f'{name_or_path}.yaml'

@@ -309,15 +309,16 @@ def fill(disk):
 
 
 def test_a_full_disk_ends_sim_with_one_line_and_no_file_that_looks_valid(tmp_path):
-    """``sim`` on a full 3 MB tmpfs: one line naming the file and the error, exit status 2,
-    and nothing left behind (no truncated or empty output, no temporary file)."""
+    """``sim`` on a full 3 MB tmpfs: one line naming the file and the error, exit status 1
+    (the run failed to write its outputs; it was 2, the status of invalid input), and nothing
+    left behind (no truncated or empty output, no temporary file)."""
     with small_filesystem(tmp_path / 'disk', '3m') as disk:
         (disk / 'run').mkdir()
         fill(disk)
         proc = command('sim', 'demo', '--set', 'duration=2', '--out', disk / 'run', '--quiet',
                        env=subprocess_env())
         left = sorted(os.listdir(disk / 'run'))
-    assert proc.returncode == 2
+    assert proc.returncode == 1
     assert proc.stderr == (f'sim: error: --out: cannot write {disk / "run" / "timeseries.npz"}: '
                            'No space left on device\n')
     assert left == []

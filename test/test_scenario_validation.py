@@ -566,3 +566,11 @@ def test_many_agents_spread_out_are_not_refused():
     real = realize(sc)
     assert initial_pairs(sc, real) < 1000
     check_pairs(sc, real)
+
+
+def test_a_device_given_as_the_scenario_is_read_not_called_missing(tmp_path, capsys):
+    """``sim /dev/null`` said 'no such file'; it is read, as an empty file."""
+    res = run_sim(capsys, '/dev/null', '--out', str(tmp_path / 'o'))
+    assert res.returncode == 2
+    assert res.stderr == ('sim: error: scenario: /dev/null: empty (no YAML document); a '
+                          'scenario is a mapping of keys such as n_agents and protocol\n')

@@ -12,8 +12,8 @@ import sys
 from functools import partial
 from pathlib import Path
 
-from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
-                                 out_dir, signal_name)
+from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
+                                 StopSignals, out_dir, signal_name)
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core import registry
 from flock_swarm.core.faults import RunFault
@@ -157,8 +157,10 @@ def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSign
                 if say:
                     say(f'[sim] wrote {path}')
     except OSError as exc:
+        # The input was valid and the run done: its outputs could not be written (a full
+        # disk), a failed run (status 1), not invalid input (2).
         print(f'sim: error: --out: {write_error(exc)}', file=sys.stderr)
-        return EXIT_USAGE
+        return EXIT_FAILURE
     s = result.summary
     if say:
         if stop.stopped:
