@@ -673,8 +673,20 @@ def test_a_specs_set_key_the_points_set_is_refused(key, axis, tmp_path, capsys):
     fixed = {'duration': 1.0, key: {'fraction': 0.5} if key == 'informed' else 12}
     err = sweep_error(tmp_path, capsys, {**SMALL, 'set': fixed})
     kind = 'a derived value' if key == 'initial.position_box' else 'an axis'
-    assert err == (f'sweep: error: set.{key}: is also set per point ({kind}: {axis}), whose '
+    # A mapping's error names the value the point replaces (informed.fraction).
+    leaf = axis if key == 'informed' else key
+    assert err == (f'sweep: error: set.{leaf}: is also set per point ({kind}: {axis}), whose '
                    'value would replace it; remove it from set')
+
+
+def test_an_axis_below_a_mapping_of_the_set_refines_it(tmp_path):
+    """An axis under a mapping the set gives (network.loss: {model: ...} with the axis
+    network.loss.loss_bad) refines it: the set's other keys stay, nothing is refused."""
+    spec = parse_spec({'scenario': 'demo', 'set': {'duration': 0.2, 'network.loss': {
+        'model': 'gilbert_elliott', 'p_good_bad': 0.1, 'p_bad_good': 0.5}},
+        'grid': {'network.loss.loss_bad': [1.0, 0.8]}, 'seeds': 1})
+    last = plan_runs(spec)[-1].scenario().network.agents.loss
+    assert (last.model, last.p_good_bad, last.loss_bad) == ('gilbert_elliott', 0.1, 0.8)
 
 
 def test_a_specs_set_seed_is_refused(tmp_path, capsys):

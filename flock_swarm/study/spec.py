@@ -315,16 +315,29 @@ def _check_fixed(fixed: tuple[tuple[str, Any], ...], axes: list[str],
 
     The point's value (or the run's seed) would replace it silently.
     """
-    for key, _ in fixed:
+    for key, value in fixed:
         if key == 'seed':
             raise ScenarioError('set.seed', 'every run takes its seed from the spec key seeds '
                                 '(a count, a list, or {first, count}); move it there')
         for kind, names in (('an axis', axes), ('a derived value', derived)):
             for name in names:
-                if key == name or key.startswith(f'{name}.') or name.startswith(f'{key}.'):
-                    raise ScenarioError(f'set.{key}', f'is also set per point ({kind}: '
-                                        f'{name}), whose value would replace it; remove it '
-                                        'from set')
+                # A point's value replaces what the set gave at its key or below it; an axis
+                # below a mapping of the set refines it (network.loss: {model: ...} with the
+                # axis network.loss.loss_bad) unless the mapping gives that key too.
+                for leaf in _leaves(key, value):
+                    if leaf == name or leaf.startswith(f'{name}.') \
+                            or name.startswith(f'{leaf}.'):
+                        raise ScenarioError(f'set.{leaf}', f'is also set per point ({kind}: '
+                                            f'{name}), whose value would replace it; remove '
+                                            'it from set')
+
+
+def _leaves(key: str, value: Any) -> list[str]:
+    """Return the dotted paths of the values a ``set:`` entry gives: ``key`` itself, or the
+    leaves of a mapping (an empty mapping counts as a value)."""
+    if not isinstance(value, dict) or not value:
+        return [key]
+    return [leaf for sub, item in value.items() for leaf in _leaves(f'{key}.{sub}', item)]
 
 
 def _paths(section: Any, key: str) -> dict[str, Any]:
