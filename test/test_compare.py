@@ -69,3 +69,23 @@ def test_the_testing_api_gives_the_same_problems(atol):
     reference, ref_series, summary, series = runs()
     assert api_compare_runs(reference, ref_series, summary, series, atol) == \
         compare_runs(reference, ref_series, summary, series, atol).problems
+
+
+def test_a_sim_summary_read_from_disk_is_compared_without_its_sim_only_keys(tmp_path):
+    """``sim``'s summary.json (with ``pseudo_leader_reselections`` and ``wall_time_s``,
+    which only sim writes) against a run that lacks them: no 'missing' for those (each
+    comparison read from disk reported ``pseudo_leader_reselections: missing``); the other
+    keys are still compared."""
+    import json
+    from flock_swarm.cli.sim import main
+    out = tmp_path / 'sim'
+    assert main(['demo', '--set', 'duration=0.2', '--out', str(out), '--quiet']) == 0
+    reference = json.loads((out / 'summary.json').read_text())
+    with np.load(out / 'timeseries.npz') as data:
+        series = {key: data[key] for key in data.files}
+    assert {'pseudo_leader_reselections', 'wall_time_s'} <= set(reference)
+    run = {k: v for k, v in reference.items()
+           if k not in ('pseudo_leader_reselections', 'wall_time_s')}
+    assert compare_runs(reference, series, run, series).problems == []
+    assert compare_runs(reference, series, dict(run, eta=-1.0), series).problems == [
+        f'summary eta: got -1.0, want {reference["eta"]!r} (atol 0)']

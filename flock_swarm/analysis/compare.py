@@ -22,6 +22,7 @@ from typing import Any, Iterable, Iterator
 import numpy as np
 
 from flock_swarm.analysis.bagrun import AnalyzeError, METADATA_RECORD, Progress, RunData
+from flock_swarm.core.summary import sim_only_keys
 
 #: Default largest deviation from ``sim`` that ``--verify`` accepts (m, m/s). A lockstep run
 #: reproduces ``sim`` bit for bit; the margin only absorbs a different floating-point library.
@@ -70,7 +71,10 @@ def compare_runs(reference: dict, reference_series: dict, summary: dict, series:
     Every key of ``reference`` (the summary, nested mappings and lists included) and every
     array of ``reference_series`` must be in the run; numbers and float arrays may differ by
     ``atol`` (0: bit for bit), everything else must be equal. Keys the run has beyond the
-    reference's are not differences.
+    reference's are not differences, nor are the reference's keys that describe the
+    simulator rather than the run (:func:`~flock_swarm.core.summary.sim_only_keys`:
+    ``wall_time_s``, ``pseudo_leader_reselections``), which no world or analysis writes: a
+    ``sim`` summary read from disk is compared as the testing API compares it.
 
     :param reference: the reference summary (``sim``'s, or the expected one).
     :param reference_series: the reference time series.
@@ -79,7 +83,9 @@ def compare_runs(reference: dict, reference_series: dict, summary: dict, series:
     :param atol: the absolute tolerance.
     :return: the differences and the largest deviation of each series.
     """
-    problems = [f'summary {line}' for line in _differences('', reference, summary, atol)]
+    own = set(sim_only_keys())
+    reference_run = {key: value for key, value in reference.items() if key not in own}
+    problems = [f'summary {line}' for line in _differences('', reference_run, summary, atol)]
     deviation: dict[str, float | None] = {}
     for name, ref in reference_series.items():
         if name not in series:
