@@ -368,3 +368,26 @@ def test_a_converted_bag_without_the_scenario_topic_says_informed_unknown(split_
     assert result.returncode == 0, result.stderr
     ours = json.loads((tmp_path / 'out' / 'summary.json').read_text())
     assert ours['scenario'] is None and ours['informed'] == 'unknown'
+
+
+@pytest.mark.parametrize('field, value, note', [
+    ('message_count', 7, 'metadata.yaml lists 7 messages but the files hold {found}; the files '
+     'were read'),
+    ('version', 99, "metadata.yaml is version 99, newer than the 9 this reader knows; its "
+     "fields were read as version 9's"),
+], ids=['message_count', 'version'])
+def test_metadata_that_disagrees_with_the_files_is_flagged(split_run, tmp_path, field, value,
+                                                           note):
+    """A sound bag whose metadata.yaml lists a wrong message_count, or a version this reader
+    does not know, was read without a word: the reader's warning says so (analyze prints
+    it), the files are read as they are."""
+    import shutil
+    bag = shutil.copytree(split_run / 'bag', tmp_path / 'bag')
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    meta['rosbag2_bagfile_information'][field] = value
+    (bag / 'metadata.yaml').write_text(yaml.safe_dump(meta))
+    sound, edited = BagReader(split_run / 'bag'), BagReader(bag)
+    found = sum(sound.message_counts().values())
+    assert sound.warning is None
+    assert edited.warning == note.format(found=found) and not edited.recovered
+    assert edited.message_counts() == sound.message_counts()

@@ -30,7 +30,7 @@ from rclpy.serialization import deserialize_message
 import yaml
 
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError, message_class
-from flock_swarm.bag.writer import METADATA_FILENAME, PROFILE
+from flock_swarm.bag.writer import METADATA_FILENAME, METADATA_VERSION, PROFILE
 
 #: The eight bytes that open and close every MCAP file.
 MAGIC = b'\x89MCAP0\r\n'
@@ -409,11 +409,21 @@ class BagReader:
         self._files = [_open_mcap(file) for file in self._bag_files(notes)]
         notes += [file.warning for file in self._files if file.warning]
         self._recovered = any(file.warning for file in self._files)
-        if self._recovered and self._bag_metadata is not None:
+        if self._bag_metadata is not None:
             listed = self._bag_metadata.get('message_count')
             found = sum(file.message_count for file in self._files)
-            if isinstance(listed, int) and listed != found:
+            if self._recovered and isinstance(listed, int) and listed != found:
                 notes.append(f'{METADATA_FILENAME} lists {listed} messages')
+            elif isinstance(listed, int) and listed != found:
+                # A sound set of files whose metadata says otherwise: edited, or written by
+                # a faulty tool; the files are what is read.
+                notes.append(f'{METADATA_FILENAME} lists {listed} messages but the files hold '
+                             f'{found}; the files were read')
+            version = self._bag_metadata.get('version')
+            if isinstance(version, int) and version > METADATA_VERSION:
+                notes.append(f'{METADATA_FILENAME} is version {version}, newer than the '
+                             f'{METADATA_VERSION} this reader knows; its fields were read as '
+                             f'version {METADATA_VERSION}\'s')
         self._warning = '; '.join(notes) or None
         self._classes: dict[str, type] = {}
 
