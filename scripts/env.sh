@@ -197,12 +197,22 @@ _flock_env_work() {
     fi
     if [[ -n "$_flock_env_create" ]]; then
         _flock_env_pick_python || return 1
-        if [[ -e "$venv" ]]; then
+        if [[ -e "$venv" || -L "$venv" ]]; then
+            # Only what this script made is removed (its marker or stamp inside): a .venv of
+            # the user's own (another project's, a hand-made one) is never deleted unasked.
+            if [[ ! -f "$venv/.flock_swarm_created" && ! -f "$venv/.flock_swarm_stamp" ]]; then
+                _flock_env_log "error: $venv cannot be used ($_flock_env_create) and was not" \
+                    "made by scripts/env.sh (no .flock_swarm_stamp in it): move it away or" \
+                    "remove it yourself, then run again"
+                return 1
+            fi
             _flock_env_log "removing .venv ($_flock_env_create)"
             rm -rf -- "$venv"
         fi
         _flock_env_log "creating .venv with $(basename -- "$_flock_env_py") ($_flock_env_py)"
         "$_flock_env_py" -m venv -- "$venv" || return 1
+        # The marker of a .venv this script made (the stamp comes once pip has finished).
+        : > "$venv/.flock_swarm_created"
         _flock_env_assess || return 1
     fi
     if [[ "$_flock_env_deps" != "$_flock_env_old_deps" ]]; then

@@ -170,3 +170,26 @@ def test_swarm_no_record_runs_beside_a_bag_it_leaves_alone(tmp_path, ros_domain)
     assert (out / 'bag' / 'bag_0.mcap').read_bytes() == b'an earlier recording'
     assert run.stderr.splitlines()[-1] == (f'[swarm] wrote {out / "summary.json"}, '
                                            f'{out / "timeseries.npz"}')
+
+
+def test_env_sh_never_deletes_a_venv_it_did_not_make(tmp_path):
+    """A ``.venv`` that cannot be executed and carries no stamp of scripts/env.sh (somebody
+    else's) is left alone: one line and status 1 (it was removed and rebuilt)."""
+    root = tmp_path / 'checkout'
+    (root / 'scripts').mkdir(parents=True)
+    (root / 'scripts' / 'env.sh').write_text((ROOT / 'scripts' / 'env.sh').read_text())
+    venv = root / '.venv'
+    (venv / 'bin').mkdir(parents=True)
+    (venv / 'bin' / 'python').write_text('not an interpreter\n')
+    (venv / 'notes.txt').write_text('my own files\n')
+    env = {key: value for key, value in os.environ.items()
+           if key not in ('VIRTUAL_ENV', 'PYTHON')}
+    env['PATH'] = os.pathsep.join(part for part in env['PATH'].split(os.pathsep)
+                                  if not part.startswith(str(ROOT / '.venv')))
+    run = subprocess.run(['bash', '-c', 'source scripts/env.sh'], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert run.returncode == 1, run.stderr
+    assert run.stderr.splitlines()[-1] == (
+        f'[env] error: {venv} cannot be used (broken) and was not made by scripts/env.sh (no '
+        '.flock_swarm_stamp in it): move it away or remove it yourself, then run again')
+    assert (venv / 'notes.txt').read_text() == 'my own files\n'
