@@ -655,3 +655,31 @@ def test_a_broken_or_duplicate_plugin_fails_only_the_runs_that_use_it(tmp_path):
     path = scenario(tmp_path, {'name': 'olfati_saber_2006'})
     path.write_text(path.read_text() + 'intrinsic: {model: broken}\n')
     assert_one_line_error(sim(site, path), 'flock_swarm.leaders:broken', 'cannot be imported')
+
+
+def test_a_plugin_reusing_a_built_in_name_is_ignored_and_named(tmp_path):
+    """Another package registering ``olfati_saber_2006`` and ``lorenz`` made both names
+    unusable (the presets with them failed) and ``sim --list`` called the built-in BROKEN:
+    the built-ins stay, the plugin's entries are listed as IGNORED with its package."""
+    site = tmp_path / 'site'
+    install_plugins(site, laws=[('olfati_saber_2006', 'Damped')], leaders=[('lorenz', 'Circle')],
+                    package='squatter-plugins', module='squatter_plugins')
+    out = tmp_path / 'out'
+    proc = sim(site, 'su2009_fig6', '--set', 'duration=0.1', out=out)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((out / 'summary.json').read_text())['status'] == 'completed'
+    proc = sim(site, scenario(tmp_path, {'name': 'olfati_saber_2006'}), out=tmp_path / 'o2')
+    assert proc.returncode == 0, proc.stderr
+    listing = sim(site, '--list')
+    rows = [line for line in listing.stdout.splitlines() if line.startswith('  ')]
+    assert not any('BROKEN' in line for line in rows), listing.stdout
+    builtin = [line for line in rows if line.split()[:2] == ['olfati_saber_2006', '[flock_swarm]']]
+    assert len(builtin) == 1
+    ignored = [line.split(None, 2) for line in rows if 'IGNORED' in line]
+    assert ignored == [
+        ['olfati_saber_2006', '[squatter-plugins]', "IGNORED: flock_swarm.laws:olfati_saber_2006 "
+         "(squatter_plugins:Damped): 'olfati_saber_2006' is a built-in name of flock_swarm; "
+         'register the plugin under another name'],
+        ['lorenz', '[squatter-plugins]', "IGNORED: flock_swarm.leaders:lorenz "
+         "(squatter_plugins:Circle): 'lorenz' is a built-in name of flock_swarm; register the "
+         'plugin under another name']]

@@ -67,6 +67,12 @@ def listing() -> str:
         for name, (entry, cls, problem) in found.items():
             what = registry.describe(cls) if problem is None else f'BROKEN: {problem}'
             lines.append(f'  {name:<{width}}  [{entry.package}]  {what}')
+        for entry in registry.shadowed(group):
+            # The built-in of that name is listed above and works; the other one is named.
+            lines.append(f'  {entry.name:<{width}}  [{entry.package}]  IGNORED: '
+                         f'{entry.label}: {entry.name!r} is a built-in name of '
+                         f'{found[entry.name][0].package}; register the plugin under another '
+                         'name')
     return '\n'.join(lines) + '\n'
 
 

@@ -16,6 +16,7 @@ as ever, and :func:`status` (``sim --list``) shows it as broken with the reason.
 
 import dataclasses
 import inspect
+import re
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import metadata
@@ -65,6 +66,15 @@ class Entry:
         return f'{self.group}:{self.name} ({self.value})'
 
 
+#: The distribution of the built-in plugins (normalised as :func:`_normal` does).
+BUILTIN_PACKAGE = 'flock-swarm'
+
+
+def _normal(package: str) -> str:
+    """Return a distribution name normalised (PEP 503): ``flock_swarm`` -> ``flock-swarm``."""
+    return re.sub(r'[-_.]+', '-', package).lower()
+
+
 @lru_cache(maxsize=None)
 def entries(group: str) -> dict[str, Entry]:
     """Return the registered plugins of a group by name.
@@ -72,23 +82,54 @@ def entries(group: str) -> dict[str, Entry]:
     The same distribution found twice (an editable install and a colcon install side by
     side) counts once, the first on ``sys.path`` winning; two distributions registering one
     name make that name unusable (:attr:`Entry.conflict`), since which one runs would depend
-    on the path order; the other names are not affected.
+    on the path order; the other names are not affected. A built-in name (this package's)
+    stays the built-in's: another package's entry of that name is set aside
+    (:func:`shadowed`), so the presets that use the built-in keep working.
 
     :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
     :return: ``{name: Entry}`` in name order.
     """
+    found, _SHADOWED[group] = _scan(group)
+    return found
+
+
+def shadowed(group: str) -> tuple[Entry, ...]:
+    """Return the other packages' entries set aside because they reuse a built-in name.
+
+    ``sim --list`` names each (its package and where it points), not the built-in.
+
+    :param group: :data:`LAW_GROUP` or :data:`LEADER_GROUP`.
+    """
+    entries(group)
+    return _SHADOWED[group]
+
+
+#: :func:`shadowed` of each group, as the last :func:`entries` found them.
+_SHADOWED: dict[str, tuple[Entry, ...]] = {}
+
+
+def _scan(group: str) -> tuple[dict[str, Entry], tuple[Entry, ...]]:
+    """Return :func:`entries` and :func:`shadowed` of a group."""
     found: dict[str, Entry] = {}
+    aside: list[Entry] = []
     for ep in metadata.entry_points(group=group):
         dist = getattr(ep, 'dist', None)
         package = dist.metadata['Name'] if dist is not None else '?'
         entry = Entry(group, ep.name, ep.value, package, ep)
         old = found.get(ep.name)
+        if old is not None and _normal(old.package) != _normal(package) and (
+                BUILTIN_PACKAGE in (_normal(old.package), _normal(package))):
+            builtin, other = (old, entry) if _normal(old.package) == BUILTIN_PACKAGE \
+                else (entry, old)
+            found[ep.name] = builtin
+            aside.append(other)
+            continue
         if old is not None and old.package != package and package not in old.conflict:
             found[ep.name] = dataclasses.replace(
                 old, conflict=f'{entry.label}: the name {ep.name!r} is also registered by '
                 f'package {old.package} ({old.value})')
         found.setdefault(ep.name, entry)
-    return dict(sorted(found.items()))
+    return dict(sorted(found.items())), tuple(aside)
 
 
 def _key(group: str) -> str:
