@@ -136,6 +136,10 @@ class RunData:
     informed_known: bool = True
     #: Odometry stamps for which some agent's message is missing.
     incomplete_steps: int = 0
+    #: Whether the world closed the last complete step: ``False`` for a lockstep run stopped
+    #: while that step waited for its commands (its odometry is in the bag, none of its
+    #: commands and no metrics): the world's series and metrics end the step before.
+    last_observed: bool = True
     #: The law's adaptive state per step, ``{key: (K, N, ...)}`` as ``sim`` records it (empty
     #: for a law without, or a bag without ``/agent_<i>/state``).
     state: dict[str, np.ndarray] = field(default_factory=dict)
@@ -739,6 +743,12 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
     network_at = {step_of(stamp): {key: _number(values[key]) for key in STATISTICS}
                   for stamp, values in raw.metrics
                   if step_of(stamp) in index and all(key in values for key in STATISTICS)}
+    last_observed = True
+    if (sc is not None and mode == 'lockstep' and not reader.recovered
+            and steps[-1] < sc.steps and len(steps) > 1):
+        final = stamps[-1]
+        last_observed = (any(stamp == final for stamp, _, _ in raw.cmd)
+                         or any(stamp == final for stamp, _ in raw.metrics))
     return RunData(
         bag=reader.path, steps=steps, t=t, q=q, p=p, u=u, leader_q=leader[0],
         leader_p=leader[1], leader_a=leader[2], informed=informed, dt=dt, radius=float(radius),
@@ -749,7 +759,8 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         non_finite_at=non_finite,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
-        informed_known=informed_known, network_at=network_at, plant_state=plant_state)
+        informed_known=informed_known, network_at=network_at, plant_state=plant_state,
+        last_observed=last_observed)
 
 
 def _plant_states(sc: Scenario, states: np.ndarray

@@ -44,7 +44,13 @@ def recompute(run: RunData, record_every: int | None = None,
     log = RunLog(run.eta_tolerance, run.collision_distance, run.radius, run.strict_radius,
                  record_every or run.record_every,
                  obstacles=sc.obstacles if sc is not None else None)
+    # The row recorded whatever record_every says: the last complete one, except in a sound
+    # bag of a run stopped before its end (interrupted, failed), where the world records its
+    # last step only when it falls on record_every, so its summary's t_final and final
+    # metrics are those of its last recorded instant: the same here.
     last = len(run.steps) - 1
+    if sc is not None and not run.recovered and run.steps[-1] < sc.steps:
+        last = -1
     tick = Ticker(progress)
     real = realize(sc) if sc is not None else None
     static = static_graph(sc, real) if sc is not None else None
@@ -53,7 +59,8 @@ def recompute(run: RunData, record_every: int | None = None,
     network = sc is not None and sc.network.active
     observer = LinkObserver(sc, real, static) if network and run.mode != 'realtime' else None
     tally, told = Tally(), None
-    for row, k in enumerate(run.steps):
+    observed = run.steps if run.last_observed else run.steps[:-1]
+    for row, k in enumerate(observed):
         q, p = run.q[row], run.p[row]
         leader = LeaderState(run.leader_q[row], run.leader_p[row], run.leader_a[row])
         covered, radius = disk_graph(q, run.radius, run.strict_radius), run.radius
@@ -76,7 +83,7 @@ def recompute(run: RunData, record_every: int | None = None,
             extra.update(sc.plant.model.recorded(run.plant_state[row]))
         log.observe(int(k), float(run.t[row]), q, p, run.u[row], leader, run.informed,
                     covered, radius, row == last, **extra)
-        tick(lambda: f'[analyze] metrics: step {row + 1}/{last + 1}')
+        tick(lambda: f'[analyze] metrics: step {row + 1}/{len(run.steps)}')
     return log.rec.arrays(), log.metrics
 
 
