@@ -10,6 +10,7 @@ the contract's (:mod:`flock_swarm.contract`).
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+import itertools
 import json
 from pathlib import Path
 import struct
@@ -404,9 +405,9 @@ def load_run(bag: Path | str, *, radius: float | None = None,
 class _Messages:
     """The messages of a swarm, keyed by header stamp [ns]."""
 
-    # stamp -> (N x ODOM_COLUMNS: position, linear velocity, orientation (x, y, z, w),
-    # angular velocity; N presence flags)
-    odom: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # agent -> batches of (stamps, their ODOM_COLUMNS values: position, linear velocity,
+    # orientation (x, y, z, w), angular velocity), in bag order (_odometry_table joins them)
+    odom: dict[int, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
     # (stamp, agent, acceleration), in bag order
     cmd: list[tuple[int, int, tuple[float, float, float]]] = field(default_factory=list)
     leader_odom: dict[int, tuple[float, ...]] = field(default_factory=dict)
@@ -506,8 +507,20 @@ def _layout_of(type_name: str, data: bytes) -> tuple[int, list[tuple[int, int]],
     return values, [(values, count)], tuple(names)
 
 
+@dataclass
+class _Columns:
+    """A batch of one topic's messages that all share the first one's layout."""
+
+    #: Header stamps [ns], ``(M,)``.
+    stamps: np.ndarray
+    #: Their values, ``(M, K)``.
+    values: np.ndarray
+    #: A state's joint names (empty for the other types).
+    names: tuple
+
+
 def _decode_batch(reader: BagReader, records: list[tuple]
-                  ) -> list[tuple | UndecodableMessage]:
+                  ) -> list[tuple | UndecodableMessage] | _Columns:
     """Return :func:`_fields`' stamp and values (or why it does not decode) of each message
     of one topic (:meth:`BagReader.records`), those of one layout read at once with NumPy.
 
@@ -515,7 +528,8 @@ def _decode_batch(reader: BagReader, records: list[tuple]
     the frame ids, names and counts are (only the stamp and the values differ). Those are
     read as columns of one byte array, after the first one's values were checked against
     :mod:`flock_swarm.nodes.wire`'s; every other message is decoded on its own
-    (:func:`_fields`).
+    (:func:`_fields`). A batch whose messages all share the layout comes back as its
+    columns (:class:`_Columns`).
     """
     datas = [record[2] for record in records]
     found: list[tuple | UndecodableMessage | None] = [None] * len(records)
@@ -549,6 +563,8 @@ def _decode_batch(reader: BagReader, records: list[tuple]
         stamps = secs * 1_000_000_000 + nanos
         columns = np.concatenate([table[:, offset:offset + 8 * count].copy().view('<f8')
                                   for offset, count in runs], axis=1)
+        if len(rows) == len(datas) and same.all():
+            return _Columns(stamps, columns, names)
         values = ([(names, tuple(row)) for row in columns.tolist()] if names
                   else list(columns))
         for r, (j, stamp, same_layout) in enumerate(zip(rows, stamps.tolist(),
@@ -584,7 +600,6 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
             kinds[name] = (kind, -1)
     counts = reader.message_counts()
     total = sum(counts.get(name, 0) for name in kinds)
-    n = len(topics.odom)
     out = _Messages()
     tick = Ticker(progress)
     read = 0
@@ -593,22 +608,39 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
 
     def flush(topic: str) -> None:
         kind, i = kinds[topic]
-        for found in _decode_batch(reader, pending.pop(topic)):
+        decoded = _decode_batch(reader, pending.pop(topic))
+        if isinstance(decoded, _Columns):
+            stamps = decoded.stamps.tolist()
+            if kind == 'odom':
+                out.odom.setdefault(i, []).append((decoded.stamps, decoded.values))
+            elif kind == 'cmd':
+                out.cmd.extend(zip(stamps, itertools.repeat(i), decoded.values.tolist()))
+            elif kind == 'state':
+                names = decoded.names
+                out.state.extend((stamp, i, names, tuple(values))
+                                 for stamp, values in zip(stamps, decoded.values.tolist()))
+            elif kind == 'leader_odom':
+                out.leader_odom.update(
+                    (stamp, tuple(values[:6]))
+                    for stamp, values in zip(stamps, decoded.values.tolist()))
+            else:
+                out.leader_accel.update(
+                    (stamp, tuple(values))
+                    for stamp, values in zip(stamps, decoded.values.tolist()))
+            return
+        if kind == 'odom':
+            good = [item for item in decoded if not isinstance(item, UndecodableMessage)]
+            out.odom.setdefault(i, []).append((
+                np.fromiter((item[0] for item in good), np.int64, len(good)),
+                np.array([item[1] for item in good], dtype=float).reshape(-1, ODOM_COLUMNS)))
+            decoded = [item for item in decoded if isinstance(item, UndecodableMessage)]
+        for found in decoded:
             if isinstance(found, UndecodableMessage):
                 bad.append((found.message.log_time_ns, f'{topic} at '
                             f'{found.message.log_time_ns} ns ({found.reason})'))
                 continue
             stamp, values = found
-            if kind == 'odom':
-                # The whole odometry: a robot plant's state needs the heading and the yaw
-                # rate besides (Plant.from_odometry).
-                entry = out.odom.get(stamp)
-                if entry is None:
-                    entry = out.odom[stamp] = (np.zeros((n, ODOM_COLUMNS)),
-                                               np.zeros(n, dtype=bool))
-                entry[0][i] = values
-                entry[1][i] = True
-            elif kind == 'leader_odom':
+            if kind == 'leader_odom':
                 out.leader_odom[stamp] = tuple(values[:6])
             elif kind == 'cmd':
                 out.cmd.append((stamp, i, values))
@@ -658,8 +690,12 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
               eta_tolerance: float, collision_distance: float, notes: list[str]) -> RunData:
     """Turn the decoded messages into per-step arrays."""
     n = len(topics.odom)
-    complete = sorted(stamp for stamp, (_, seen) in raw.odom.items() if seen.all())
-    incomplete = len(raw.odom) - len(complete)
+    # The whole odometry: a robot plant's state needs the heading and the yaw rate besides
+    # (Plant.from_odometry).
+    all_stamps, odometry, seen = _odometry_table(raw.odom, n)
+    whole = seen.all(axis=1)
+    complete = all_stamps[whole].tolist()
+    incomplete = len(all_stamps) - len(complete)
     if not complete:
         lost = f' ({reader.warning})' if reader.warning else ''
         raise AnalyzeError('the bag holds no complete step (odometry of every agent for one '
@@ -668,7 +704,7 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         dt, origin = sc.dt, 0
         dt_ns = int(round(dt * 1e9))
     else:
-        diffs = np.diff(np.array(sorted(raw.odom), dtype=np.int64))
+        diffs = np.diff(all_stamps)
         diffs = diffs[diffs > 0]
         dt_ns = int(np.median(diffs)) if diffs.size else 0
         dt, origin = dt_ns * 1e-9, complete[0]
@@ -682,7 +718,7 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         steps_seen.setdefault(step_of(stamp), stamp)
     steps = np.array(sorted(steps_seen), dtype=np.int64)
     stamps = [steps_seen[k] for k in steps]
-    states = np.stack([raw.odom[stamp][0] for stamp in stamps])
+    states = odometry[np.searchsorted(all_stamps, np.array(stamps, dtype=np.int64))]
     if sc is not None:
         dim = sc.dim
         t = steps * dt
@@ -761,6 +797,29 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
         informed_known=informed_known, network_at=network_at, plant_state=plant_state,
         last_observed=last_observed)
+
+
+def _odometry_table(parts: dict[int, list[tuple[np.ndarray, np.ndarray]]], n: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return every odometry stamp (sorted), each agent's values at each, ``(S, N,``
+    :data:`ODOM_COLUMNS` ``)`` (zero where it sent none), and which agents sent one ``(S, N)``:
+    of an agent's messages of one stamp, the last in the bag.
+    """
+    joined = {i: (np.concatenate([s for s, _ in batches]),
+                  np.concatenate([v for _, v in batches]))
+              for i, batches in parts.items()}
+    stamps = (np.unique(np.concatenate([s for s, _ in joined.values()])) if joined
+              else np.zeros(0, dtype=np.int64))
+    values = np.zeros((len(stamps), n, ODOM_COLUMNS))
+    seen = np.zeros((len(stamps), n), dtype=bool)
+    for i, (agent_stamps, agent_values) in joined.items():
+        # The last of each stamp: the first in the reversed order.
+        _, first = np.unique(agent_stamps[::-1], return_index=True)
+        last = len(agent_stamps) - 1 - first
+        rows = np.searchsorted(stamps, agent_stamps[last])
+        values[rows, i] = agent_values[last]
+        seen[rows, i] = True
+    return stamps, values, seen
 
 
 def _plant_states(sc: Scenario, states: np.ndarray
