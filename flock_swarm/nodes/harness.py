@@ -616,9 +616,10 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     summary = json.loads(path.read_text()) if path.is_file() else {}
     if outcome.dead is not None:
         report_death(outcome.dead, summary.get('steps'), say)
-    elif not summary and world.proc.returncode not in (0, None):
+    if not summary and world.proc.returncode not in (0, None):
         # Killed (SIGKILL, the OOM killer) or failed before its summary: say how, and what
-        # its log holds, not only that no summary was written.
+        # its log holds, not only that no summary was written (the other processes may have
+        # ended on its death first, and been reported above).
         report_exit(world, f'before it wrote {path}', say)
     if outcome.timed_out:
         raise TimeoutError(f'the run did not finish within {timeout:g} s')
