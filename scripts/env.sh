@@ -259,6 +259,24 @@ if ((_flock_env_status == 0)); then
         *":$VIRTUAL_ENV:"*) ;;
         *) export AMENT_PREFIX_PATH="$VIRTUAL_ENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" ;;
     esac
+    # The virtualenv is an ament prefix (it holds share/ament_index): as one, it gets the
+    # local_setup.sh every prefix has, so that colcon chains it as an underlay instead of
+    # warning that it has none, and a workspace's install/setup.sh puts it back on
+    # AMENT_PREFIX_PATH.
+    _flock_env_local="# Written by scripts/env.sh: this virtualenv as an ament prefix.
+case \":\${AMENT_PREFIX_PATH:-}:\" in
+    *\":$VIRTUAL_ENV:\"*) ;;
+    *) export AMENT_PREFIX_PATH=\"$VIRTUAL_ENV\${AMENT_PREFIX_PATH:+:\$AMENT_PREFIX_PATH}\" ;;
+esac"
+    # (colcon's setup.bash and setup.zsh look for the file of their own shell.)
+    for _flock_env_shell in sh bash zsh; do
+        if [[ "$(cat "$VIRTUAL_ENV/local_setup.$_flock_env_shell" 2>/dev/null)" \
+                != "$_flock_env_local" ]]; then
+            printf '%s\n' "$_flock_env_local" > "$VIRTUAL_ENV/local_setup.$_flock_env_shell"
+        fi
+    done
+    unset _flock_env_shell
+    unset _flock_env_local
     export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 fi
 unset -f _flock_env_log _flock_env_supported _flock_env_candidates _flock_env_pick_python \

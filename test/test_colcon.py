@@ -68,6 +68,13 @@ def test_colcon_build_gives_no_setuptools_warning(workspace):
     assert 'tests_require' not in output, output
 
 
+def test_colcon_build_takes_the_virtualenv_as_an_ament_prefix(workspace):
+    # scripts/env.sh puts .venv on AMENT_PREFIX_PATH (it holds the wheels' ament index) and
+    # gives it the local_setup.sh every prefix has: colcon used to warn that it had none.
+    output = (workspace / 'build_output.txt').read_text()
+    assert "doesn't contain any 'local_setup.*' files" not in output, output
+
+
 def test_colcon_build_installs_package(workspace):
     prefix = workspace / 'install' / PACKAGE
     for name in EXECUTABLES:

@@ -193,3 +193,13 @@ def test_env_sh_never_deletes_a_venv_it_did_not_make(tmp_path):
         f'[env] error: {venv} cannot be used (broken) and was not made by scripts/env.sh (no '
         '.flock_swarm_stamp in it): move it away or remove it yourself, then run again')
     assert (venv / 'notes.txt').read_text() == 'my own files\n'
+
+
+@pytest.mark.parametrize('command', ['analyze', 'replay', 'sim', 'sweep'])
+def test_every_command_with_a_quiet_option_takes_its_short_form(command):
+    """``analyze -q`` was refused while ``replay -q`` worked: the short form is the same
+    option everywhere."""
+    from importlib import import_module
+    parser = import_module(f'flock_swarm.cli.{command}').build_parser()
+    assert parser.parse_args(['-q', 'ARG']).quiet is True
+    assert parser.parse_args(['ARG']).quiet is False

@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     fallback.add_argument('--collision-distance', type=_positive, metavar='D',
                           help='collision distance [m] '
                           f'(default {FALLBACK_COLLISION_DISTANCE:g})')
-    parser.add_argument('--quiet', action='store_true',
+    parser.add_argument('-q', '--quiet', action='store_true',
                         help='no progress output (warnings and the --verify result remain)')
     return parser
 

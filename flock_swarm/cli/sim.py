@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--seed', type=int, help='random seed (replaces the scenario seed)')
     parser.add_argument('--out', type=out_dir, help='output directory (default: out/SCENARIO)')
     parser.add_argument('--plots', action='store_true', help='also write PNG figures')
-    parser.add_argument('--quiet', action='store_true', help='no progress output')
+    parser.add_argument('-q', '--quiet', action='store_true', help='no progress output')
     parser.add_argument('--backend', choices=BACKENDS, default='plant',
                         help="what integrates the agents: 'plant' (the scenario's plant "
                         "model) or 'mujoco' (the physics engine, as the world's backend: "

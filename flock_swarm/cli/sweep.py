@@ -58,7 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--allow-unstable', action='store_true',
                         help='run points whose dt violates a stability bound')
     parser.add_argument('--no-plots', action='store_true', help='write the tables only')
-    parser.add_argument('--quiet', action='store_true', help='no progress output')
+    parser.add_argument('-q', '--quiet', action='store_true', help='no progress output')
     return parser
 
 

@@ -104,7 +104,7 @@ def follow_world(node: Node, keep_running: bool) -> Callable[[], bool]:
     :param keep_running: the node's ``keep_running`` parameter.
     :return: a predicate, true once the world finished and the node is not to keep running;
         its ``completed()`` says whether the world announced ``completed`` (its run ended by
-        itself, not by a signal or a failure).
+        itself, not by a signal or a failure) and the node is not to keep running.
     """
     from std_msgs.msg import String
     ended: list[str] = []
@@ -118,5 +118,7 @@ def follow_world(node: Node, keep_running: bool) -> Callable[[], bool]:
 
     def finished() -> bool:
         return bool(ended) and not keep_running
-    finished.completed = lambda: ended == ['completed']
+    # A node kept running after the end is stopped by its user: that stop is an interruption
+    # (status 130), not the end of its run.
+    finished.completed = lambda: ended == ['completed'] and not keep_running
     return finished
