@@ -414,15 +414,20 @@ def test_pace_holds_a_lockstep_run_to_real_time_or_a_factor(tmp_path, ros_domain
     assert run.summary['wall_time_s'] >= 0.49
 
 
+def start_waiting_swarm(out, ros_domain: int) -> subprocess.Popen:
+    """Start a 0.1 s ``swarm demo --foxglove 0 --wait-for-viewer`` writing to ``out``."""
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
+                                     '--out', str(out), '--no-plots', '--foxglove', '0',
+                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
+    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+
+
 def test_swarm_waits_for_the_first_viewer(tmp_path, ros_domain):
     """``--wait-for-viewer``: the run starts once a client subscribed, so the viewer sees it
     from step 0, even a run too short to be caught otherwise."""
     out = tmp_path / 'run'
-    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
-                                     '--out', str(out), '--no-plots', '--foxglove', '0',
-                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
-    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+    proc = start_waiting_swarm(out, ros_domain)
     try:
         url = announced(proc, r'live view on (ws://\S+)').group(1)
         announced(proc, r'waiting for a viewer to subscribe')
@@ -464,11 +469,7 @@ def test_the_run_waits_for_every_subscription_of_the_viewer(tmp_path, ros_domain
     start. The run now starts once the viewer's subscriptions have settled: here one channel
     every 0.1 s, and every channel gets every message of the run."""
     out = tmp_path / 'run'
-    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=0.1',
-                                     '--out', str(out), '--no-plots', '--foxglove', '0',
-                                     '--wait-for-viewer', '--domain-id', str(ros_domain)]
-    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+    proc = start_waiting_swarm(out, ros_domain)
     try:
         url = announced(proc, r'live view on (ws://\S+)').group(1)
         client = FoxgloveClient(url)
