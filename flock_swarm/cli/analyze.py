@@ -22,12 +22,9 @@ from flock_swarm.analysis.bagrun import (AnalyzeError, FALLBACK_COLLISION_DISTAN
 from flock_swarm.analysis.compare import check_verifiable, VERIFY_TOLERANCE
 from flock_swarm.analysis.pipeline import analyze, default_out
 from flock_swarm.bag import BagError
-from flock_swarm.console import (EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser, StopSignals,
-                                 out_dir)
+from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
+                                 StopSignals, out_dir)
 from flock_swarm.outputs import ensure_writable
-
-#: Exit status when ``--verify`` finds the recording off the simulation.
-EXIT_VERIFY_FAILED = 1
 
 
 def _times(text: str) -> list[float]:
@@ -178,7 +175,7 @@ def _run(args: argparse.Namespace, say: Progress | None, warn: Progress,
             warn(f'analyze: verify failed: the recording deviates from sim by '
                  f'{check.max_position_error:.3g} m, {check.max_velocity_error:.3g} m/s '
                  f'(tolerance {check.tolerance:g})')
-            return EXIT_VERIFY_FAILED
+            return EXIT_FAILURE
     return 0
 
 

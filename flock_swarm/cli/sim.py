@@ -22,11 +22,6 @@ from flock_swarm.core.run import simulate
 from flock_swarm.engine import BACKENDS
 from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
-#: Exit status when the state stopped being finite.
-EXIT_DIVERGED = 1
-#: Exit status when the law or the leader model failed during the run (status ``failed``).
-EXIT_FAILED = 1
-
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``sim``."""
@@ -143,12 +138,12 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
     except RunFault as fault:
         # The fault came before the first recorded instant: nothing to write.
         print(f'sim: error: {fault}', file=sys.stderr)
-        return EXIT_FAILED
+        return EXIT_FAILURE
     except PluginError as exc:
         # A law's output of the wrong shape at some step: the run cannot go on (status 1,
         # a failed run, not a usage error).
         print(f'sim: error: {exc}', file=sys.stderr)
-        return EXIT_DIVERGED
+        return EXIT_FAILURE
     with stop.held():
         return _finish(result, sc, out, args, say, stop)
 
@@ -178,11 +173,11 @@ def _finish(result, sc, out: Path, args: argparse.Namespace, say, stop: StopSign
             say(f'[sim] wrote {out / "summary.json"} (nothing was recorded: no time series)')
     if s['status'] == 'failed':
         print(f'sim: error: {s["failure"]}', file=sys.stderr)
-        return EXIT_FAILED
+        return EXIT_FAILURE
     if s['status'] == 'diverged':
         print(f'sim: error: the state stopped being finite at step {s["steps"]}; '
               'reduce dt', file=sys.stderr)
-        return EXIT_DIVERGED
+        return EXIT_FAILURE
     return stop.status(EXIT_INTERRUPTED) if s['status'] == 'interrupted' else 0
 
 
