@@ -23,7 +23,9 @@ from typing import Iterator
 
 from flock_swarm.core.errors import one_line
 
-#: Exit status when the run failed (a node, a child process or the recording failed).
+#: Exit status when the run failed: a node, a child process or the recording failed, a law or
+#: leader model faulted, the state stopped being finite (``sim``), or ``analyze --verify``
+#: found the recording off the simulation. The one name of status 1 in the package.
 EXIT_FAILURE = 1
 #: Exit status for invalid input (as argparse uses), of every command and node of the package.
 EXIT_USAGE = 2
@@ -43,6 +45,27 @@ FAIL_SIGNAL = signal.SIGUSR1
 #: Exit status of a command whose machinery failed while it ran, its input being valid (a
 #: sweep's Dask scheduler lost, no Dask workers): running it again may succeed.
 EXIT_RUNTIME = 3
+
+
+#: The distribution whose console scripts are the executables (setup.py's ``name``).
+DISTRIBUTION = 'flock-swarm'
+#: The package of the commands' modules (``flock_swarm.cli.<name>``).
+COMMAND_PACKAGE = 'flock_swarm.cli'
+
+
+def executables() -> dict[str, str]:
+    """Return every executable of the package, name to ``module:function``: the console
+    scripts of setup.py's entry points, as installed (the one list of them)."""
+    from importlib.metadata import distribution
+    return {ep.name: ep.value for ep in distribution(DISTRIBUTION).entry_points
+            if ep.group == 'console_scripts'}
+
+
+def commands() -> dict[str, str]:
+    """Return the commands (``sim``, ``swarm``...): the executables whose module is in
+    :data:`COMMAND_PACKAGE`, name to module; the others are node executables."""
+    return {name: target.split(':')[0] for name, target in executables().items()
+            if target.startswith(COMMAND_PACKAGE + '.')}
 
 
 #: Where the runs of this machine hold their ROS domains (:func:`claim_domain`): one file per

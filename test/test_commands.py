@@ -18,9 +18,6 @@ from conftest import imported_modules
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / 'flock_swarm'
-#: The commands and their modules.
-COMMANDS = {name: f'flock_swarm.cli.{name}:main'
-            for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
 #: Modules that run a command when executed (``python -m``): entry points, not libraries.
 ENTRY_MODULES = {PACKAGE / 'reproduce' / '__main__.py'}
 #: A small demo whose dt (0.2 s) is beyond its velocity-consensus bound (about 0.098 s).
@@ -42,6 +39,11 @@ def console_scripts() -> dict[str, str]:
     raise AssertionError('setup.py declares no console_scripts')
 
 
+#: The commands and their ``module:function`` (setup.py's console scripts into flock_swarm.cli).
+COMMANDS = {name: target for name, target in console_scripts().items()
+            if target.startswith('flock_swarm.cli.')}
+
+
 def test_no_library_imports_a_command():
     offenders = []
     for path in sorted(PACKAGE.rglob('*.py')):
@@ -55,12 +57,23 @@ def test_no_library_imports_a_command():
 
 def test_every_command_is_a_module_of_the_cli_package():
     scripts = console_scripts()
-    assert {name: scripts[name] for name in COMMANDS} == COMMANDS
+    assert COMMANDS == {name: f'flock_swarm.cli.{name}:main'
+                        for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
     for name, target in scripts.items():
         if name not in COMMANDS:
             assert target.startswith('flock_swarm.nodes.'), (name, target)
     modules = {path.stem for path in (PACKAGE / 'cli').glob('*.py')} - {'__init__'}
     assert modules == set(COMMANDS) | {'reproduce'}
+
+
+def test_the_package_reads_its_commands_from_setup_py():
+    """The harness and the docs' examples take the commands from setup.py's console scripts
+    (as installed): one list, no copy to keep in step."""
+    from flock_swarm.console import commands, executables
+    from flock_swarm.nodes.harness import executable
+    assert executables() == console_scripts()
+    assert commands() == {name: target.split(':')[0] for name, target in COMMANDS.items()}
+    assert executable('no_such_command')[-1] == 'flock_swarm.nodes.no_such_command'
 
 
 def test_the_commands_share_the_console_plumbing():

@@ -28,11 +28,13 @@ from pathlib import Path
 
 import pytest
 
+from flock_swarm.console import commands
+
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
 DOCS = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]
-#: The commands whose example lines run.
-COMMANDS = ('sim', 'sweep', 'swarm', 'analyze', 'replay')
+#: The commands whose example lines run: setup.py's console scripts into flock_swarm.cli.
+COMMANDS = tuple(commands())
 #: Commands that get a block's ARGS.
 SHORTENED = ('sim', 'sweep', 'swarm')
 MARK = re.compile(r'^<!-- examples: (.*) -->$')

@@ -32,6 +32,7 @@ import time
 from typing import Any, Callable, Iterable, TYPE_CHECKING
 
 from flock_swarm import contract
+from flock_swarm.console import commands
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.supervisor import LOG_DIR, Supervisor, report_death, report_exit
 
@@ -492,20 +493,17 @@ def run_in_process(scenario: Path, out: Path, mode: str = 'lockstep', domain_id:
         return swarm.summary()
 
 
-#: Modules of the executables that are not ``flock_swarm.nodes.<name>``, for ``python -m``.
-MODULES = {name: f'flock_swarm.cli.{name}'
-           for name in ('sim', 'swarm', 'sweep', 'analyze', 'replay')}
-
-
 def executable(name: str) -> list[str]:
-    """Return the command of a node executable: ``ros2 run``'s, the venv's, or ``python -m``."""
+    """Return the command of a node executable: ``ros2 run``'s, the venv's, or ``python -m``
+    (a command's module from setup.py's console scripts, :func:`~flock_swarm.console.commands`,
+    else ``flock_swarm.nodes.<name>``)."""
     prefix_lib = Path(sys.prefix) / 'lib' / 'flock_swarm' / name
     if prefix_lib.is_file():
         return [str(prefix_lib)]
     found = shutil.which(name)
     if found:
         return [found]
-    return [sys.executable, '-m', MODULES.get(name, f'flock_swarm.nodes.{name}')]
+    return [sys.executable, '-m', commands().get(name, f'flock_swarm.nodes.{name}')]
 
 
 #: Fast DDS profile of swarms of several hundred agents across processes (docs/ros.md).
