@@ -557,3 +557,20 @@ def test_the_critical_lag_of_the_linear_law(conversion):
         radius = linear.sampled_lag_radius(4.0, factor * tau_c, dt, k_p, k_v, conversion)
         assert sign * rate > 1.0
         assert rate == pytest.approx(np.log(radius) / dt, rel=0.05)
+
+
+def test_a_plant_tells_its_capabilities():
+    """The robot agent and the engine ask the plant what it is, not its name: a plant of
+    another name with the same classes' capabilities is taken as they are."""
+    from flock_swarm.core.plants.models import DoubleIntegrator, Unicycle, VelocityLag
+
+    class Rover(Unicycle):
+        name = 'rover'
+
+    assert [c.velocity_commanded() for c in (DoubleIntegrator, VelocityLag, Unicycle, Rover)] \
+        == [False, True, True, True]
+    assert [c.differential_drive for c in (DoubleIntegrator, VelocityLag, Unicycle, Rover)] \
+        == [False, False, True, True]
+    x = np.array([[1.0, 2.0, 0.1, 0.99, 0.3, 0.7]])
+    np.testing.assert_array_equal(Rover().commanded_state(x, np.array([[0.05, -0.2]])),
+                                  [[1.0, 2.0, 0.1, 0.99, 0.05, -0.2]])

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from flock_swarm.core.plants.models import Unicycle, VelocityLag
 from flock_swarm.core.robot_state import from_command, PoseDifferentiator, plant_state, rotate
 from flock_swarm.core.robot_state import world_velocity
 from flock_swarm.core.robot_state import yaw_of
@@ -63,9 +64,10 @@ def test_the_differentiator_smooths_jitter_and_ignores_old_poses():
 
 
 def test_from_command_replaces_the_velocity_columns():
+    """The plant says which columns are its velocities (the robot agent asked the name)."""
     x = np.array([[1.0, 2.0, 0.1, 0.99, 0.3, 0.7]])
-    np.testing.assert_array_equal(from_command('unicycle', x, np.array([[0.05, -0.2]])),
+    np.testing.assert_array_equal(from_command(Unicycle(), x, np.array([[0.05, -0.2]])),
                                   [[1.0, 2.0, 0.1, 0.99, 0.05, -0.2]])
     x = np.array([[1.0, 2.0, 0.3, 0.4]])
-    np.testing.assert_array_equal(from_command('velocity_lag', x, np.array([[0.0, 0.1]])),
+    np.testing.assert_array_equal(from_command(VelocityLag(), x, np.array([[0.0, 0.1]])),
                                   [[1.0, 2.0, 0.0, 0.1]])

@@ -367,6 +367,20 @@ def test_bad_bridge_parameters_are_one_line(fleet, ros_domain):
         assert len(lines) == 1 and re.match(rf'robot_agent: error: {key}: ', lines[0]), lines
 
 
+def test_the_bridge_asks_the_plant_whether_it_takes_velocity_commands(ros_domain):
+    """A plant without ``cmd_vel`` among its commands is refused, the plants that have it
+    named from the registry (the node kept its own list of them)."""
+    from flock_swarm.nodes.robot_agent import velocity_plants
+    assert velocity_plants() == ['unicycle', 'velocity_lag']
+    res = subprocess.run(executable('robot_agent') + ['--ros-args', '-p', 'scenario:=demo'],
+                         env=dict(os.environ, ROS_DOMAIN_ID=str(ros_domain)),
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert res.stderr == ('robot_agent: error: plant.model: the robot agent drives '
+                          "velocity-commanded robots (unicycle or velocity_lag), got "
+                          "'double_integrator'\n")
+
+
 def test_the_profiles_make_the_launch_parameters():
     defaults = {name: default for name, default, _ in ARGUMENTS}
     for profile in PROFILES:

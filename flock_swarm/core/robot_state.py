@@ -66,7 +66,7 @@ def plant_state(plant: Plant, dim: int, position: np.ndarray, orientation: np.nd
                                np.array([[0.0, 0.0, yaw_rate]]), dim)[0]
 
 
-def from_command(model: str, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+def from_command(plant: Plant, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
     """Return state rows ``x`` with their velocities replaced by the last command sent.
 
     A plant's ``command`` integrates the law's acceleration from the velocity in the state
@@ -76,18 +76,14 @@ def from_command(model: str, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
     closing the loop) is the robot agent's ``integrate_from:=command``; its default,
     ``predict``, predicts the whole state instead (:mod:`flock_swarm.core.latency`).
 
-    :param model: ``'velocity_lag'`` or ``'unicycle'``.
+    :param plant: the plant model, which says which columns are velocities
+        (:meth:`~flock_swarm.core.plants.base.Plant.commanded_state`).
     :param x: state rows ``(n, S)`` (:func:`plant_state`).
     :param cmd: the commands sent, as the plant's commands ``(n, C)`` (``v_sp``, or
         ``(v, omega)``).
     :return: the rows with the velocity columns replaced.
     """
-    out = np.array(x, dtype=float)
-    if model == 'unicycle':
-        out[:, 4:6] = cmd[:, :2]
-    else:
-        out[:, out.shape[1] // 2:] = cmd
-    return out
+    return plant.commanded_state(x, cmd)
 
 
 class PoseDifferentiator:

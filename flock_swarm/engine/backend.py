@@ -11,16 +11,20 @@ axle), whichever integrates. Robot-robot contacts are counted by the engine
 
 import numpy as np
 
+from flock_swarm.core import registry
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.engine.mujoco_world import EngineWorld
 
 
 def check_plant(plant_name: str) -> None:
     """Raise :class:`ScenarioError` (key ``backend``) unless the engine has robots of the
-    scenario's plant: the differential-drive ``unicycle``."""
-    if plant_name != 'unicycle':
+    scenario's plant: a differential-drive one (the plant says so,
+    :attr:`~flock_swarm.core.plants.base.Plant.differential_drive`)."""
+    if not registry.plant_class(plant_name).differential_drive:
+        drives = [name for name, cls in registry.usable(registry.PLANT_GROUP).items()
+                  if cls.differential_drive]
         raise ScenarioError('backend', 'mujoco drives differential-drive robots: it needs '
-                            f'plant.model unicycle, got {plant_name!r}')
+                            f'plant.model {" or ".join(drives)}, got {plant_name!r}')
 
 
 class EngineBackend:

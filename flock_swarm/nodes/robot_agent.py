@@ -41,6 +41,7 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Bool
 
 from flock_swarm.contract import ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL, LEADER_ODOM, qos_profile
+from flock_swarm.core import registry
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.latency import CommandHistory, extrapolate
 from flock_swarm.core.laws.base import local_control
@@ -52,10 +53,15 @@ from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.spin import run_node, wall_timer
 
-#: The plants a robot agent drives (velocity commands; a double integrator takes accelerations).
-VELOCITY_PLANTS = ('velocity_lag', 'unicycle')
 #: Commands: reliable, depth 1 (only the newest command matters to a robot's driver).
 CMD_QOS = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE)
+
+
+def velocity_plants() -> list[str]:
+    """Return the registered plants a robot agent drives: those that take velocity commands
+    (:meth:`~flock_swarm.core.plants.base.Plant.velocity_commanded`), by name."""
+    return [name for name, cls in registry.usable(registry.PLANT_GROUP).items()
+            if cls.velocity_commanded()]
 
 
 def _positive(name: str, default: float, description: str) -> Param:
@@ -162,9 +168,9 @@ class RobotAgentNode(Node):
         params = self.params = NodeParameters(self, ROBOT_PARAMS)
         sc = self.scenario = params.load_scenario()
         plant = self.plant = sc.plant.model
-        if plant.name not in VELOCITY_PLANTS:
+        if not plant.velocity_commanded():
             raise ScenarioError('plant.model', 'the robot agent drives velocity-commanded '
-                                f'robots ({" or ".join(VELOCITY_PLANTS)}), got {plant.name!r}')
+                                f'robots ({" or ".join(velocity_plants())}), got {plant.name!r}')
         i = self.agent_id = params['agent_id']
         if i >= sc.n_agents:
             raise ScenarioError('agent_id', f'must be below n_agents = {sc.n_agents}, got {i}')
@@ -340,7 +346,7 @@ class RobotAgentNode(Node):
             leader = LeaderState(self.leader_odom[0], self.leader_odom[1], self.leader_accel)
         u = local_control(sc.law, q_self, p_self, q_nb, p_nb, np.ones(len(q_nb)), leader,
                           self.agent, sc.dt)
-        x_cmd = from_command(plant.name, x_self, self.sent) if self.from_sent else x_self
+        x_cmd = from_command(plant, x_self, self.sent) if self.from_sent else x_self
         cmd = plant.command(x_cmd, u[None], self.period)
         self.x_now = x_self
         linear, angular = plant.twist(x_self, cmd, self.twist_frame)

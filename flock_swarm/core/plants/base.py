@@ -71,6 +71,9 @@ class Plant:
     oriented: ClassVar[bool] = False
     #: The conversions it offers (:data:`CONVERSIONS`), the default first.
     conversions: ClassVar[tuple[str, ...]] = ('exact',)
+    #: Whether it is a differential-drive robot (what the physics engine's robots are:
+    #: ``backend: mujoco`` needs one).
+    differential_drive: ClassVar[bool] = False
 
     #: How :meth:`command` turns the law's acceleration into the command (one of
     #: :attr:`conversions`; a name, not a number, keyword-only so a subclass's fields may
@@ -161,6 +164,27 @@ class Plant:
     def step(self, x: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
         """Return the state after ``dt`` with ``cmd`` held (a new array)."""
         raise NotImplementedError
+
+    @classmethod
+    def velocity_commanded(cls) -> bool:
+        """Return whether it takes velocity commands (``cmd_vel`` among :attr:`commands`:
+        what a real robot's driver takes, so what the robot agent drives)."""
+        return 'cmd_vel' in cls.commands
+
+    def commanded_state(self, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+        """Return state rows ``x`` with their velocities replaced by the velocity commands
+        ``cmd`` (the robot agent's ``integrate_from:=command``, docs/robots.md).
+
+        The default, for a state ``(q, v)`` commanded by a velocity set-point ``v_sp``: the
+        second half of the columns replaced by the command.
+
+        :param x: state rows ``(n, S)``.
+        :param cmd: the commands sent ``(n, C)``.
+        :return: a new array.
+        """
+        out = np.array(x, dtype=float)
+        out[:, out.shape[1] // 2:] = cmd
+        return out
 
     def twist(self, x: np.ndarray, cmd: np.ndarray,
               frame: str) -> tuple[np.ndarray, np.ndarray]:

@@ -198,6 +198,7 @@ class Unicycle(Plant):
     frames: ClassVar[tuple[str, ...]] = ('body', 'world')
     oriented: ClassVar[bool] = True
     conversions: ClassVar[tuple[str, ...]] = CONVERSIONS
+    differential_drive: ClassVar[bool] = True
 
     #: Distance of the steered point ahead of the axle [m].
     ell: float = 0.1
@@ -237,6 +238,12 @@ class Unicycle(Plant):
     def _cos_sin(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         qz, qw = x[:, 2], x[:, 3]
         return qw * qw - qz * qz, 2.0 * qz * qw
+
+    def commanded_state(self, x: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+        """Return state rows ``x`` with ``(v, omega)`` replaced by the commands'."""
+        out = np.array(x, dtype=float)
+        out[:, 4:6] = cmd[:, :2]
+        return out
 
     def law_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return the point ahead of the axle and its velocity ``R(theta) (v, ell omega)``."""
