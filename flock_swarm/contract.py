@@ -64,24 +64,40 @@ FAULTS = 'swarm/faults'
 #: message stops every robot agent whatever its namespace; QoS :data:`ESTOP_QOS`.
 ESTOP = '/swarm/estop'
 ESTOP_TYPE = 'std_msgs/msg/Bool'
+#: The batched transport (``transport: batched``, docs/ros.md "Transports"): the whole
+#: swarm's state of a step as one message of the world, and each agents host's commands (and
+#: adaptive states) of a step as one message, instead of the per-agent odometry and command
+#: topics (:mod:`flock_swarm.nodes.cloud` has the fields).
+STATES = 'swarm/states'
+COMMANDS = 'swarm/commands'
+CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
 METRICS_STATUS = 'flock_swarm/metrics'
+
+#: An agent's name from its index ``{i}``: its node's name (one agent a node), its topics'
+#: prefix, a robot's default name (``robot_pattern``).
+AGENT_PATTERN = 'agent_{i}'
 
 #: An agent topic of the contract, absolute, in any namespace: ``<ns>/agent_<i>/<kind>``.
 AGENT_TOPIC = re.compile(
     r'^(?P<ns>(?:/[^/]+)*?)/agent_(?P<id>\d+)/(?P<kind>odom|cmd_accel|state)$')
 
 
+def agent_name(i: int) -> str:
+    """Return the name of agent ``i`` (:data:`AGENT_PATTERN`): ``agent_<i>``."""
+    return AGENT_PATTERN.format(i=i)
+
+
 def odom_topic(i: int) -> str:
     """Return the odometry topic of agent ``i`` (relative: namespaces apply)."""
-    return f'agent_{i}/odom'
+    return f'{agent_name(i)}/odom'
 
 
 def cmd_topic(i: int) -> str:
     """Return the command topic of agent ``i`` (relative: namespaces apply)."""
-    return f'agent_{i}/cmd_accel'
+    return f'{agent_name(i)}/cmd_accel'
 
 
 def cmd_vel_topic(i: int) -> str:
@@ -90,7 +106,7 @@ def cmd_vel_topic(i: int) -> str:
     Only the agents of a robot plant commanded by velocity (``plant.command: cmd_vel``)
     publish it, beside ``cmd_accel`` (the law's acceleration, recorded).
     """
-    return f'agent_{i}/cmd_vel'
+    return f'{agent_name(i)}/cmd_vel'
 
 
 def state_topic(i: int) -> str:
@@ -98,7 +114,7 @@ def state_topic(i: int) -> str:
 
     Optional: only the agents of a law with adaptive state publish it.
     """
-    return f'agent_{i}/state'
+    return f'{agent_name(i)}/state'
 
 
 def network_topic(i: int) -> str:
@@ -108,7 +124,7 @@ def network_topic(i: int) -> str:
     :data:`STATE_TYPE`, one message per command, stamped like it, its names
     :data:`flock_swarm.core.network.USAGE_LABELS` (``docs/network.md``).
     """
-    return f'agent_{i}/network'
+    return f'{agent_name(i)}/network'
 
 
 def state_slices(shapes: Mapping[str, tuple[int, ...]]
@@ -234,11 +250,11 @@ def contract(n_agents: int, state: bool = False, velocity: bool = False) -> list
               Topic(LEADER_ACCEL, ACCEL_TYPE, LOCKSTEP_QOS, 'leader')]
     for i in range(n_agents):
         topics += [Topic(odom_topic(i), ODOMETRY_TYPE, LOCKSTEP_QOS, 'world'),
-                   Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, f'agent_{i}')]
+                   Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, agent_name(i))]
         if state:
-            topics.append(Topic(state_topic(i), STATE_TYPE, LOCKSTEP_QOS, f'agent_{i}'))
+            topics.append(Topic(state_topic(i), STATE_TYPE, LOCKSTEP_QOS, agent_name(i)))
         if velocity:
-            topics.append(Topic(cmd_vel_topic(i), TWIST_TYPE, LOCKSTEP_QOS, f'agent_{i}'))
+            topics.append(Topic(cmd_vel_topic(i), TWIST_TYPE, LOCKSTEP_QOS, agent_name(i)))
     topics += [Topic(MARKERS, MARKERS_TYPE, TELEMETRY_QOS, 'world'),
                Topic(METRICS, METRICS_TYPE, TELEMETRY_QOS, 'world')]
     return topics

@@ -11,6 +11,7 @@ check them in the virtualenv.
 from dataclasses import dataclass, field
 from typing import Any
 
+from flock_swarm.contract import agent_name
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.foxglove_ws import DEFAULT_PORT
 from flock_swarm.scenario_yaml import parse_value
@@ -137,7 +138,7 @@ def swarm_processes(scenario: str = 'demo', n_agents: str = '0', mode: str = 'lo
     if parse_flag('container', container):
         specs.append(NodeSpec('agents', 'agents', dict(common)))
     else:
-        specs += [NodeSpec('agent', f'agent_{i}', dict(common, agent_id=i)) for i in range(n)]
+        specs += [NodeSpec('agent', agent_name(i), dict(common, agent_id=i)) for i in range(n)]
     if parse_flag('foxglove', foxglove):
         port = _integer('foxglove_port', foxglove_port, 0, 65535)
         specs.append(NodeSpec('foxglove_server', 'foxglove_server',

@@ -12,9 +12,10 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (CLOCK, DIAGNOSTICS, FAULTS, LEADER_ACCEL, LEADER_ODOM,
-                                  MARKERS, METRICS, OBSTACLES, SCENARIO, STATUS, cmd_topic,
-                                  cmd_vel_topic, network_topic, odom_topic, state_topic)
+from flock_swarm.contract import (agent_name, CLOCK, DIAGNOSTICS, FAULTS, LEADER_ACCEL,
+                                  LEADER_ODOM, MARKERS, METRICS, OBSTACLES, SCENARIO, STATUS,
+                                  cmd_topic, cmd_vel_topic, network_topic, odom_topic,
+                                  state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -48,9 +49,9 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
         'leader': ([LEADER_ODOM, LEADER_ACCEL, FAULTS], [CLOCK, STATUS]),
     }
     for i in range(n_agents):
-        out[f'agent_{i}'] = ([cmd_topic(i), state_topic(i), network_topic(i),
-                              cmd_vel_topic(i), FAULTS],
-                             [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
+        out[agent_name(i)] = ([cmd_topic(i), state_topic(i), network_topic(i),
+                               cmd_vel_topic(i), FAULTS],
+                              [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 
 

@@ -46,9 +46,9 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, PointCloud2
 
-from flock_swarm.contract import (LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
+from flock_swarm.contract import (agent_name, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
                                   cmd_vel_topic, network_topic, odom_topic, qos_profile,
                                   state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
@@ -67,6 +67,8 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer
+from flock_swarm.nodes.cloud import BATCHED, COMMANDS, STATES, CloudEncoder, command_fields
+from flock_swarm.nodes.transport import TRANSPORT, StateCloud, host_commands, transport_of
 from flock_swarm.nodes.wire import (AccelBatchEncoder, AccelEncoder, MalformedMessage,
                                     StateEncoder, decode_accel, decode_heading,
                                     decode_odometry, encode_twist)
@@ -105,7 +107,7 @@ AGENT_PARAMS = COMMON_PARAMS + (
           "sent, the others' at constant velocity; docs/robots.md); 'off' on the states as "
           'measured. Lockstep states are current: no effect',
           lambda v: v in LATENCY_CHOICES, "must be 'predict' or 'off', got {value!r}"),
-) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH)
+) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH, TRANSPORT)
 
 
 class AgentNode(Node):
@@ -127,6 +129,11 @@ class AgentNode(Node):
         params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
         # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
         self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
+        # The batched transport (nodes/transport.py): the swarm's state as one message in, the
+        # hosted agents' commands (and adaptive states) as one message out.
+        self.batched = transport_of(sc, params['transport'], params['mode'],
+                                    params['command']) == BATCHED
+        hosted = [] if self.batched else self.controller_ids_placeholder
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
                                           leader_start_timeout=params['leader_start_timeout'],
@@ -166,7 +173,7 @@ class AgentNode(Node):
         self.pubs = self.cmd_pubs + self.state_pubs + self.usage_pubs + self.twist_pubs
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
-        self.children = [f'agent_{j}' for j in range(sc.n_agents)]
+        self.children = [agent_name(j) for j in range(sc.n_agents)]
         # Lockstep: a step's odometry, queued as it comes, then taken in one pass.
         self.inbox = OdometryInbox(self.controller, self.guard, self.odom_topics, self.children)
         odom_subs = [self.create_subscription(Odometry, odom_topic(j),
@@ -431,7 +438,7 @@ def main(args: list[str] | None = None) -> int:
     """
     argv = sys.argv if args is None else args
     found = [m.group(1) for a in argv for m in [re.search(r'^agent_id:=(\d+)$', a)] if m]
-    name = f'agent_{found[-1]}' if found else 'agent'
+    name = agent_name(int(found[-1])) if found else 'agent'
     return run_agents('agent', lambda: AgentNode(node_name=name), args)
 
 

@@ -24,7 +24,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
-from flock_swarm.contract import FRAME
+from flock_swarm.contract import AGENT_PATTERN, FRAME
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import realize
 from flock_swarm.engine.mujoco_world import MODELS, EngineWorld
@@ -37,7 +37,7 @@ ENGINE_PARAMS = COMMON_PARAMS + (
     Param('model', 'turtlebot3_burger', 'the robot model (an MJCF of flock_swarm.engine)',
           lambda v: v in MODELS, f'must be one of {sorted(MODELS)}, got {{value!r}}'),
     Param('robots', '', "the robots' names, comma-separated; '' names them by robot_pattern"),
-    Param('robot_pattern', 'agent_{i}', "a robot's name from its index {i}",
+    Param('robot_pattern', AGENT_PATTERN, "a robot's name from its index {i}",
           lambda v: '{i}' in v, "must contain '{{i}}', got {value!r}"),
     Param('frame', FRAME, 'the frame of the published poses (header.frame_id)'),
     Param('latency', 0.0, 'seconds between reading a state and publishing its odometry',

@@ -581,7 +581,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
             children.start('agents', executable('agents') + ros_args(base))
         else:
             for i in range(sc.n_agents):
-                children.start(f'agent_{i}',
+                children.start(contract.agent_name(i),
                                executable('agent') + ros_args(dict(base, agent_id=i)))
         if live is not None:
             from flock_swarm.nodes.foxglove_server import BackgroundBridge

@@ -40,7 +40,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Bool
 
-from flock_swarm.contract import ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL, LEADER_ODOM, qos_profile
+from flock_swarm.contract import (AGENT_PATTERN, ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL,
+                                  LEADER_ODOM, qos_profile)
 from flock_swarm.core import registry
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.latency import CommandHistory, extrapolate
@@ -83,7 +84,7 @@ ROBOT_PARAMS = tuple(
           lambda v: v >= 0, 'must be >= 0, got {value!r}'),
     Param('robots', '', "the robots' names (their namespaces), comma-separated, in agent "
           "order; '' names them by robot_pattern"),
-    Param('robot_pattern', 'agent_{i}', "a robot's name from its index {i}, when robots is ''",
+    Param('robot_pattern', AGENT_PATTERN, "a robot's name from its index {i}, when robots is ''",
           lambda v: '{i}' in v, "must contain '{{i}}', got {value!r}"),
     Param('odom_topic', '{robot}/odom', "each robot's state topic ({robot}: its name)",
           lambda v: '{robot}' in v, "must contain '{{robot}}', got {value!r}"),
