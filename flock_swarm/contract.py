@@ -64,13 +64,6 @@ FAULTS = 'swarm/faults'
 #: message stops every robot agent whatever its namespace; QoS :data:`ESTOP_QOS`.
 ESTOP = '/swarm/estop'
 ESTOP_TYPE = 'std_msgs/msg/Bool'
-#: The batched transport (``transport: batched``, docs/ros.md "Transports"): the whole
-#: swarm's state of a step as one message of the world, and each agents host's commands (and
-#: adaptive states) of a step as one message, instead of the per-agent odometry and command
-#: topics (:mod:`flock_swarm.nodes.cloud` has the fields).
-STATES = 'swarm/states'
-COMMANDS = 'swarm/commands'
-CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.

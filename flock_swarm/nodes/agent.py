@@ -46,7 +46,7 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from sensor_msgs.msg import JointState, PointCloud2
+from sensor_msgs.msg import JointState
 
 from flock_swarm.contract import (agent_name, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
                                   cmd_vel_topic, network_topic, odom_topic, qos_profile,
@@ -67,8 +67,6 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer
-from flock_swarm.nodes.cloud import BATCHED, COMMANDS, STATES, CloudEncoder, command_fields
-from flock_swarm.nodes.transport import TRANSPORT, StateCloud, host_commands, transport_of
 from flock_swarm.nodes.wire import (AccelBatchEncoder, AccelEncoder, MalformedMessage,
                                     StateEncoder, decode_accel, decode_heading,
                                     decode_odometry, encode_twist)
@@ -107,7 +105,7 @@ AGENT_PARAMS = COMMON_PARAMS + (
           "sent, the others' at constant velocity; docs/robots.md); 'off' on the states as "
           'measured. Lockstep states are current: no effect',
           lambda v: v in LATENCY_CHOICES, "must be 'predict' or 'off', got {value!r}"),
-) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH, TRANSPORT)
+) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH)
 
 
 class AgentNode(Node):
@@ -129,11 +127,6 @@ class AgentNode(Node):
         params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
         # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
         self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
-        # The batched transport (nodes/transport.py): the swarm's state as one message in, the
-        # hosted agents' commands (and adaptive states) as one message out.
-        self.batched = transport_of(sc, params['transport'], params['mode'],
-                                    params['command']) == BATCHED
-        hosted = [] if self.batched else self.controller_ids_placeholder
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
                                           leader_start_timeout=params['leader_start_timeout'],
