@@ -393,6 +393,17 @@ def test_the_profiles_make_the_launch_parameters():
         robot_agent_parameters({**defaults, 'profile': 'roomba'})
 
 
+def test_the_node_and_the_launch_file_take_the_safety_defaults_from_one_table():
+    """The robot agent's parameters and the launch file's arguments were two lists."""
+    from flock_swarm.core.safety import ROBOT_DEFAULTS
+    from flock_swarm.nodes.robot_agent import ROBOT_PARAMS
+    node = {p.name: (p.default, p.description) for p in ROBOT_PARAMS}
+    launch = {name: (float(default), description) for name, default, description in ARGUMENTS
+              if name in ROBOT_DEFAULTS}
+    assert node['max_speed'] == (0.22, 'safety: largest linear speed (m/s)')
+    assert {name: node[name] for name in ROBOT_DEFAULTS} == launch == ROBOT_DEFAULTS
+
+
 def test_motion_capture_poses_give_the_robot_its_estimated_velocity(fleet, ros_context):
     """``odom_type:=pose``: PoseStamped of a robot driving at 0.1 m/s along its heading (the
     y axis) give the robot agent the state of a unicycle at 0.1 m/s, heading pi/2."""

@@ -31,6 +31,16 @@ ESTOP, STALE_OWN, STALE_LEADER, GEOFENCE, NON_FINITE = (
     'estop', 'stale_own', 'stale_leader', 'geofence', 'non_finite')
 #: The stop reasons, in the order the rules are checked.
 STOPS = (ESTOP, STALE_OWN, STALE_LEADER, GEOFENCE, NON_FINITE)
+#: The bounds a robot gets unless it is given its own (a TurtleBot3 Burger's speed and yaw
+#: rate), name -> (default, description): the one table of the robot agent's parameters and
+#: the launch file's arguments (:mod:`flock_swarm.nodes.robot_profiles`).
+ROBOT_DEFAULTS = {
+    'max_speed': (0.22, 'safety: largest linear speed (m/s)'),
+    'max_accel': (0.5, 'safety: largest change of the linear command per second (m/s^2)'),
+    'max_yaw_rate': (2.84, 'safety: largest yaw rate (rad/s)'),
+    'stale_after': (0.5, 'safety: the oldest own or leader state that still commands motion '
+                    '(s)'),
+}
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,7 @@ from flock_swarm.core.laws.base import local_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.robot_state import (PoseDifferentiator, from_command, plant_state,
                                           world_velocity)
-from flock_swarm.core.safety import SafetyLayer, SafetyLimits
+from flock_swarm.core.safety import ROBOT_DEFAULTS, SafetyLayer, SafetyLimits
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.spin import run_node, wall_timer
@@ -113,12 +113,8 @@ ROBOT_PARAMS = tuple(
     Param('pose_filter_tau', 0.05, 'odom_type pose: time constant of the velocity estimate '
           '(s, 0: raw differences)', lambda v: math.isfinite(v) and v >= 0,
           'must be >= 0, got {value!r}'),
-    _positive('max_speed', 0.22, 'safety: largest linear speed (m/s)'),
-    _positive('max_accel', 0.5, 'safety: largest change of the linear command per second '
-              '(m/s^2)'),
-    _positive('max_yaw_rate', 2.84, 'safety: largest yaw rate (rad/s)'),
-    _positive('stale_after', 0.5, "safety: the oldest own or leader state that still "
-              'commands motion (s)'),
+    *(_positive(name, default, description)
+      for name, (default, description) in ROBOT_DEFAULTS.items()),
     Param('geofence', '', "safety: 'xmin,ymin,xmax,ymax' or 'xmin,ymin,zmin,xmax,ymax,zmax' "
           "in world_frame (m); '' for none"),
 )

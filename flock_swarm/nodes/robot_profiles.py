@@ -6,6 +6,7 @@ mapping rests on, and which were exercised here, is in docs/robots.md ("Robot pr
 """
 
 from flock_swarm.contract import ESTOP
+from flock_swarm.core.safety import ROBOT_DEFAULTS
 
 #: Profile name -> the robot agent's parameters.
 PROFILES: dict[str, dict[str, str]] = {
@@ -40,15 +41,13 @@ ARGUMENTS = (
     ('agent_id', '0', "this robot's index among the robots"),
     ('robots', '', "the robots' names (namespaces), comma-separated, in agent order"),
     ('profile', 'turtlebot3', f'topic mapping: {", ".join(sorted(PROFILES))}'),
-    ('max_speed', '0.22', 'safety: largest linear speed (m/s)'),
-    ('max_accel', '0.5', 'safety: largest change of the linear command per second (m/s^2)'),
-    ('max_yaw_rate', '2.84', 'safety: largest yaw rate (rad/s)'),
-    ('stale_after', '0.5', 'safety: oldest own or leader state that commands motion (s)'),
+    *((name, str(default), description)
+      for name, (default, description) in ROBOT_DEFAULTS.items()),
     ('geofence', '', "safety: 'xmin,ymin,xmax,ymax' (or with z) in the world frame"),
     ('estop_topic', ESTOP, 'emergency stop (std_msgs/Bool, latched or not)'),
 )
 #: Arguments passed on as numbers.
-NUMBERS = ('max_speed', 'max_accel', 'max_yaw_rate', 'stale_after')
+NUMBERS = tuple(ROBOT_DEFAULTS)
 
 
 def robot_agent_parameters(values: dict[str, str]) -> dict:
