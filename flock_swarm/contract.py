@@ -64,6 +64,12 @@ FAULTS = 'swarm/faults'
 #: message stops every robot agent whatever its namespace; QoS :data:`ESTOP_QOS`.
 ESTOP = '/swarm/estop'
 ESTOP_TYPE = 'std_msgs/msg/Bool'
+#: A robot's own topics (``robot_agent``, ``engine_robots``, docs/robots.md), ``{robot}``
+#: standing for its name (its namespace): its odometry (QoS :data:`SENSOR_QOS`) and its
+#: velocity command (:data:`TWIST_TYPE`, QoS :data:`ROBOT_CMD_QOS`); the robot agent's
+#: defaults, a robot profile may map them elsewhere.
+ROBOT_ODOM = '{robot}/odom'
+ROBOT_CMD_VEL = '{robot}/cmd_vel'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.
@@ -192,6 +198,13 @@ FAULTS_QOS = QosSpec(depth=10, latched=True)
 #: transient-local subscription ignores a volatile publisher (``ros2 topic pub``'s default)
 #: while a volatile one matches both (a latched publisher's message comes through both).
 ESTOP_QOS = (QosSpec(depth=1, latched=True), QosSpec(depth=1))
+#: What a robot's driver publishes and a robot agent subscribes (its own and the others'
+#: odometry, the leader's state): ROS's sensor-data profile (``qos_profile_sensor_data``:
+#: best effort, depth 5, volatile).
+SENSOR_QOS = QosSpec(depth=5, reliable=False)
+#: A robot's velocity command: reliable, depth 1 (only the newest command matters to a
+#: robot's driver).
+ROBOT_CMD_QOS = QosSpec(depth=1)
 #: A viewer's bridge: best effort, so a viewer never makes a writer wait for its
 #: acknowledgements (it matches the reliable writers of the contract); the depth covers a
 #: step's burst.

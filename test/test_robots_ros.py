@@ -404,6 +404,21 @@ def test_the_node_and_the_launch_file_take_the_safety_defaults_from_one_table():
     assert {name: node[name] for name in ROBOT_DEFAULTS} == launch == ROBOT_DEFAULTS
 
 
+def test_the_robot_topics_and_their_qos_come_from_the_contract():
+    """The robot agent's and the simulated fleet's topics and QoS (the QoS were rclpy
+    profiles of the node modules): the same profiles as before, named in the contract."""
+    from rclpy.qos import QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
+
+    from flock_swarm.contract import qos_profile, ROBOT_CMD_QOS, SENSOR_QOS
+    from flock_swarm.nodes.robot_agent import ROBOT_PARAMS
+    assert qos_profile(SENSOR_QOS) == qos_profile_sensor_data
+    assert qos_profile(ROBOT_CMD_QOS) == QoSProfile(
+        depth=1, reliability=QoSReliabilityPolicy.RELIABLE)
+    node = {p.name: p.default for p in ROBOT_PARAMS}
+    assert [node[k] for k in ('odom_topic', 'cmd_vel_topic', 'estop_topic', 'robot_pattern')] \
+        == ['{robot}/odom', '{robot}/cmd_vel', '/swarm/estop', 'agent_{i}']
+
+
 def test_motion_capture_poses_give_the_robot_its_estimated_velocity(fleet, ros_context):
     """``odom_type:=pose``: PoseStamped of a robot driving at 0.1 m/s along its heading (the
     y axis) give the robot agent the state of a unicycle at 0.1 m/s, heading pi/2."""

@@ -22,9 +22,9 @@ import numpy as np
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
 
-from flock_swarm.contract import AGENT_PATTERN, FRAME
+from flock_swarm.contract import (AGENT_PATTERN, FRAME, qos_profile, ROBOT_CMD_VEL, ROBOT_ODOM,
+                                  SENSOR_QOS)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import realize
 from flock_swarm.engine.mujoco_world import MODELS, EngineWorld
@@ -80,10 +80,11 @@ class EngineRobotsNode(Node):
         self.v = np.zeros(n)
         self.omega = np.zeros(n)
         self.heard = np.full(n, -math.inf)
-        self.pubs = [self.create_publisher(Odometry, f'{robot}/odom', qos_profile_sensor_data)
-                     for robot in self.names]
+        sensor = qos_profile(SENSOR_QOS)
+        self.pubs = [self.create_publisher(Odometry, ROBOT_ODOM.replace('{robot}', robot),
+                                           sensor) for robot in self.names]
         for j, robot in enumerate(self.names):
-            self.create_subscription(Twist, f'{robot}/cmd_vel',
+            self.create_subscription(Twist, ROBOT_CMD_VEL.replace('{robot}', robot),
                                      lambda msg, j=j: self.on_cmd(j, msg), CMD_QOS)
         #: Odometry read but not yet sent: ``(due, messages)``, oldest first.
         self.outbox: collections.deque = collections.deque()

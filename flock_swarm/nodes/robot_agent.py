@@ -37,11 +37,11 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Bool
 
 from flock_swarm.contract import (AGENT_PATTERN, ESTOP, ESTOP_QOS, FRAME, LEADER_ACCEL,
-                                  LEADER_ODOM, qos_profile)
+                                  LEADER_ODOM, qos_profile, ROBOT_CMD_QOS, ROBOT_CMD_VEL,
+                                  ROBOT_ODOM, SENSOR_QOS)
 from flock_swarm.core import registry
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.latency import CommandHistory, extrapolate
@@ -54,8 +54,8 @@ from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.spin import run_node, wall_timer
 
-#: Commands: reliable, depth 1 (only the newest command matters to a robot's driver).
-CMD_QOS = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE)
+#: A robot's velocity commands (the contract's :data:`~flock_swarm.contract.ROBOT_CMD_QOS`).
+CMD_QOS = qos_profile(ROBOT_CMD_QOS)
 
 
 def velocity_plants() -> list[str]:
@@ -86,11 +86,11 @@ ROBOT_PARAMS = tuple(
           "order; '' names them by robot_pattern"),
     Param('robot_pattern', AGENT_PATTERN, "a robot's name from its index {i}, when robots is ''",
           lambda v: '{i}' in v, "must contain '{{i}}', got {value!r}"),
-    Param('odom_topic', '{robot}/odom', "each robot's state topic ({robot}: its name)",
+    Param('odom_topic', ROBOT_ODOM, "each robot's state topic ({robot}: its name)",
           lambda v: '{robot}' in v, "must contain '{{robot}}', got {value!r}"),
     _choice('odom_type', 'odometry', ('odometry', 'pose'), 'nav_msgs/Odometry, or '
             'geometry_msgs/PoseStamped (motion capture; velocity estimated)'),
-    Param('cmd_vel_topic', '{robot}/cmd_vel', "this robot's velocity command ({robot}: its "
+    Param('cmd_vel_topic', ROBOT_CMD_VEL, "this robot's velocity command ({robot}: its "
           'name)'),
     Param('leader_odom_topic', LEADER_ODOM, "the leader's nav_msgs/Odometry (world frame)"),
     Param('leader_accel_topic', LEADER_ACCEL, "the leader's geometry_msgs/AccelStamped"),
@@ -211,7 +211,7 @@ class RobotAgentNode(Node):
         #: The last command sent, as the plant's command row (zero before the first).
         self.sent = np.zeros((1, len(plant.command_names(sc.dim))))
         self.differentiators = [PoseDifferentiator(params['pose_filter_tau']) for _ in range(n)]
-        sensor = qos_profile_sensor_data
+        sensor = qos_profile(SENSOR_QOS)
         pose = params['odom_type'] == 'pose'
         for j, robot in enumerate(self.names):
             topic = params['odom_topic'].replace('{robot}', robot)
