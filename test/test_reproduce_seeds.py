@@ -4,6 +4,7 @@ settling time on a synthetic series, a ``--quick`` report rendered from partial 
 Fig. 3 curves judged at the paper's anchors, and an interrupted reproduction."""
 
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -271,3 +272,26 @@ def test_rekey_fig3_cache_covers_the_plan_with_the_committed_records(tmp_path):
         original = committed[(rec['n_agents'], rec['delta'], rec['seed'])]
         assert {k: v for k, v in rec.items() if k != 'digest'} == \
             {k: v for k, v in original.items() if k not in ('digest', 'check')}
+
+
+def test_cached_seeds_renders_from_the_committed_results_with_no_run(tmp_path,
+                                                                     quick_reproduction):
+    # The session's quick run's results stand for the committed docs/reproduction/results/;
+    # an empty --out: --cached-seeds renders the report from them and the caches, runs nothing.
+    results, seeds = tmp_path / 'results', quick_reproduction / 'out' / 'seeds'
+    shutil.copytree(quick_reproduction / 'out' / 'results', results)
+    cached = {p.name: p.read_bytes() for p in seeds.iterdir()}
+    out = tmp_path / 'out'
+    assert reproduce.main(['--quick', '--cached-seeds', '--jobs', '1', '--out', str(out),
+                           '--results', str(results), '--seeds-cache', str(seeds),
+                           '--report', str(tmp_path / 'report.md'),
+                           '--figures', str(tmp_path / 'figures')]) == 0
+    text = (tmp_path / 'report.md').read_text()
+    assert 'Nothing ran: the presets\' and ROS runs\' results are those committed in' in text
+    assert 'python -m flock_swarm.reproduce --quick --skip-ros' in text  # the run that wrote them
+    assert not (out / 'runs').exists() and not (out / 'results').exists()
+    assert {p.name: p.read_bytes() for p in seeds.iterdir()} == cached  # read, not run
+    # Every experiment's section and the summary are the ones the run itself wrote.
+    original = re.split(r'^## ', (quick_reproduction / 'report.md').read_text(), flags=re.M)
+    rendered = re.split(r'^## ', text, flags=re.M)
+    assert rendered[2:] == original[2:] and len(rendered) == len(original) > 10

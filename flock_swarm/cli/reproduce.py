@@ -10,6 +10,7 @@ from pathlib import Path
 
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_USAGE, StopSignals, out_dir
 from flock_swarm.reproduce import pipeline
+from flock_swarm.reproduce.pipeline import RESULTS
 from flock_swarm.reproduce.seeds import SEEDS_CACHE
 
 
@@ -50,7 +51,12 @@ def build_parser() -> argparse.ArgumentParser:
                         'others are read from their caches')
     parser.add_argument('--cached-seeds', action='store_true',
                         help='run nothing new over seeds: the distributions use what the '
-                        'caches hold (the report states the counts)')
+                        'caches hold (the report states the counts); when OUT holds no '
+                        'preset run either, run nothing at all: the presets\' and ROS runs\' '
+                        'results come from --results (the report says so)')
+    parser.add_argument('--results', type=Path, metavar='DIR',
+                        help='the committed results of the presets\' and ROS runs, written by '
+                        f'every full run (default: {RESULTS}; none with --quick)')
     return parser
 
 

@@ -7,6 +7,7 @@ import json
 import shlex
 import sys
 import time
+from pathlib import Path
 from datetime import datetime, timezone
 from typing import Any, Callable
 
@@ -22,6 +23,11 @@ from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
 from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
                                        terminal_line)
 from flock_swarm.study.spec import plain
+
+#: The committed results of the presets' and ROS runs (one JSON per experiment, without its
+#: study over seeds, which its own cache holds; ``meta.json``: the run that wrote them): what
+#: ``--cached-seeds`` renders the report from when ``--out`` holds no run.
+RESULTS = Path('docs/reproduction/results')
 
 
 def run(args: argparse.Namespace, argv_used: list[str]) -> int:
@@ -46,6 +52,10 @@ def run(args: argparse.Namespace, argv_used: list[str]) -> int:
 
     if args.seeds_only:
         return seeds_only(args, plan, meta, say)
+    if args.results is None and not plan.quick:
+        args.results = RESULTS
+    if args.cached_seeds and not args.fresh and committed(args):
+        return render_committed(args, plan, meta, say)
     ros: dict[str, dict] = {}
     ros_started = time.monotonic()
     if args.skip_ros:
@@ -96,6 +106,8 @@ def run(args: argparse.Namespace, argv_used: list[str]) -> int:
     meta['history'] = record_invocation(args.out, meta, plan)
     write_report(results, ros, plan, meta, args.report, args.figures)
     (results_dir / 'meta.json').write_text(json.dumps(plain(meta), indent=2) + '\n')
+    if args.results is not None:
+        write_committed(args.results, results, meta)
     sizes = {p.name: p.stat().st_size for p in args.figures.glob('*.png')}
     for name, size in sorted(sizes.items()):
         if size > FIG_MAX_BYTES:
@@ -120,4 +132,61 @@ def seeds_only(args: argparse.Namespace, plan: Plan, meta: dict,
     meta['wall_min'] = (time.monotonic() - started) / 60.0
     write_seeds_report(studies, meta, args.report, args.figures)
     say(f'[reproduce] wrote {args.report}; {meta["wall_min"]:.1f} min')
+    return 0
+
+
+def write_committed(where: Path, results: dict[str, dict], meta: dict) -> None:
+    """Write the results the report was rendered from, without the studies over seeds (their
+    caches hold them), for :func:`render_committed`.
+
+    :param where: the directory (``--results``).
+    :param results: every experiment's JSON result, by key.
+    :param meta: the invocation's provenance.
+    """
+    where.mkdir(parents=True, exist_ok=True)
+    for key, res in results.items():
+        kept = {k: v for k, v in res.items() if k != 'seeds'}
+        (where / f'{key}.json').write_text(json.dumps(plain(kept), indent=1) + '\n')
+    (where / 'meta.json').write_text(json.dumps(plain(meta), indent=1) + '\n')
+
+
+def committed(args: argparse.Namespace) -> bool:
+    """Return whether the report is to be rendered from ``--results`` alone: ``--out`` holds
+    no preset run, and ``--results`` holds every experiment's result."""
+    runs = args.out / 'runs'
+    if runs.is_dir() and any(runs.iterdir()):
+        return False
+    where = args.results
+    return where is not None and (where / 'meta.json').is_file() and all(
+        (where / f'{exp.key}.json').is_file() for exp in all_experiments())
+
+
+def render_committed(args: argparse.Namespace, plan: Plan, meta: dict,
+                     say: Callable[[str], None]) -> int:
+    """Write the report from the committed results and the caches over seeds: run nothing
+    (the figures of the presets stay as they were drawn by the run that wrote the results)."""
+    started = time.monotonic()
+    ran = json.loads((args.results / 'meta.json').read_text())
+    seeds_dir = args.seeds_cache or (args.out / 'seeds' if plan.quick else SEEDS_CACHE)
+    studies = run_studies(seeds_dir, SerialBackend(), say, plan.quick, True, None, False,
+                          args.figures)
+    results: dict[str, dict] = {}
+    for exp in all_experiments():
+        res = json.loads((args.results / f'{exp.key}.json').read_text())
+        if exp.key in studies:
+            res['seeds'] = studies[exp.key]
+        results[exp.key] = res
+    ros = {key: res['ros'] for key, res in results.items() if 'ros' in res}
+    meta['seeds_cache'] = str(seeds_dir)
+    meta['rendered_from'] = {'where': str(args.results), 'command': ran['command'],
+                             'date': ran['date'], 'git': ran['git']}
+    for key in ('simulations', 'ros_note', 'ros_wall_s', 'ros_total', 'history', 'out'):
+        meta[key] = ran[key]
+    meta['ros_executed'] = 0
+    meta['simulations'] = dict(ran['simulations'], executed=0, wall_s=0.0, core_seconds=0.0)
+    meta['wall_min'] = (time.monotonic() - started) / 60.0
+    write_report(results, ros, plan, meta, args.report, args.figures)
+    say(f'[reproduce] wrote {args.report} from the committed results in {args.results} (run '
+        f'{ran["date"]}, commit {ran["git"]}) and the caches over seeds: nothing ran; '
+        f'{meta["wall_min"]:.1f} min')
     return 0

@@ -196,6 +196,15 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
         f'{sims["core_seconds_all"] / 60:.1f} CPU-min when they ran.'
         + (' It ran nothing new: it rendered the report from the cached runs below.'
            if sims['executed'] == 0 and meta['ros_executed'] == 0 else ''),
+    ]
+    rendered = meta.get('rendered_from')
+    if rendered:
+        lines.append(
+            f'- Nothing ran: the presets\' and ROS runs\' results are those committed in '
+            f'`{rendered["where"]}/` by `{rendered["command"]}` on {rendered["date"]} (UTC, '
+            f'commit {rendered["git"]}), the studies over seeds come from their caches, and '
+            'the presets\' figures are the ones that run drew.')
+    lines += [
         '- The runs used here were computed by these invocations (from '
         f'`{meta["out"]}/invocations.jsonl`; '
         f'{sum(item["wall_min"] for item in meta["history"]):.1f} min of wall time in all):',
@@ -216,7 +225,8 @@ def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, met
         'in `OUT/*.jsonl` (one JSON line per run, keyed by a hash of the scenario and package '
         'version), the ROS runs in '
         '`OUT/ros/`. Re-running the command resumes; a larger `--realisations` adds only the '
-        'missing runs.',
+        'missing runs. Every full run also writes its results to `docs/reproduction/results/` '
+        '(committed): `--cached-seeds` with no run in OUT renders the report from them.',
         f'- ROS runs: {meta["ros_note"]}',
         '',
         '- Over seeds: each experiment\'s study (`config/sweeps/reproduce_*.yaml`, seeds from '
