@@ -426,16 +426,19 @@ def leader_at(t):
                        LEADER_ACCEL.copy())
 
 
-def moving_lattice(network, steps=8):
-    """Feed a NetworkState ``steps`` steps of the lattice translating at :data:`V` (and of an
-    accelerating leader); return its ``u`` at the last step, the states and the agents."""
+def moving_lattice(network, steps=8, accel=(0.0, 0.0)):
+    """Feed a NetworkState ``steps`` steps of the lattice translating at :data:`V` (at the
+    uniform acceleration ``accel`` from it), and of an accelerating leader; return its ``u`` at
+    the last step, the states and the agents."""
     law, dt = FIG2.law, FIG2.dt
     q0 = lattice_start()
     n = q0.shape[0]
     agents = AgentData(np.arange(n) < INFORMED)
     net = NetworkState(parse_network(network, dt), 1, n, 2, law, 'disk')
+    accel = np.asarray(accel)
     for k in range(steps):
-        q, p = q0 + V * (k * dt), np.tile(V, (n, 1))
+        t = k * dt
+        q, p = q0 + V * t + 0.5 * accel * t * t, np.tile(V + accel * t, (n, 1))
         net.send(k, q, p, leader_at(k * dt), disk_graph(q, law.radius, law.strict_radius),
                  agents.informed)
     u = net.control(None, q, p, agents, dt)[0]
@@ -462,6 +465,29 @@ def test_predict_gives_the_undelayed_law_on_a_uniformly_moving_lattice(model):
     else:
         np.testing.assert_allclose(stale[INFORMED:], exact[INFORMED:], rtol=0, atol=1e-12)
         assert np.abs(stale - exact)[:INFORMED].min() > 1e-3
+
+
+@pytest.mark.parametrize('model', ['communication', 'input'])
+def test_predict_carries_the_acceleration_of_a_uniformly_accelerating_lattice(model):
+    """Each message carries its sender's acceleration over the step before it was sent
+    (``(p(k') - p(k' - 1)) / dt``); at a uniform acceleration the prediction ``(q + p s + f
+    s^2 / 2, p + f s)`` is then exact: the law's output is the one on current states, where a
+    constant-velocity prediction would leave every neighbour ``f s^2 / 2`` and ``f s`` off."""
+    accel = (0.8, -0.5)
+    u, q, p, agents, t = moving_lattice({'delay': 0.06, 'leader': {'delay': 0.04},
+                                         'model': model, 'compensation': 'predict'},
+                                        accel=accel)
+    law = FIG2.law
+    exact = swarm_control(law, q, p, disk_graph(q, law.radius, law.strict_radius),
+                          leader_at(t), agents, FIG2.dt)
+    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-9)
+    # The acceleration carried: zero at the first step sent; over the steps since the one
+    # sent before otherwise (realtime may skip steps).
+    net = NetworkState(parse_network({'delay': 0.06, 'compensation': 'predict'}, FIG2.dt), 1,
+                       q.shape[0], 2, law, 'disk')
+    assert np.array_equal(net._acceleration(0, p), np.zeros_like(p))
+    np.testing.assert_allclose(net._acceleration(3, p + 3 * FIG2.dt * np.array(accel)),
+                               np.tile(accel, (q.shape[0], 1)), rtol=1e-12)
 
 
 def test_without_compensation_the_neighbours_appear_shifted_by_minus_v_d():

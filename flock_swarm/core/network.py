@@ -19,8 +19,9 @@ or for the agents one process hosts (the agents' controller): both get the same 
   within the radius of ``i``'s own position (the current one under the ``communication``
   delay model, the one of the message's sending step under ``input``);
 - under ``compensation: predict`` every state the law uses, of age ``a`` steps, is first
-  extrapolated to the current step at constant velocity (``q + p a dt``; the leader's with
-  its acceleration), before the r-disk neighbour decision;
+  extrapolated to the current step at constant acceleration (``q + p s + f s^2 / 2``, ``p +
+  f s``, ``s = a dt``; a neighbour's message carries its sender's acceleration over the step
+  before it was sent, the leader's its own), before the r-disk neighbour decision;
 - an informed agent without any held leader state applies the law of an uninformed agent
   (``combine`` with ``leader=None``).
 
@@ -627,6 +628,10 @@ class NetworkState:
         # The agents' own states over the window (only the input delay model uses them).
         own = (window + 1, n, dim) if spec.model == 'input' else (0, n, dim)
         self.own_q, self.own_p = np.zeros(own), np.zeros(own)
+        # Under predict every message carries its sender's acceleration over the step before
+        # it was sent (what the sender's last command did; it knows its own velocities).
+        self.own_a = np.zeros(own if spec.predict else (0, n, dim))
+        self.last_p: tuple[int, np.ndarray] | None = None
         self.step = -1
         self.leader_now: LeaderState | None = None
         # Since the last recorded instant (a record every few steps would otherwise alias
@@ -649,16 +654,20 @@ class NetworkState:
         :param receivers: the agents whose incoming messages to keep (``None``: all).
         """
         self.step, self.leader_now = k, leader
+        acc = self._acceleration(k, p) if self.spec.predict else None
         if self.spec.model == 'input':
             w = self.spec.max_age + 1
             self.own_q[k % w], self.own_p[k % w] = q, p
+            if acc is not None:
+                self.own_a[k % w] = acc
         rec = np.concatenate([edges.i, edges.j]).astype(np.int64)
         snd = np.concatenate([edges.j, edges.i]).astype(np.int64)
         weight = np.concatenate([edges.weight, edges.weight])
         if receivers is not None:
             keep = receivers[rec]
             rec, snd, weight = rec[keep], snd[keep], weight[keep]
-        self.links.send(k, rec, snd, weight, q.take(snd, axis=0), p.take(snd, axis=0))
+        self.links.send(k, rec, snd, weight, q.take(snd, axis=0), p.take(snd, axis=0),
+                        None if acc is None else acc.take(snd, axis=0))
         if not self.spec.leader.active:
             # Informed agents then use the leader's current state (_combine): nothing to send.
             return
@@ -670,6 +679,14 @@ class NetworkState:
         sent = [np.zeros((0, self.dim))] * 3 if leader is None else \
             [np.broadcast_to(x, (m, self.dim)) for x in (leader.q, leader.p, leader.a)]
         self.leader_links.send(k, lrec, np.full(m, LEADER, dtype=np.int64), np.ones(m), *sent)
+
+    def _acceleration(self, k: int, p: np.ndarray) -> np.ndarray:
+        """Return every agent's acceleration over its last step, ``(p(k) - p(k')) /
+        ((k - k') dt)`` with ``k'`` the step sent before (zero at the first)."""
+        last, self.last_p = self.last_p, (k, p.copy())
+        if last is None:
+            return np.zeros_like(p)
+        return (p - last[1]) / ((k - last[0]) * self.spec.dt)
 
     def control(self, ids: np.ndarray | None, q: np.ndarray, p: np.ndarray,
                 agents: AgentData, dt: float, t: float = 0.0) -> tuple[np.ndarray, dict]:
@@ -727,9 +744,11 @@ class NetworkState:
         law = self.law
         held = self.links.held(self.step, hosted)
         if self.spec.predict:
-            # Each neighbour's state at the current step, at constant velocity (a message
-            # carries no command): q + p a dt, before the neighbours are decided.
-            held = replace(held, q=held.q + held.p * (held.age * self.spec.dt)[:, None])
+            # Each neighbour's state at the current step at the constant acceleration its
+            # message carries: (q + p s + f s^2 / 2, p + f s), s = a dt, before the
+            # neighbours are decided.
+            held = replace(held, **dict(zip('qp', extrapolated(
+                held.q, held.p, held.a, held.age * self.spec.dt))))
         own_q, own_p = self._own(held.receiver, held.age, q, p)
         use = np.ones(held.receiver.size, dtype=bool)
         weight = held.weight
@@ -826,7 +845,8 @@ class NetworkState:
         slot = (self.step - age) % (self.spec.max_age + 1)
         own_q, own_p = self.own_q[slot, receiver], self.own_p[slot, receiver]
         if self.spec.predict:
-            own_q = own_q + own_p * (age * self.spec.dt)[:, None]
+            own_q, own_p = extrapolated(own_q, own_p, self.own_a[slot, receiver],
+                                        age * self.spec.dt)
         return own_q, own_p
 
     def _combine(self, ids, row, q, p, s, agents, dt, fn):
@@ -976,8 +996,22 @@ def predicted_leader(state: LeaderState, s: float) -> LeaderState:
     :param state: the state held.
     :param s: its age [s].
     """
-    return LeaderState(state.q + state.p * s + state.a * (0.5 * s * s), state.p + state.a * s,
-                       state.a)
+    return LeaderState(*extrapolated(state.q, state.p, state.a, s), state.a)
+
+
+def extrapolated(q: np.ndarray, p: np.ndarray, a: np.ndarray, s) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(q + p s + a s^2 / 2, p + a s)``: a state extrapolated by ``s`` seconds at
+    the constant acceleration ``a``.
+
+    :param q: positions, ``(dim,)`` or one row per state.
+    :param p: velocities, as ``q``.
+    :param a: accelerations, as ``q``.
+    :param s: the time [s]: a number, or one per row of ``q``.
+    """
+    s = np.asarray(s, dtype=float)
+    if s.ndim:
+        s = s[:, None]
+    return q + p * s + a * (0.5 * s * s), p + a * s
 
 
 def _scatter(out, members: np.ndarray, part, size: int):
