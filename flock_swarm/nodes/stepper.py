@@ -23,7 +23,6 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from flock_swarm.contract import state_labels, state_slices
-from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.headline import progress_text
@@ -34,9 +33,8 @@ from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.core.run import (LinkObserver, Recorder, RunLog, SimResult, build_summary,
                                   observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
-from flock_swarm.core.summary import with_failure
 from flock_swarm.core.faults import agents_text
-from flock_swarm.engine import BACKENDS
+from flock_swarm.engine.backends import BACKENDS, make_backend
 from flock_swarm.nodes.guard import InputGuard
 from flock_swarm.nodes.inbox import StepInbox
 from flock_swarm.nodes.leader_watch import LeaderWatch, Log
@@ -238,25 +236,10 @@ class WorldStepper:
         self.lockstep = settings.lockstep
         self.real = realize(sc)
         self.static = static_graph(sc, self.real)
-        self.q, self.p = self.real.q0.copy(), self.real.p0.copy()
-        #: The plant (``plant:``; ``None``: the double integrator, today's exact path), its
-        #: state (``q``, ``p`` are what the law sees of it), and the command interface the
-        #: world applies (:attr:`velocity`: the agents' Twists, else their accelerations).
-        self.plant = None if sc.plant.default else sc.plant.model
-        self.x: np.ndarray | None = None
-        if self.plant is not None:
-            self.x = self.plant.initial_state(self.q, self.p)
-            self.q, self.p = self.plant.law_state(self.x)
-        #: The physics engine integrating the robots instead of the plant (``backend``).
-        self.engine = None
-        if settings.backend == 'mujoco':
-            # Imported here: MuJoCo loads only for a world that uses it.
-            from flock_swarm.engine.backend import EngineBackend
-            self.engine = EngineBackend('double_integrator' if self.plant is None
-                                        else self.plant.name, self.x)
-            self.x = self.engine.state()
-            self.q, self.p = self.plant.law_state(self.x)
-            self.contacts_told: set[tuple[int, int]] = set()
+        #: What integrates the agents (:mod:`flock_swarm.engine.backends`: the double
+        #: integrator, the plant model or the physics engine, by the ``backend`` setting).
+        self.world = make_backend(settings.backend, sc, self.real)
+        self.contacts_told: set[tuple[int, int]] = set()
         #: Whether the world applies the agents' velocity commands (``cmd_vel``).
         self.velocity = command_interface(sc, settings.command) == 'cmd_vel'
         # The open step's velocity commands by agent, (linear, angular) rows of 3 (lockstep);
@@ -267,7 +250,6 @@ class WorldStepper:
         # Twist older than the staleness: a zero Twist applied instead).
         self.held_twist_at = np.full(sc.n_agents, -np.inf)
         self.stopped = np.zeros(sc.n_agents, dtype=bool)
-        self.intrinsic = sc.intrinsic.velocity_field() if sc.intrinsic is not None else None
         n = sc.n_agents
         self.k = 0
         self.commands: dict[int, np.ndarray] = {}
@@ -330,6 +312,14 @@ class WorldStepper:
         self.last_step_s = 0.0
         self.t_created = self.t_wall0 = time.monotonic() if now is None else now
         self.t_last_progress = self.t_wall0
+
+    # The backend's state read-out (:attr:`world`).
+    q = property(lambda self: self.world.q, doc='Positions (what the law sees).')
+    p = property(lambda self: self.world.p, doc='Velocities (what the law sees).')
+    x = property(lambda self: self.world.x, doc="The plant's state rows (None: the double "
+                 'integrator).')
+    plant = property(lambda self: self.world.plant, doc='The plant model (None: the double '
+                     "integrator's exact path).")
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -696,7 +686,7 @@ class WorldStepper:
         now = self.run_log.observe(k, k * sc.dt, self.q, self.p, u, leader,
                                    self.real.agents.informed, covered, radius, last,
                                    non_finite_commands=self.non_finite.copy(), **self.state,
-                                   **net, **self.plant_recorded())
+                                   **net, **self.world.recorded())
         if now is not None:
             self.metrics_now = now
         events = self.leader.events
@@ -718,26 +708,20 @@ class WorldStepper:
             if counts is not None:
                 # Of the steps since the previous message (docs/network.md).
                 values.update(self.net_metrics.take(sc.dt))
-            if self.engine is not None:
-                values.update(robot_contacts=len(self.engine.contacts_run),
-                              robot_contacts_this_step=len(self.engine.contacts_step))
+            if self.world.counts_contacts:
+                values.update(robot_contacts=len(self.world.contacts_run),
+                              robot_contacts_this_step=len(self.world.contacts_step))
             problems = ([f'{len(missing)} missing command(s)'] if missing else []) \
                 + ([f'{len(non_finite)} non-finite command(s)'] if non_finite else []) \
                 + (['leader lost'] if self.leader.lost else [])
         return Observation(k, self.q, self.p, u, leader, edges, missing,
                            k % st.marker_every == 0 or last, values, problems, last)
 
-    def plant_recorded(self) -> dict:
-        """Return the plant's state to record (none for the double integrator)."""
-        return {} if self.plant is None else self.plant.recorded(self.x)
-
-    def plant_command(self, u: np.ndarray) -> np.ndarray:
-        """Return the command every plant executes this step: the agents' Twists (a missing
-        or, realtime, stale one: stop), or the conversion of their accelerations ``u``,
-        exactly as ``sim``'s (:meth:`~flock_swarm.core.plants.base.Plant.command` over the
-        step)."""
+    def twist_rows(self) -> np.ndarray | None:
+        """Return the Twist rows the plants execute this step, or ``None``: the world applies
+        the accelerations. A missing (lockstep) or stale (realtime) Twist is a stop (zero)."""
         if not self.velocity:
-            return self.plant.command(self.x, u, self.scenario.dt)
+            return None
         if self.lockstep:
             rows = np.zeros((self.scenario.n_agents, 6))
             for i, row in self.twists.items():
@@ -745,25 +729,21 @@ class WorldStepper:
         else:
             rows = self.held_twist.copy()
             rows[self.stopped] = 0.0
-        return self.plant.from_twist(self.x, rows[:, :3], rows[:, 3:], self.scenario.plant.frame)
+        return rows
 
     def advance(self, u: np.ndarray) -> bool:
-        """Integrate every agent over one step with ``u`` held (the plant under its command,
-        :meth:`plant_command`); return whether the state is still finite."""
-        if self.plant is None:
-            self.q, self.p = step_agents(self.q, self.p, u, self.scenario.dt, self.intrinsic)
-        else:
-            step = self.plant.step if self.engine is None else self.engine.step
-            self.x = step(self.x, self.plant_command(u), self.scenario.dt)
-            self.q, self.p = self.plant.law_state(self.x)
-            if self.engine is not None:
-                self._note_contacts()
+        """Integrate every agent over one step with ``u`` held (the plant under its command:
+        the conversion of ``u``, or the Twists of :meth:`twist_rows`, exactly as ``sim``'s);
+        return whether the state is still finite."""
+        self.world.step(u, self.twist_rows(), self.scenario.dt)
+        if self.world.counts_contacts:
+            self._note_contacts()
         self.k += 1
         return bool(np.isfinite(self.q).all() and np.isfinite(self.p).all())
 
     def _note_contacts(self) -> None:
         """Log the robot pairs that touched in the engine for the first time."""
-        new = self.engine.contacts_run - self.contacts_told
+        new = self.world.contacts_run - self.contacts_told
         if new:
             self.log.warning(f'step {self.k}: robots in contact in the physics engine: '
                              f'{sorted(new)}')
@@ -806,11 +786,7 @@ class WorldStepper:
         """
         log = self.run_log
         series = log.rec.arrays()
-        summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
-                                self.status)
-        if self.failure is not None:
-            summary = with_failure(summary, self.status, self.failure)
-        summary.update({
+        given = {
             'mode': 'lockstep' if self.lockstep else 'realtime',
             'missed_commands': int(self.missed.sum()),
             'missed_commands_per_agent': [int(x) for x in self.missed],
@@ -824,9 +800,14 @@ class WorldStepper:
             'leader_missed': self.leader_missed,
             'wall_time_s': round(now - self.t_wall0, 3),
             'bag': bag,
-        })
-        if self.engine is not None:
-            summary['robot_contacts'] = len(self.engine.contacts_run)
+        }
+        if self.failure is not None:
+            given['failure'] = self.failure
+        if self.world.counts_contacts:
+            given['robot_contacts'] = len(self.world.contacts_run)
+        # Every key through the checked table (core/summary.py), in its order.
+        summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
+                                self.status, **given)
         return SimResult(summary, series)
 
 
