@@ -26,8 +26,15 @@ connects after the start still draws the map (:meth:`LiveServer.latch`).
 A slow or stalled client never stalls the run: ``channel.log`` only queues, the SDK keeps a
 bounded queue per client (``message_backlog_size``) and drops that client's oldest messages
 when it is full, and the bridge subscribes best-effort, so it never holds a writer back.
+
+The SDK's server closes a connection with an empty close frame, which a client reads as
+status 1005 (no status), and its ``stop()`` takes no code (issue 38). So the server listens
+on a loopback port of its own, and the address clients connect to is a relay's
+(:class:`CloseCodeRelay`): it passes the bytes through both ways and gives the server's
+close frame a status, 1001 (going away) when the server stops.
 """
 
+import socket
 import struct
 import threading
 import time
@@ -57,6 +64,19 @@ LIVE_PACE = 1.0
 WATCH_PERIOD = 0.2
 
 
+#: Close status a client sees when the server stops (RFC 6455: "going away").
+CLOSE_GOING_AWAY = 1001
+#: Close status a client sees when the SDK drops it while the server runs (its control
+#: queue overflowed: a client that does not read). IANA: "try again later", an overload.
+CLOSE_TRY_AGAIN_LATER = 1013
+#: The reason sent with each status.
+CLOSE_REASONS = {CLOSE_GOING_AWAY: b'server stopped',
+                 CLOSE_TRY_AGAIN_LATER: b'message backlog full'}
+#: Where the SDK's server listens, behind the relay (:class:`CloseCodeRelay`).
+RELAYED_HOST = '127.0.0.1'
+#: Bytes a relay reads from a socket at a time.
+RELAY_CHUNK = 1 << 16
+
 _NS = 10**9
 _TIME = {0: struct.Struct('>iI'), 1: struct.Struct('<iI')}
 
@@ -83,6 +103,196 @@ def message_stamp_ns(type_name: str, data: bytes) -> int | None:
     return sec * _NS + nanosec
 
 
+def close_frame(code: int) -> bytes:
+    """Return an unmasked WebSocket close frame (server to client) with ``code`` and its
+    reason (:data:`CLOSE_REASONS`)."""
+    payload = struct.pack('>H', code) + CLOSE_REASONS.get(code, b'')
+    return bytes((0x88, len(payload))) + payload
+
+
+class CloseRewriter:
+    """Follows the server-to-client byte stream of one WebSocket connection, frame by frame,
+    and gives an empty close frame (the SDK's) a status code; every other byte passes as is.
+
+    The stream begins with the server's HTTP response to the upgrade; a response other than
+    ``101`` is passed through untouched, and so is everything after it.
+
+    :param code: returns the status to put in an empty close frame, asked when one comes.
+    """
+
+    def __init__(self, code) -> None:
+        """Start before the HTTP response."""
+        self.code = code
+        self.pending = b''  # an incomplete HTTP response or frame header
+        self.skip = 0  # payload bytes of the current frame still to pass
+        self.http = True
+        self.raw = False
+
+    def feed(self, data: bytes) -> bytes:
+        """Return the bytes to send on for ``data``, the next bytes the server sent."""
+        if self.raw:
+            return data
+        if self.pending:
+            data = self.pending + data
+            self.pending = b''
+        out = []
+        pos = 0
+        if self.http:
+            end = data.find(b'\r\n\r\n')
+            if end < 0:
+                self.pending = data
+                return b''
+            self.http = False
+            if not data.startswith(b'HTTP/1.1 101'):
+                self.raw = True
+                return data
+            pos = end + 4
+            out.append(data[:pos])
+        size = len(data)
+        while pos < size:
+            if self.skip:
+                take = min(self.skip, size - pos)
+                out.append(data[pos:pos + take])
+                pos += take
+                self.skip -= take
+                continue
+            if size - pos < 2:
+                self.pending = data[pos:]
+                break
+            first, second = data[pos], data[pos + 1]
+            length = second & 0x7F
+            header = 2 + {126: 2, 127: 8}.get(length, 0) + (4 if second & 0x80 else 0)
+            if size - pos < header:
+                self.pending = data[pos:]
+                break
+            if length == 126:
+                length = int.from_bytes(data[pos + 2:pos + 4], 'big')
+            elif length == 127:
+                length = int.from_bytes(data[pos + 2:pos + 10], 'big')
+            if first == 0x88 and length == 0 and header == 2:
+                out.append(close_frame(self.code()))
+            else:
+                out.append(data[pos:pos + header])
+                self.skip = length
+            pos += header
+        return b''.join(out)
+
+
+class CloseCodeRelay:
+    """A TCP relay in front of the SDK's server: clients connect to its address, each
+    connection is passed to the server on ``upstream`` and its bytes are relayed both ways,
+    the server's through a :class:`CloseRewriter` (a close frame with a status).
+
+    Two daemon threads a connection, which close its sockets once both ways have ended
+    (the client's or the server's close); :meth:`close` waits a bounded time for the server to
+    end each connection and then cuts those that are left (a client that does not read).
+
+    :param host: the address clients connect to.
+    :param port: its TCP port (0: any free port).
+    :param upstream: the SDK server's ``(host, port)``.
+    :raises OSError: when the address cannot be bound.
+    """
+
+    def __init__(self, host: str, port: int, upstream: tuple[str, int]) -> None:
+        """Bind, listen and start accepting."""
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)[0]
+        self.listener = socket.socket(family, kind, proto)
+        try:
+            self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.listener.bind(address)
+            self.listener.listen()
+        except OSError:
+            self.listener.close()
+            raise
+        self.port = self.listener.getsockname()[1]
+        self.upstream = upstream
+        #: Whether the server is stopping (:data:`CLOSE_GOING_AWAY`, else the SDK dropped a
+        #: client: :data:`CLOSE_TRY_AGAIN_LATER`).
+        self.stopping = False
+        self.lock = threading.Lock()
+        #: Open connections: ``(client socket, server socket, relay thread)``.
+        self.connections: list[tuple[socket.socket, socket.socket, threading.Thread]] = []
+        self.acceptor = threading.Thread(target=self._accept, name='foxglove-relay',
+                                         daemon=True)
+        self.acceptor.start()
+
+    def code(self) -> int:
+        """The status of a close frame the server sends now."""
+        return CLOSE_GOING_AWAY if self.stopping else CLOSE_TRY_AGAIN_LATER
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                client, _ = self.listener.accept()
+            except OSError:
+                return  # closed
+            try:
+                server = socket.create_connection(self.upstream)
+            except OSError:
+                client.close()
+                continue
+            for sock in (client, server):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            thread = threading.Thread(target=self._serve, args=(client, server),
+                                      name='foxglove-relay', daemon=True)
+            with self.lock:
+                self.connections.append((client, server, thread))
+            thread.start()
+
+    def _serve(self, client: socket.socket, server: socket.socket) -> None:
+        """Relay one connection both ways until both have ended; then close its sockets."""
+        incoming = threading.Thread(target=self._pipe, args=(client, server, None),
+                                    name='foxglove-relay-in', daemon=True)
+        incoming.start()
+        self._pipe(server, client, CloseRewriter(self.code))
+        incoming.join()
+        with self.lock:
+            self.connections = [c for c in self.connections if c[0] is not client]
+        client.close()
+        server.close()
+
+    @staticmethod
+    def _pipe(source: socket.socket, sink: socket.socket,
+              rewriter: CloseRewriter | None) -> None:
+        """Relay ``source`` to ``sink`` until ``source`` ends; then end ``sink``'s writing."""
+        try:
+            while True:
+                data = source.recv(RELAY_CHUNK)
+                if not data:
+                    break
+                if rewriter is not None:
+                    data = rewriter.feed(data)
+                sink.sendall(data)
+        except OSError:
+            pass  # a connection reset, or cut by close()
+        try:
+            sink.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass
+
+    def close(self, timeout: float) -> None:
+        """Stop accepting; wait at most ``timeout`` s for the connections to end, then cut
+        those left (a client that does not read)."""
+        try:
+            self.listener.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self.listener.close()
+        deadline = time.monotonic() + timeout
+        with self.lock:
+            connections = list(self.connections)
+        for _, _, thread in connections:
+            thread.join(max(0.0, deadline - time.monotonic()))
+        for client, server, thread in connections:
+            for sock in (client, server):
+                try:
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass  # closed already
+            thread.join(1.0)
+
+
 class LiveServer:
     """A Foxglove WebSocket server whose channels take CDR bytes of ROS 2 messages.
 
@@ -103,6 +313,7 @@ class LiveServer:
         self.context = foxglove.Context()
         self.channels: dict[str, object] = {}
         self.time_ns = -1
+        self.closed = False
         #: The latched topics and their last message ``(bytes, t_ns)`` (None: none yet).
         self.latched: dict[str, tuple[bytes, int] | None] = {}
         #: Set once a client has subscribed to a channel (:meth:`wait_for_viewer`).
@@ -119,19 +330,27 @@ class LiveServer:
                 viewer.set()
                 resend(channel.topic)
         try:
+            # The SDK's server on a loopback port of its own; clients reach it through the
+            # relay on the address asked for (its close frames with a status).
             self.server = foxglove.start_server(
-                name=SERVER_NAME, host=host, port=port, context=self.context,
+                name=SERVER_NAME, host=RELAYED_HOST, port=0, context=self.context,
                 capabilities=[foxglove.Capability.Time], message_backlog_size=backlog,
                 server_listener=Listener())
         except RuntimeError as exc:
-            raise OSError(f'cannot serve on {host}:{port}: {" ".join(str(exc).split())}'
+            raise OSError(f'cannot serve on {RELAYED_HOST}:0: {" ".join(str(exc).split())}'
                           ) from None
+        try:
+            self.relay = CloseCodeRelay(host, port, (RELAYED_HOST, self.server.port))
+        except OSError as exc:
+            self.server.stop()
+            reason = exc.strerror or ' '.join(str(exc).split())
+            raise OSError(f'cannot serve on {host}:{port}: {reason}') from None
         self.host = host
 
     @property
     def port(self) -> int:
-        """The TCP port the server listens on."""
-        return self.server.port
+        """The TCP port clients connect to (the relay's)."""
+        return self.relay.port
 
     @property
     def url(self) -> str:
@@ -234,15 +453,22 @@ class LiveServer:
         The SDK's ``stop`` waits until every client has closed its connection: a client that
         does not read never sees the close frame and holds it up for as long as the client's
         own keepalive takes (47 s with ``websockets``' defaults, measured). So ``stop`` runs
-        in a daemon thread, left behind after ``timeout``: a ``swarm`` or ``replay`` ends on
-        time whatever its clients do (the process's exit ends the thread).
+        in a daemon thread, and the relay cuts the connections still open after ``timeout``:
+        a ``swarm`` or ``replay`` ends on time whatever its clients do. A client that reads
+        sees the close frame with status :data:`CLOSE_GOING_AWAY` (the relay's).
         """
+        if self.closed:
+            return
+        self.closed = True
+        deadline = time.monotonic() + timeout
+        self.relay.stopping = True
         for channel in self.channels.values():
             channel.close()
         self.channels = {}
         stopper = threading.Thread(target=self.server.stop, name='foxglove-stop', daemon=True)
         stopper.start()
         stopper.join(timeout)
+        self.relay.close(max(0.0, deadline - time.monotonic()))
 
     def __enter__(self) -> 'LiveServer':
         """Return the server."""

@@ -25,7 +25,9 @@ from foxglove_client import FoxgloveClient, SUBPROTOCOL
 from flock_swarm.bag.msgdefs import message_definition
 from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.contract import contract_topics
-from flock_swarm.foxglove_ws import CLOSE_TIMEOUT, LiveServer, message_stamp_ns, start_live
+from flock_swarm.foxglove_ws import (CLOSE_GOING_AWAY, CLOSE_REASONS, CLOSE_TIMEOUT,
+                                     CloseRewriter, LiveServer, close_frame, message_stamp_ns,
+                                     start_live)
 from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, unique_domain
 
 pytestmark = pytest.mark.ros
@@ -44,6 +46,8 @@ CONTRACT = {'/clock': 'rosgraph_msgs/msg/Clock',
 RUN = [f'n_agents={N}', 'informed.count=1', 'duration=1']
 #: Wall-clock bound of a run, a connection or a playback [s].
 TIMEOUT = 60.0
+#: The close status and reason a client sees when the server stops.
+GOING_AWAY = (CLOSE_GOING_AWAY, CLOSE_REASONS[CLOSE_GOING_AWAY].decode())
 
 
 def bag_messages(bag: Path) -> tuple[dict, dict]:
@@ -215,9 +219,11 @@ def test_replay_serves_the_bag(recorded, ros_domain):
         decoders = check_advertised(client, bag_messages(bag)[1])
         client.pump_until(lambda: {t for t, _, _ in client.messages} >= set(CONTRACT),
                           TIMEOUT, 'a message on every topic')
-        client.close()
-        check_received(client, bag, decoders)
         proc.send_signal(signal.SIGINT)
+        # Still connected: the replay's end closes the connection with a status.
+        assert not client.pump(TIMEOUT)
+        assert (client.ws.close_code, client.ws.close_reason) == GOING_AWAY
+        check_received(client, bag, decoders)
         proc.stderr.read()
         assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
     finally:
@@ -252,7 +258,11 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
         client.close()
         decoders = check_advertised(client, bag_messages(bag)[1])
         check_received(client, bag, decoders, wire=True)
+        watcher = FoxgloveClient(found.group(2))
         proc.send_signal(signal.SIGINT)
+        # A client connected when the node stops sees the connection closed with a status.
+        assert not watcher.pump(TIMEOUT)
+        assert (watcher.ws.close_code, watcher.ws.close_reason) == GOING_AWAY
         assert proc.wait(timeout=TIMEOUT) == EXIT_INTERRUPTED
         assert 'Traceback' not in proc.stderr.read()
     finally:
@@ -264,11 +274,14 @@ def test_foxglove_server_bridges_a_run_started_node_by_node(tmp_path, ros_domain
 @pytest.mark.parametrize('layout', [[], ['--processes', '--container']])
 def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
     """``swarm --foxglove 0``: one process (the world's recorded bytes), or three processes
-    (a bridge node in the runner's process); a client that connects on the announcement."""
+    (a bridge node in the runner's process); a client that connects on the announcement,
+    and sees the connection closed with status 1001 when the run is over (issue 38: 1005,
+    no status). 20 s of simulation paced at 10 (at least 2 s, time to connect): a viewer of
+    every channel would pace a one-process run to real time (20 s)."""
     out = tmp_path / 'run'
     command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=20',
                                      '--out', str(out), '--no-plots', '--foxglove', '0',
-                                     '--domain-id', str(ros_domain), *layout]
+                                     '--pace', '10', '--domain-id', str(ros_domain), *layout]
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
@@ -276,7 +289,8 @@ def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
         # Every channel was there before the announcement: the first advertisement has all.
         assert set(CONTRACT) <= set(client.advertise_ops[0]), client.advertise_ops
         # The client reads until the run is over and the server has gone.
-        client.pump(TIMEOUT)
+        assert not client.pump(TIMEOUT)
+        assert (client.ws.close_code, client.ws.close_reason) == GOING_AWAY
         assert proc.wait(timeout=TIMEOUT) == 0
         log = proc.stderr.read()
         assert 'Traceback' not in log, log
@@ -334,11 +348,11 @@ def test_a_stalled_client_does_not_stall_the_world(tmp_path, ros_domain):
     finally:
         started = time.monotonic()
         live.close()
-        # The client never saw the close frame; the server is left to stop on its own.
+        # The client never read the close frame: the relay cut its connection at the bound.
         closing = time.monotonic() - started
     sent = sum(len(v) for (topic, _), v in bag_messages(bag)[0].items()
                if not topic.endswith('/swarm/scenario'))  # recorded, not served
-    stalled.pump(2.0)
+    assert not stalled.pump(2.0)  # what it holds, then the cut connection
     stalled.close()
     assert summary['steps'] == 1500
     assert closing < CLOSE_TIMEOUT + 1.0
@@ -529,6 +543,46 @@ def test_swarm_ends_within_the_close_bound_after_a_client_closed(tmp_path, ros_d
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_a_client_sees_the_server_stop_with_status_1001():
+    """Issue 38: the SDK closes with an empty close frame (a client reads 1005, no status)
+    and its ``stop()`` takes no code. Through the relay a reading client sees 1001 (going
+    away) with a reason, and what it sends still reaches the server (its subscription)."""
+    with start_live(port=0) as live:
+        live.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+        client = subscribed_client(live.url, ['/clock'])
+        wait_for(lambda: live.watched, TIMEOUT, 'the subscription to reach the server')
+        live.write('/clock', b'\x00\x01\x00\x00' + bytes(8), 5)
+        client.pump_until(lambda: client.messages, TIMEOUT, 'the message')
+        reader = threading.Thread(target=client.pump, args=(TIMEOUT,))
+        reader.start()
+        started = time.monotonic()
+        live.close()
+        closing = time.monotonic() - started
+        reader.join(TIMEOUT)
+    assert client.messages == [('/clock', 5, b'\x00\x01\x00\x00' + bytes(8))]
+    assert client.closed and (client.ws.close_code, client.ws.close_reason) == GOING_AWAY
+    assert closing < CLOSE_TIMEOUT
+
+
+def test_the_close_rewriter_gives_only_an_empty_close_frame_a_status():
+    """The relay follows the server's frames across any split of the stream: the HTTP
+    response, frames of 7-, 16- and 64-bit lengths (a payload that looks like a close frame
+    included) pass byte for byte; only the SDK's empty close frame gets the status."""
+    response = b'HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\n\r\n'
+    frames = [b'\x81\x05hello', b'\x82\x7e\x01\x2c' + b'\x88\x00' * 150,
+              b'\x82\x7f' + (70000).to_bytes(8, 'big') + bytes(70000), b'\x89\x00']
+    stream = response + b''.join(frames) + b'\x88\x00'
+    expected = response + b''.join(frames) + close_frame(CLOSE_GOING_AWAY)
+    assert close_frame(CLOSE_GOING_AWAY) == b'\x88\x10\x03\xe9server stopped'
+    for size in (1, 3, 7, 1000, len(stream)):
+        rewriter = CloseRewriter(lambda: CLOSE_GOING_AWAY)
+        out = b''.join(rewriter.feed(stream[i:i + size]) for i in range(0, len(stream), size))
+        assert out == expected, size
+    # A refused upgrade is not WebSocket: passed as it is.
+    refused = b'HTTP/1.1 400 Bad Request\r\n\r\n\x88\x00'
+    assert CloseRewriter(lambda: CLOSE_GOING_AWAY).feed(refused) == refused
 
 
 #: A sphere far from the demo's agents: the run has an obstacle map and flies as before.
