@@ -523,6 +523,35 @@ def test_cli_bad_input_is_one_line_and_status_2(tmp_path, args, message):
     assert 'Traceback' not in proc.stderr and proc.stdout == ''
 
 
+def test_clock_beside_a_run_started_by_hand_is_refused_in_one_line(tmp_path, ros_domain):
+    """Issue 38: ``replay --clock`` beside a run started by hand (``ros2 run`` of each node,
+    not ``swarm``, so no domain lock) played on, and the domain had two /clock publishers
+    (a running world only logs the second one). The player now looks on the ROS graph
+    before its first tick and refuses with one line, status 2; the run goes on."""
+    from test_node_stops import SMALL, reap, start_all
+    from flock_swarm.testing import wait_for
+    bag = write_bag(tmp_path / 'bag')
+    out = tmp_path / 'run'
+    scenario = resolve_scenario('demo', SMALL + ['duration=1000'], None, out)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    procs = start_all(scenario, out, env, tmp_path, agents=2)
+    log = tmp_path / 'node3.log'  # the world's
+    try:
+        # Its first progress line comes after two seconds of stepping.
+        wait_for(lambda: '[world]: t = ' in log.read_text(), 60.0, "the world's progress")
+        proc = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.replay', str(bag),
+                               '--clock'], capture_output=True, text=True, timeout=60, env=env)
+        running = [p.poll() for p in procs]
+    finally:
+        reap(procs)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr == (
+        f'replay: error: ROS_DOMAIN_ID: another node publishes /clock on domain {ros_domain} '
+        '(nodes: /world): --clock would make a second clock; give each run a domain of its '
+        'own\n')
+    assert running == [None] * 4
+
+
 @pytest.mark.parametrize('topic, hint', [
     ('/leader/odm', 'did you mean /leader/odom?'),
     ('leader/odom', 'did you mean /leader/odom?'),

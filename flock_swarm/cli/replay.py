@@ -13,9 +13,11 @@ of the bag; with ``--foxglove`` the replayed messages are also served over the F
 WebSocket protocol (:mod:`flock_swarm.foxglove_ws`).
 
 Invalid input (a missing path, a file that is not a bag, ``--rate 0``, a bad regular
-expression, a topic the bag does not have) prints one line ``replay: error: ...`` and exits
-with status 2. Ctrl-C (or SIGTERM, SIGHUP) stops the playback and exits with the signal's
-status (130, 143, 129: :data:`~flock_swarm.console.EXIT_SIGNAL`). See ``docs/replay.md``.
+expression, a topic the bag does not have; with ``--clock``, a domain held by a run of this
+machine or one where another node publishes ``/clock``, a world started by hand say) prints
+one line ``replay: error: ...`` and exits with status 2. Ctrl-C (or SIGTERM, SIGHUP) stops
+the playback and exits with the signal's status (130, 143, 129:
+:data:`~flock_swarm.console.EXIT_SIGNAL`). See ``docs/replay.md``.
 """
 
 import argparse
@@ -27,7 +29,7 @@ from flock_swarm.bag import BagError
 from flock_swarm.console import (claim_domain, DomainBusy, EXIT_FAILURE, EXIT_USAGE,
                                  OneLineParser, StopSignals)
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
-from flock_swarm.nodes.player import Player, ReplayError
+from flock_swarm.nodes.player import ClockTaken, Player, ReplayError
 from flock_swarm.nodes.spin import middleware_defaults
 
 
@@ -99,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         _check_bounds(args)
         # A replay --clock drives a world's clock: held like a swarm's domain, so that it
-        # is refused beside a running swarm and a swarm is refused beside it.
+        # is refused beside a running swarm and a swarm is refused beside it. A world
+        # started by hand holds no lock: the player looks for its /clock on the graph.
         domain = _environment_domain()
         held = claim_domain(domain, 'replay --clock') if args.clock else None
     except (ReplayError, DomainBusy) as exc:
@@ -177,7 +180,8 @@ def _play(args: argparse.Namespace, argv: list[str]) -> int:
         print(f'replay: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
     except (BagError, ReplayError) as exc:
-        status = EXIT_USAGE if player is None else EXIT_FAILURE
+        # Another /clock on the domain is invalid input, found once the player looked.
+        status = EXIT_USAGE if player is None or isinstance(exc, ClockTaken) else EXIT_FAILURE
         print(f'replay: error: {exc}', file=sys.stderr)
         return status
     except KeyboardInterrupt:

@@ -57,6 +57,11 @@ MAX_WAIT = 0.05
 #: publishers have changed for DISCOVERY_QUIET s; all within ``--wait-timeout``.
 DISCOVERY_MIN = 1.0
 DISCOVERY_QUIET = 0.5
+#: With ``clock``, the player looks on the ROS graph for another ``/clock`` publisher for at
+#: least DISCOVERY_MIN s after its publishers were made, before its first tick, whatever
+#: ``wait_timeout`` says, and refuses to play beside one (:class:`ClockTaken`).
+#: How a publisher whose node discovery has not named yet is listed.
+UNNAMED = 'a node not yet named'
 #: Final stretch (s) of a wait that is slept rather than spent in the executor: rcl's wait
 #: overshoots its timeout by up to ~3.5 ms now and then on these machines, time.sleep by ~0.1 ms.
 SLEEP_MARGIN = 0.005
@@ -78,6 +83,12 @@ class ReplayError(ValueError):
         super().__init__(f'{option}: {reason}')
         self.option = option
         self.reason = reason
+
+
+class ClockTaken(ReplayError):
+    """``--clock`` on a domain where another node publishes ``/clock`` (a world started by
+    hand, another replay): two clocks would make simulation time jump. Invalid input, as a
+    domain held by a run of this machine is (exit status 2)."""
 
 
 @dataclass
@@ -449,18 +460,57 @@ class Player(Node):
             self._executor = None
         return result
 
+    def other_clocks(self) -> list[str]:
+        """Return the nodes (fully qualified) that publish ``/clock`` besides this player's
+        ``--clock`` publisher, as discovery shows them now (``[]``: none, or no ``--clock``).
+        """
+        if self._clock_pub is None or self.count_publishers(CLOCK_TOPIC) <= 1:
+            return []
+        names = [f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                 for i in self.get_publishers_info_by_topic(CLOCK_TOPIC)]
+        own = f'{self.get_namespace().rstrip("/")}/{self.get_name()}'
+        if own in names:
+            names.remove(own)
+        return sorted(name if not name.split('/')[-1].startswith('_NODE_NAME_UNKNOWN')
+                      else UNNAMED for name in names)
+
+    def _check_clock(self, final: bool) -> None:
+        """Refuse to play beside another ``/clock`` publisher.
+
+        :param final: refuse now even if the node of a publisher is not named yet
+            (discovery names a node a little after its publishers).
+        :raises ClockTaken: when discovery shows one.
+        """
+        others = self.other_clocks()
+        if others and (final or UNNAMED not in others):
+            raise ClockTaken('ROS_DOMAIN_ID', (
+                f'another node publishes {CLOCK_TOPIC} on domain {self.context.get_domain_id()} '
+                f'(nodes: {", ".join(others)}): --clock would make a second clock; give each '
+                'run a domain of its own'))
+
     def _wait_for_subscribers(self) -> bool:
         """Wait until a topic has the subscribers asked for and discovery has settled (see
-        :class:`Player`'s ``wait_subscribers``); return whether the subscribers came."""
+        :class:`Player`'s ``wait_subscribers``); return whether the subscribers came.
+
+        With ``clock``, the wait lasts DISCOVERY_MIN s at least and looks for another
+        ``/clock`` publisher all along.
+
+        :raises ClockTaken: when another node publishes ``/clock``.
+        """
         publishers = list(self._topic_pubs.values())
         if self._clock_pub is not None:
             publishers.append(self._clock_pub)
         needed = self._wait_subscribers
         start = time.monotonic()
         deadline = start + self._wait_timeout
+        if self._clock_pub is not None:
+            deadline = max(deadline, self._created + DISCOVERY_MIN)
         seen, changed = None, start
         while not self._stop.is_set():
             now = time.monotonic()
+            if self._clock_pub is not None:
+                # Every return below comes at DISCOVERY_MIN or later: checked finally then.
+                self._check_clock(final=now >= self._created + DISCOVERY_MIN)
             counts = [pub.get_subscription_count() for pub in publishers]
             graph = (counts, sorted(self.get_node_names_and_namespaces()))
             if graph != seen:
