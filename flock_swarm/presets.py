@@ -167,6 +167,20 @@ class StepError(ScenarioError):
         self.violations = violations
 
 
+def reread(data: Mapping[str, Any]) -> Scenario:
+    """Return the scenario of a mapping :func:`prepare` prepared before, read back: a run's
+    resolved scenario file, a bag's recorded scenario, a planned sweep run.
+
+    Validated (:func:`~flock_swarm.core.scenario.parse_scenario`), not checked again: its
+    law-output and step-size checks passed, or ``--allow-unstable`` waived them, when it was
+    prepared. Beside :func:`load` (values read, nothing run), the one named way around
+    :func:`prepare` (docs/architecture.md, "Where each fact lives").
+
+    :param data: the prepared scenario's mapping (``Scenario.raw``; not modified).
+    """
+    return parse_scenario(copy.deepcopy(dict(data)))
+
+
 def prepare(scenario: str | os.PathLike | Mapping[str, Any], overrides: Iterable[str] = (),
             seed: int | None = None, *, extra: Mapping[str, Any] | None = None,
             allow_unstable: bool = False) -> tuple[Scenario, Realization]:

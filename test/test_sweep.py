@@ -483,6 +483,20 @@ def test_scenario_errors_name_the_point():
         plan_runs(spec)
 
 
+def test_every_seed_is_prepared_as_the_first_is(tmp_path, capsys):
+    """Each seed's realisation goes through presets.prepare: a seed whose own Barabasi-Albert
+    graph puts dt beyond the step bound is refused, naming it (only the first seed's was
+    checked; the others' scenarios were re-parsed without the checks)."""
+    spec = {'scenario': 'zhou2012_sec52', 'seeds': [1, 2, 7],
+            'set': {'n_agents': 20, 'duration': 0.1, 'informed.count': 2,
+                    'graph': {'type': 'barabasi_albert', 'm0': 2, 'm': 1}},
+            'grid': {'dt': [0.0012, 0.0024]}}
+    assert len(plan_runs(parse_spec({**spec, 'seeds': [1, 2]}))) == 4
+    line = sweep_error(tmp_path, capsys, spec)
+    assert line.startswith('sweep: error: dt=0.0024, seed=7: dt: '), line
+    assert len(plan_runs(parse_spec(spec), allow_unstable=True)) == 6
+
+
 # --------------------------------------------------------------------------------------------
 # Issue 24: bounded inputs, no silent acceptance
 

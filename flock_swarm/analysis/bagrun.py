@@ -25,9 +25,10 @@ from flock_swarm.bag import BagError, BagMessage, BagReader
 from flock_swarm.bag.reader import UndecodableMessage
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.network import STATISTICS
-from flock_swarm.core.scenario import Scenario, parse_scenario, realize
+from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.wire import (decode_accel, decode_odometry_state, decode_state,
                                     MalformedMessage, POSE_BYTES)
+from flock_swarm.presets import reread
 from flock_swarm.scenario_yaml import parse_yaml
 
 #: Name of the MCAP metadata record in which the world node stores the scenario as run.
@@ -282,7 +283,7 @@ def _stored_scenario(reader: BagReader, notes: list[str]
     plugin = None
     try:
         data = json.loads(meta['scenario'])
-        return parse_scenario(data), meta, None
+        return reread(data), meta, None
     except KeyError:
         reason = 'no scenario key'
     except json.JSONDecodeError as exc:

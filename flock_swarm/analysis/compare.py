@@ -177,7 +177,7 @@ def verify_run(run: RunData, tolerance: float = VERIFY_TOLERANCE,
     :raises AnalyzeError: if the bag has no scenario.
     """
     from flock_swarm.core.run import simulate
-    from flock_swarm.core.scenario import parse_scenario
+    from flock_swarm.presets import reread
 
     check_verifiable(run)
     sc = run.scenario
@@ -185,7 +185,7 @@ def verify_run(run: RunData, tolerance: float = VERIFY_TOLERANCE,
     last = int(run.steps[-1])
     if last < sc.steps:
         data['duration'] = max(last, 1) * sc.dt
-    ref = parse_scenario(data)
+    ref = reread(data)
     # Every step's state, taken as sim steps (its metrics only at its recorded instants,
     # as sim computes them: recording every step cost more than the simulation).
     states = {'q': np.empty((ref.steps + 1, ref.n_agents, ref.dim)),

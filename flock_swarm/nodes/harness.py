@@ -186,10 +186,11 @@ def resolve_scenario(name: str, overrides: Iterable[str], seed: int | None, out:
 
 
 def read_scenario(path: Path) -> Scenario:
-    """Return the validated scenario of a resolved scenario file."""
-    from flock_swarm.core.scenario import parse_scenario
+    """Return the validated scenario of a resolved scenario file (prepared when it was
+    written: :func:`~flock_swarm.presets.reread`)."""
+    from flock_swarm.presets import reread
     from flock_swarm.scenario_yaml import parse_yaml
-    return parse_scenario(parse_yaml(Path(path).read_text()))
+    return reread(parse_yaml(Path(path).read_text()))
 
 
 def node_parameters(scenario: Path, mode: str, realtime_factor: float,

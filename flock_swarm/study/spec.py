@@ -7,7 +7,6 @@ layout. See ``docs/sweeps.md`` for the format; :func:`parse_spec` checks all of 
 :func:`plan_runs` resolves and validates every run's scenario, before any run starts.
 """
 
-import copy
 import dataclasses
 import hashlib
 import itertools
@@ -23,7 +22,7 @@ from flock_swarm.core import summary
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.run import stack_mismatch
-from flock_swarm.core.scenario import MAX_SEED, Scenario, parse_scenario
+from flock_swarm.core.scenario import MAX_SEED, Scenario
 from flock_swarm.scenario_yaml import read_yaml_file
 from flock_swarm.study.expr import Expression, ExpressionError
 
@@ -132,8 +131,9 @@ class Run:
         return self.n_agents * self.steps
 
     def scenario(self) -> Scenario:
-        """Return the run's validated scenario."""
-        return parse_scenario(copy.deepcopy(self.data))
+        """Return the run's validated scenario (prepared when it was planned)."""
+        from flock_swarm.presets import reread
+        return reread(self.data)
 
 
 def timed_column(metric: str, t: float) -> str:
@@ -551,7 +551,7 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False,
         sweep (planning checks each point's scenario: about 3 ms a point).
     :raises ScenarioError: naming the point and the key a scenario rejects.
     """
-    from flock_swarm.presets import StepError, load_mapping, prepare, set_values
+    from flock_swarm.presets import load_mapping, prepare, set_values
     base = load_mapping(spec.scenario)
     try:
         base = set_values(base, dict(spec.fixed))
@@ -564,16 +564,8 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False,
             say(f'[sweep] planning: {number}/{len(todo)} points checked')
         values = point_values(spec, point)
         where = ', '.join(f'{k}={v!r}' for k, v in point.items())
-        try:
-            sc, _ = prepare(base, spec.overrides, spec.seeds[0], extra=values,
-                            allow_unstable=allow_unstable)
-        except StepError as exc:
-            raise ScenarioError(where or 'dt', f'dt: {exc.reason} (sweep --allow-unstable '
-                                'runs it anyway)') from None
-        except ScenarioError as exc:
-            if exc.key in ('scenario', '--set'):
-                raise
-            raise ScenarioError(where or 'set', str(exc)) from None
+        sc = _prepared(where, lambda: prepare(base, spec.overrides, spec.seeds[0],
+                                              extra=values, allow_unstable=allow_unstable))
         _law_metrics(spec.metrics, sc)
         for t in spec.times:
             if t > sc.duration + 0.5 * sc.dt:
@@ -587,10 +579,30 @@ def plan_runs(spec: SweepSpec, allow_unstable: bool = False,
         for k in order:
             point, first = resolved[k]
             data = dict(first.raw, seed=seed)
-            sc = parse_scenario(copy.deepcopy(data))
+            # Each further seed is a realisation of its own: prepared (and so checked: the
+            # law's output at its initial state, the step size) like the first.
+            sc = first if seed == spec.seeds[0] else _prepared(
+                ', '.join([*(f'{key}={value!r}' for key, value in point.items()),
+                           f'seed={seed}']),
+                lambda: prepare(data, seed=seed, allow_unstable=allow_unstable))
             runs.append(Run(point, seed, data, scenario_digest(sc), sc.n_agents, sc.steps,
                             stack_key(sc)))
     return runs
+
+
+def _prepared(where: str, prepare: Callable[[], tuple[Scenario, Any]]) -> Scenario:
+    """Return the scenario of one run as :func:`~flock_swarm.presets.prepare` prepares it,
+    an error naming the run (its point, ``where``) and the key."""
+    from flock_swarm.presets import StepError
+    try:
+        return prepare()[0]
+    except StepError as exc:
+        raise ScenarioError(where or 'dt', f'dt: {exc.reason} (sweep --allow-unstable '
+                            'runs it anyway)') from None
+    except ScenarioError as exc:
+        if exc.key in ('scenario', '--set'):
+            raise
+        raise ScenarioError(where or 'set', str(exc)) from None
 
 
 def _law_metrics(metrics: tuple[str, ...], sc: Scenario) -> None:
