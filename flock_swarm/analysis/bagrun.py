@@ -26,6 +26,7 @@ from flock_swarm.bag.reader import UndecodableMessage
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.network import STATISTICS
 from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.nodes.recording import END_RECORD
 from flock_swarm.nodes.wire import (decode_accel, decode_odometry_state, decode_state,
                                     MalformedMessage, POSE_BYTES)
 from flock_swarm.presets import reread
@@ -132,6 +133,9 @@ class RunData:
     warning: str | None = None
     #: Whether a file of the bag was cut or not closed (its warning says how).
     recovered: bool = False
+    #: How the world said the run ended (the bag's ``flock_swarm_end`` record: ``status``,
+    #: ``failure``), or ``None``: a bag of an older world, or of a world that was killed.
+    end: dict[str, str] | None = None
     #: Facts about how the bag was read (fallbacks, skipped steps), one line each.
     notes: list[str] = field(default_factory=list)
     #: Whether the bag says which agents are informed (no scenario anywhere: ``False``).
@@ -797,7 +801,7 @@ def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,
         has_leader=topics.leader_odom is not None, warning=reader.warning, notes=notes,
         incomplete_steps=incomplete, state=state, recovered=reader.recovered,
         informed_known=informed_known, network_at=network_at, plant_state=plant_state,
-        last_observed=last_observed)
+        last_observed=last_observed, end=reader.metadata(END_RECORD))
 
 
 def _odometry_table(parts: dict[int, list[tuple[np.ndarray, np.ndarray]]], n: int

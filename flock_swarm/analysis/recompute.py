@@ -92,6 +92,9 @@ def _status(run: RunData) -> str:
     # only the index is lost), as docs/analysis.md says: the bag is not as the world wrote it.
     if run.recovered:
         return 'truncated'
+    if run.end is not None and run.end.get('status'):
+        # The world recorded how its run ended (failed with its line, interrupted...).
+        return run.end['status']
     if run.scenario is not None and run.steps[-1] >= run.scenario.steps:
         return 'completed'
     if run.warning is not None:
@@ -116,7 +119,11 @@ def summarize(run: RunData, series: dict[str, np.ndarray], metrics: RunMetrics) 
         'non_finite_commands_per_agent': [int(x) for x in np.bincount(
             [i for ids in run.non_finite_at.values() for i in ids],
             minlength=run.n_agents)]}
-    return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), _status(run)),
+    status = _status(run)
+    if run.end is not None and status == run.end.get('status') and 'failure' in run.end:
+        # The world's line, as its summary has it.
+        counted['failure'] = run.end['failure']
+    return summary_of(SummaryInputs(facts, series, metrics, int(run.steps[-1]), status),
                       mode=run.mode,
                       missed_commands=int(sum(run.missed_commands_per_agent)),
                       missed_commands_per_agent=run.missed_commands_per_agent,

@@ -227,8 +227,8 @@ SUMMARY_KEYS: tuple[SummaryKey, ...] = (
        lambda x: x.status),
     _K('failure', PROVENANCE, 'status `failed` or `recording_failed`: the one line telling '
        'the fault (the law or leader model by its entry point, or the node, with the agent '
-       'and the step; or the file that could not be written); absent otherwise',
-       writers=(SIM, WORLD)),
+       'and the step; or the file that could not be written; `analyze`: as the world '
+       'recorded it in the bag); absent otherwise'),
     _K('flock_swarm_version', PROVENANCE, 'the package version that ran it',
        lambda x: __version__),
     _K('pseudo_leader_certificate', PROVENANCE, 'Zhou\'s Theorem 1 certificate '

@@ -67,6 +67,25 @@ def provenance(sc: Scenario, real: Realization, mode: str) -> dict[str, str]:
     }
 
 
+#: The MCAP metadata record in which the world records how its run ended (``status``, and
+#: ``failure`` for a failed run): ``analyze`` reports that status, not one guessed from the
+#: steps the bag holds.
+END_RECORD = 'flock_swarm_end'
+
+
+def end_record(status: str, failure: str | None, steps: int) -> dict[str, str]:
+    """Return the world's end as the bag's :data:`END_RECORD` holds it.
+
+    :param status: how the run ended (``completed``, ``failed``, ``interrupted``...).
+    :param failure: the line telling why it failed, or ``None``.
+    :param steps: the last step reached.
+    """
+    record = {'status': status, 'steps': str(steps)}
+    if failure is not None:
+        record['failure'] = failure
+    return record
+
+
 def _is_provenance(topic: str) -> bool:
     """Whether ``topic`` (absolute, in any namespace) is the run's ``/swarm/scenario`` or its
     ``/swarm/obstacles``: what the world records at its start, before the run."""
@@ -210,6 +229,17 @@ class BagSink:
                 bag.abandon()
         finally:
             shutil.rmtree(self.path, ignore_errors=True)
+
+    def record_end(self, status: str, failure: str | None, steps: int) -> None:
+        """Record how the run ended (:data:`END_RECORD`) after what is queued; a bag that
+        can no longer be written says nothing (its error is told already)."""
+        self.flush()
+        if self.bag is None:
+            return
+        try:
+            self.bag.add_metadata(END_RECORD, end_record(status, failure, steps))
+        except OSError as exc:
+            self._fail(exc)
 
     def close(self) -> None:
         """Write what is queued, finalise the bag (MCAP summary and ``metadata.yaml``).

@@ -100,6 +100,10 @@ class WorldEnd:
             self.get_logger().warning(
                 f'the run ended ({self.stepper.status}) before its first step: nothing was '
                 f'recorded, no bag written; {self.out / "summary.json"} says so')
+        st = self.stepper
+        if recorded:
+            # The run's end in the bag, for analyze (its status and failure line).
+            self.bag.record_end(st.status, st.failure, st.k)
         result = self.stepper.result(time.monotonic(), self.guard.counts(),
                                      sorted(self.duplicates), self.bag_error,
                                      str(self.out / 'bag') if recorded else None)

@@ -1,0 +1,86 @@
+"""The world records how its run ended in the bag, and ``analyze`` reports it (issue 38).
+
+A failed run (an agent's law gave a non-finite command), a run stopped mid-way and a
+completed one, each flown by the real nodes in one process on a real DDS domain; the bag is
+read back with the package's reader and analysed by the real ``analyze`` command. Before,
+``analyze`` guessed the status from the steps the bag holds and called the failed run
+``interrupted``.
+"""
+
+import json
+
+import pytest
+
+from flock_swarm.bag import BagReader
+from flock_swarm.cli.analyze import main as analyze_main
+from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+from flock_swarm.nodes.recording import END_RECORD
+from broken_law import nan_command_for
+
+#: Wall-clock bound of one run (a hung run fails instead of blocking the suite).
+RUN_TIMEOUT = 120.0
+#: A small run of the demo preset (25 steps of 0.02 s).
+SETS = ['n_agents=4', 'informed.count=2', 'duration=0.5', 'record_every=1']
+
+
+def summary_of(out):
+    """Return the ``summary.json`` in ``out``."""
+    return json.loads((out / 'summary.json').read_text())
+
+
+def analysed(tmp_path, out):
+    """Run ``analyze`` on the bag of the run in ``out``; return its summary."""
+    where = tmp_path / f'{out.name}_analysis'
+    assert analyze_main([str(out / 'bag'), '--out', str(where), '--no-anim', '--quiet']) == 0
+    return summary_of(where)
+
+
+@pytest.mark.ros
+def test_analyze_of_a_failed_run_says_failed_with_the_worlds_line(
+        tmp_path, ros_domain, monkeypatch):
+    """Agent 1's law gives NaN from step 5 on: the world ends the run ``failed`` with one
+    line, records that end in the bag, and ``analyze`` of the bag reports ``failed`` with
+    the same line (it said ``interrupted``)."""
+    nan_command_for(monkeypatch, 1, after=5)
+    out = tmp_path / 'failed'
+    path = resolve_scenario('demo', SETS, None, out)
+    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+        swarm.spin_to_end(RUN_TIMEOUT)
+    world = summary_of(out)
+    assert world['status'] == 'failed' and world['steps'] == 5
+    assert 'returned a non-finite command at step 5 (agent 1)' in world['failure']
+    assert BagReader(out / 'bag').metadata(END_RECORD) == {
+        'status': 'failed', 'steps': '5', 'failure': world['failure']}
+    ours = analysed(tmp_path, out)
+    assert ours['status'] == 'failed' and ours['failure'] == world['failure']
+    # The failure line in its place, after the status, as the world writes it.
+    keys = list(ours)
+    assert keys.index('failure') == keys.index('status') + 1
+
+
+@pytest.mark.ros
+def test_analyze_of_a_stopped_and_of_a_completed_run_says_so(tmp_path, ros_domain):
+    """A run whose world is closed at step 3 (as a stop signal closes it) records
+    ``interrupted``; a run to its end records ``completed``; ``analyze`` reports each, with
+    no failure line."""
+    stopped = tmp_path / 'stopped'
+    path = resolve_scenario('demo', SETS, None, stopped)
+    with InProcessSwarm(path, stopped, domain_id=ros_domain) as swarm:
+        swarm.spin_until(lambda: swarm.world.k >= 3, RUN_TIMEOUT)
+    world = summary_of(stopped)
+    assert world['status'] == 'interrupted'
+    assert BagReader(stopped / 'bag').metadata(END_RECORD) == {
+        'status': 'interrupted', 'steps': str(world['steps'])}
+    ours = analysed(tmp_path, stopped)
+    assert ours['status'] == 'interrupted' and 'failure' not in ours
+
+    done = tmp_path / 'done'
+    path = resolve_scenario('demo', SETS, None, done)
+    with InProcessSwarm(path, done, domain_id=ros_domain) as swarm:
+        swarm.spin_to_end(RUN_TIMEOUT)
+    world = summary_of(done)
+    assert world['status'] == 'completed' and world['steps'] == 25
+    assert BagReader(done / 'bag').metadata(END_RECORD) == {'status': 'completed',
+                                                            'steps': '25'}
+    ours = analysed(tmp_path, done)
+    assert ours['status'] == 'completed' and 'failure' not in ours
