@@ -19,8 +19,8 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 
-from flock_swarm.contract import (CLOCK, CLOCK_QOS, LOCKSTEP_QOS, cmd_topic, odom_topic,
-                                  qos_profile)
+from flock_swarm.contract import (agent_name, CLOCK, CLOCK_QOS, LOCKSTEP_QOS, cmd_topic,
+                                  odom_topic, qos_profile)
 from flock_swarm.nodes.batch import BatchPublish, BatchTake, release
 from flock_swarm.nodes.graph import command_claims
 from flock_swarm.nodes.stepper import CommandInbox, WorldStepper
@@ -103,7 +103,7 @@ def state_publisher(node, stepper: WorldStepper, c_path: bool) -> StatePublisher
     pubs = [node.recorded_publisher(Clock, CLOCK, qos_profile(CLOCK_QOS))]
     pubs += [node.recorded_publisher(Odometry, odom_topic(i), qos) for i in range(sc.n_agents)]
     plant = stepper.plant
-    encoder = OdometryBatchEncoder([f'agent_{i}' for i in range(sc.n_agents)],
+    encoder = OdometryBatchEncoder([agent_name(i) for i in range(sc.n_agents)],
                                    oriented=plant is not None and plant.oriented)
     return (BatchStatePublisher if c_path else StatePublisher)(node, stepper, pubs, encoder)
 
