@@ -70,6 +70,13 @@ ESTOP_TYPE = 'std_msgs/msg/Bool'
 #: defaults, a robot profile may map them elsewhere.
 ROBOT_ODOM = '{robot}/odom'
 ROBOT_CMD_VEL = '{robot}/cmd_vel'
+#: The batched transport (``transport: batched``, docs/ros.md "Transports"): the whole
+#: swarm's state of a step as one message of the world, and each agents host's commands (and
+#: adaptive states) of a step as one message, instead of the per-agent odometry and command
+#: topics (:mod:`flock_swarm.nodes.cloud` has the fields).
+STATES = 'swarm/states'
+COMMANDS = 'swarm/commands'
+CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
 #: The world's status while it runs; any other is the end of the run (``summary.json``).
 RUNNING = 'running'
 #: The name of the one status of ``/swarm/metrics``'s DiagnosticArray.

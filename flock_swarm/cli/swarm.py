@@ -69,6 +69,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="what the world integrates the agents with: 'plant' (the "
                         "scenario's plant model, as sim) or 'mujoco' (the physics engine; "
                         'plant.model unicycle; docs/robots.md)')
+    parser.add_argument('--transport', choices=('per_agent', 'batched'),
+                        help="how a step's messages move (the scenario's transport key, "
+                        "default per_agent): 'per_agent' (a topic per agent) or 'batched' "
+                        "(the swarm's state as one PointCloud2, each agents host's commands "
+                        'as one; docs/ros.md, "Transports")')
     parser.add_argument('--wait-for-viewer', action='store_true',
                         help='with --foxglove: start the run once a viewer has subscribed')
     parser.add_argument('--foxglove-host', default=DEFAULT_HOST, metavar='HOST',
@@ -134,7 +139,8 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
         print(f'swarm: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
     try:
-        scenario = resolve_scenario(args.scenario, args.overrides, args.seed, out,
+        overrides = args.overrides + ([f'transport={args.transport}'] if args.transport else [])
+        scenario = resolve_scenario(args.scenario, overrides, args.seed, out,
                                     args.allow_unstable)
     except (ScenarioError, OSError) as exc:
         if held is not None:

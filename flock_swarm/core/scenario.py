@@ -31,7 +31,11 @@ from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo
 
 TOP_KEYS = ('name', 'description', 'reference', 'dim', 'n_agents', 'dt', 'duration', 'seed',
             'record_every', 'protocol', 'graph', 'informed', 'observers', 'initial', 'leader',
-            'intrinsic', 'metrics', 'network', 'obstacles', 'plant')
+            'intrinsic', 'metrics', 'network', 'obstacles', 'plant', 'transport')
+#: How the ROS nodes move a step's messages (``transport``; ``sim`` ignores it): one topic per
+#: agent (the default), or the whole swarm's state and each host's commands as one message
+#: each (docs/ros.md, "Transports").
+TRANSPORTS = ('per_agent', 'batched')
 #: ``intrinsic.model`` values besides the registered autonomous leader models.
 INTRINSIC_SPECIAL = ('none', 'same_as_leader')
 GRAPH_TYPES = ('disk', 'fixed', 'barabasi_albert')
@@ -123,6 +127,8 @@ class Scenario:
     obstacles: ObstacleSpec = ObstacleSpec()
     #: The ``plant:`` section (``docs/plants.md``); the double integrator when absent.
     plant: PlantSpec = PlantSpec()
+    #: The ROS transport (:data:`TRANSPORTS`).
+    transport: str = TRANSPORTS[0]
 
     @property
     def steps(self) -> int:
@@ -217,6 +223,9 @@ def parse_scenario(data: Any) -> Scenario:
     network = parse_network(data.get('network'), dt)
     obstacles = parse_obstacles(data.get('obstacles'), dim, law)
     plant = parse_plant(data.get('plant'), dim, registry.plant_class)
+    transport = data.get('transport', TRANSPORTS[0])
+    if transport not in TRANSPORTS:
+        raise ScenarioError('transport', f"must be 'per_agent' or 'batched', got {transport!r}")
     if intrinsic is not None and not plant.default:
         raise ScenarioError('plant.model', f'the {plant.model.name} plant has no intrinsic '
                             'dynamics: give intrinsic.model: none, or the double_integrator')
@@ -225,7 +234,7 @@ def parse_scenario(data: Any) -> Scenario:
                     dim, n, dt, duration, seed, record_every, law, graph_type, graph, informed,
                     observers, position_box, velocity_box, positions, velocities, leader,
                     intrinsic, eta_tol, coll, data, parse_headline(metrics), network, obstacles,
-                    plant)
+                    plant, transport)
 
 
 def _parse_law(section: dict, ctx: LawContext) -> Law:

@@ -46,7 +46,7 @@ import numpy as np
 from geometry_msgs.msg import AccelStamped, Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, PointCloud2
 
 from flock_swarm.contract import (agent_name, LEADER_ACCEL, LEADER_ODOM, LOCKSTEP_QOS, cmd_topic,
                                   cmd_vel_topic, network_topic, odom_topic, qos_profile,
@@ -67,6 +67,9 @@ from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer
+from flock_swarm.nodes.cloud import (BATCHED, COMMANDS as COMMAND_CLOUDS, STATES, CloudEncoder,
+                                     command_fields)
+from flock_swarm.nodes.transport import TRANSPORT, StateCloud, host_commands, transport_of
 from flock_swarm.nodes.wire import (AccelBatchEncoder, AccelEncoder, MalformedMessage,
                                     StateEncoder, decode_accel, decode_heading,
                                     decode_odometry, encode_twist)
@@ -105,7 +108,7 @@ AGENT_PARAMS = COMMON_PARAMS + (
           "sent, the others' at constant velocity; docs/robots.md); 'off' on the states as "
           'measured. Lockstep states are current: no effect',
           lambda v: v in LATENCY_CHOICES, "must be 'predict' or 'off', got {value!r}"),
-) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH)
+) + LIMIT_PARAMS + (KEEP_RUNNING, MESSAGE_PATH, TRANSPORT)
 
 
 class AgentNode(Node):
@@ -127,6 +130,9 @@ class AgentNode(Node):
         params.declare(agent_ids=ids.tolist(), agent_id=int(ids[0]) if ids.size == 1 else -1)
         # A robot plant's velocity commands (cmd_vel), one topic per hosted agent.
         self.velocity = command_interface(sc, params['command']) == 'cmd_vel'
+        # The batched transport (nodes/transport.py): the swarm's state as one message in, the
+        # hosted agents' commands (and adaptive states) as one message out.
+        self.batched = transport_of(sc, params['transport'], params['mode']) == BATCHED
         self.controller = AgentController(sc, ids, self.get_logger(),
                                           leader_timeout=params['leader_timeout'],
                                           leader_start_timeout=params['leader_start_timeout'],
@@ -145,35 +151,46 @@ class AgentNode(Node):
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
                                 self.get_logger().warning)
         qos = qos_profile(LOCKSTEP_QOS)
+        # The hosted agents' own topics (none with the batched transport).
+        hosted = [] if self.batched else self.controller.ids
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), qos)
-                         for i in self.controller.ids]
+                         for i in hosted]
         # A law's adaptive state, one topic per hosted agent (none for a law without).
         self.state_pubs = [self.create_publisher(JointState, state_topic(int(i)), qos)
-                           for i in self.controller.ids] if self.controller.state else []
+                           for i in hosted] if self.controller.state else []
         self.state_encoder = StateEncoder(self.controller.state_labels)
         # Realtime with the network model: what each command used (docs/network.md).
         self.usage_pubs = [self.create_publisher(JointState, network_topic(int(i)), qos)
-                           for i in self.controller.ids] \
+                           for i in hosted] \
             if self.controller.net is not None and not self.lockstep else []
         self.usage_encoder = StateEncoder(USAGE_LABELS)
         self.twist_pubs = [self.create_publisher(Twist, cmd_vel_topic(int(i)), qos)
-                           for i in self.controller.ids] if self.velocity else []
+                           for i in hosted] if self.velocity else []
         # The hosted agents' odometry carries a heading (an oriented plant's).
         plant = self.controller.plant
         self.oriented = plant is not None and plant.oriented
         # What publish_commands sends on: the commands (row i: hosted agent i), states, usage,
         # velocity commands.
         self.pubs = self.cmd_pubs + self.state_pubs + self.usage_pubs + self.twist_pubs
+        if self.batched:
+            self.pubs = [self.create_publisher(PointCloud2, COMMAND_CLOUDS, qos)]
+            self.cloud_out = CloudEncoder(command_fields(sc.dim, self.controller.state_labels,
+                                                         self.velocity))
+            self.states_in = StateCloud(sc.n_agents, sc.dim, self.oriented, self.guard)
+            self.states_topic = self.create_subscription(PointCloud2, STATES, self.on_states,
+                                                         qos, raw=True).topic_name
         # Raw subscriptions: the bytes are decoded by flock_swarm.nodes.wire (see there why).
         self.odom_topics = [odom_topic(j) for j in range(sc.n_agents)]
         self.children = [agent_name(j) for j in range(sc.n_agents)]
         # Lockstep: a step's odometry, queued as it comes, then taken in one pass.
-        self.inbox = OdometryInbox(self.controller, self.guard, self.odom_topics, self.children)
+        per_agent = not self.batched
+        self.inbox = OdometryInbox(self.controller, self.guard, self.odom_topics,
+                                   self.children if per_agent else [])
         odom_subs = [self.create_subscription(Odometry, odom_topic(j),
                                               lambda data, j=j: self.on_odom(j, data), qos,
                                               raw=True)
-                     for j in range(sc.n_agents)]
-        self.odom_take = BatchTake(odom_subs) if self.c_path else None
+                     for j in range(sc.n_agents if per_agent else 0)]
+        self.odom_take = BatchTake(odom_subs) if self.c_path and per_agent else None
         self.batch_out = BatchPublish(self.pubs) if self.c_path else None
         self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, qos, raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel, qos,
@@ -224,6 +241,16 @@ class AgentNode(Node):
             return
         for j, data in queue:
             self.on_one_odom(j, data)
+
+    def on_states(self, data: bytes) -> None:
+        """Take the world's state cloud (serialised; the batched transport): lockstep stores
+        the step's states at once and answers, realtime keeps them as the latest."""
+        decoded = self.states_in.decode(self.states_topic, data, ordered=not self.lockstep)
+        if decoded is None:
+            return
+        k, rows = decoded
+        self.controller.heard_all(k, rows, time.monotonic())
+        self.stash(k, lambda box: box.put_all(rows), self.states_topic)
 
     def on_one_odom(self, j: int, data: bytes) -> None:
         """Check and store agent ``j``'s odometry (serialised) for its step."""
@@ -337,6 +364,16 @@ class AgentNode(Node):
     def publish_commands(self, u: np.ndarray, stamp_ns: int) -> None:
         """Queue one command per hosted agent (serialised), after its adaptive state for a
         law with one, and send what the world can receive."""
+        if self.batched:
+            controller = self.controller
+            state = controller.state_values if controller.state else None
+            twist = (lambda: controller.velocity_commands(u, self.scenario.plant.frame)) \
+                if self.velocity else None
+            self.sent = [(0, host_commands(self.cloud_out, controller.ids, stamp_ns, u, state,
+                                           twist))]
+            self.outbox.extend(self.sent)
+            self.flush()
+            return
         encode = self.encoder.encode
         sent = []
         if self.state_pubs:

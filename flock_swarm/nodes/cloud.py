@@ -7,7 +7,8 @@ delivery bound the run (docs/performance.md). The batched transport carries the 
 numbers in one message each way: the world's state cloud (:data:`STATES`, one point per
 agent: ``x y [z] vx vy [vz]``, an oriented plant's heading ``qz qw wz``, then ``id``) and
 each agents host's command cloud (:data:`COMMANDS`, one point per hosted agent: ``ax ay
-[az]``, a law's adaptive state under its labels, then ``id``). The type is a standard one,
+[az]``, a law's adaptive state under its labels, a robot plant's velocity command ``vx vy vz
+wx wy wz``, then ``id``). The type is a standard one,
 so ``ros2 topic echo``, rosbags and Foxglove decode it without this package, and Foxglove
 and RViz draw the state cloud as points at the agents' positions.
 
@@ -25,17 +26,16 @@ from typing import Sequence
 
 import numpy as np
 
-from flock_swarm.contract import FRAME
+from flock_swarm.contract import CLOUD_TYPE, COMMANDS, FRAME, STATES
+from flock_swarm.core.scenario import TRANSPORTS
 from flock_swarm.nodes.wire import (CDR_LE, NS_PER_S, MalformedMessage, _align, _header,
                                     _layout, _put_string)
 
-#: The world's state cloud (relative: namespaces apply) and the agents hosts' command clouds.
-STATES = 'swarm/states'
-COMMANDS = 'swarm/commands'
-CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
+#: The topics and their type (:mod:`flock_swarm.contract`), here for the codec's users.
+__all__ = ['CLOUD_TYPE', 'COMMANDS', 'STATES', 'TRANSPORTS', 'PER_AGENT', 'BATCHED',
+           'CloudEncoder', 'Cloud', 'decode_cloud', 'state_fields', 'command_fields']
 #: The transports (the scenario's ``transport`` key, the nodes' ``transport`` parameter).
-PER_AGENT, BATCHED = 'per_agent', 'batched'
-TRANSPORTS = (PER_AGENT, BATCHED)
+PER_AGENT, BATCHED = TRANSPORTS
 #: The field holding an agent's id.
 ID = 'id'
 #: ``sensor_msgs/PointField`` datatypes and their NumPy types (little-endian).
@@ -55,10 +55,17 @@ def state_fields(dim: int, oriented: bool = False) -> tuple[str, ...]:
     return (*axes, *(f'v{a}' for a in axes), *(HEADING_FIELDS if oriented else ()))
 
 
-def command_fields(dim: int, state_labels: Sequence[str] = ()) -> tuple[str, ...]:
+#: A robot plant's velocity command (``cmd_vel``): the Twist's linear and angular vectors.
+TWIST_FIELDS = ('vx', 'vy', 'vz', 'wx', 'wy', 'wz')
+
+
+def command_fields(dim: int, state_labels: Sequence[str] = (),
+                   velocity: bool = False) -> tuple[str, ...]:
     """Return the float fields of a command cloud: the acceleration, then a law's adaptive
-    state under its labels (:func:`flock_swarm.contract.state_labels`)."""
-    return (*(f'a{a}' for a in 'xyz'[:dim]), *state_labels)
+    state under its labels (:func:`flock_swarm.contract.state_labels`), then for a robot
+    plant commanded by velocity its Twist (:data:`TWIST_FIELDS`)."""
+    return (*(f'a{a}' for a in 'xyz'[:dim]), *state_labels,
+            *(TWIST_FIELDS if velocity else ()))
 
 
 class CloudEncoder:

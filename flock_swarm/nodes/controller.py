@@ -268,6 +268,16 @@ class AgentController:
         if self.reference is None or k > self.reference[0]:
             self.reference = (k, now)
 
+    def heard_all(self, k: int, rows: np.ndarray, now: float) -> None:
+        """Keep every agent's odometry vectors of step ``k`` (``(N, 2 or 4, dim)``: the
+        batched transport's state message), received at ``now`` [s, monotonic], as the latest
+        (:meth:`heard` for each agent at once)."""
+        self.latest.put_all(rows)
+        self.latest_step = k
+        self.measured[:] = k
+        if self.reference is None or k > self.reference[0]:
+            self.reference = (k, now)
+
     def predicted(self, q: np.ndarray, p: np.ndarray, now: float
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Return the swarm's law state ``(q, p)`` predicted to the step the commands

@@ -11,7 +11,7 @@ from typing import Callable, Iterable
 
 from rclpy.node import Node, NodeNameNonExistentError
 
-from flock_swarm.contract import RUNNING, STATUS, STATUS_QOS, cmd_topic, qos_profile
+from flock_swarm.contract import COMMANDS, RUNNING, STATUS, STATUS_QOS, cmd_topic, qos_profile
 
 
 def command_claims(node: Node, n_agents: int) -> dict[int, list[tuple[str, str]]]:
@@ -61,7 +61,10 @@ def agent_hosts(node: Node, n_agents: int) -> int | None:
     """
     claims = command_claims(node, n_agents)
     if len(claims) < n_agents:
-        return None
+        # The batched transport: a host publishes its agents' commands as one message on
+        # swarm/commands (nodes/transport.py), and subscribes to the leader all the same.
+        batched = node.count_publishers(node.resolve_topic_name(COMMANDS))
+        return batched or None
     return len(set().union(*claims.values()))
 
 

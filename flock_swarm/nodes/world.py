@@ -39,6 +39,9 @@ from flock_swarm.contract import (FRAME, OBSTACLES, OBSTACLES_QOS, RUNNING, SCEN
                                   SCENARIO_QOS, STATUS, STATUS_QOS, qos_profile)
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.nodes.batch import MESSAGE_PATH, use_c_path
+from flock_swarm.nodes.cloud import BATCHED
+from flock_swarm.nodes.transport import (TRANSPORT, BatchedCommandIntake,
+                                         batched_state_publisher, transport_of)
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.markers import Telemetry, obstacle_markers
@@ -80,7 +83,7 @@ WORLD_PARAMS = COMMON_PARAMS + (
     Param('expect_telemetry_subscribers', 0, 'subscribers /swarm/markers and /swarm/metrics '
           'must have before the start (a live-view bridge: 1)', lambda v: v >= 0,
           'must be 0 or more, not {value}'),
-) + LIMIT_PARAMS + (MESSAGE_PATH,)
+) + LIMIT_PARAMS + (MESSAGE_PATH, TRANSPORT)
 
 
 class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
@@ -105,6 +108,9 @@ class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
         # taken at once from its first command's callback; /clock and the odometry go out
         # in one call. Decided first: a refusal leaves nothing behind.
         self.c_path = use_c_path(params['message_path']) and self.lockstep
+        # The transport (nodes/transport.py): a topic per agent, or the swarm's state as
+        # one message and each agents host's commands as one.
+        self.batched = transport_of(sc, params['transport'], self.mode) == BATCHED
         self.init_waiting(params)
         # expect_subscribers: -1 reads back the number waited for, once it is known.
         params.will_settle('expect_subscribers')
@@ -117,11 +123,14 @@ class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
         # Not recorded: the bag's own end (and summary.json) tell a replay how the run ended.
         self.status_pub = self.create_publisher(String, STATUS, qos_profile(STATUS_QOS))
         self.status_pub.publish(String(data=RUNNING))
-        self.state_out = state_publisher(self, self.stepper, self.c_path)
+        self.state_out = batched_state_publisher(self, self.stepper) if self.batched else \
+            state_publisher(self, self.stepper, self.c_path)
         self.telemetry = Telemetry(self, sc.law.radius, self.stepper.real.agents.informed,
                                    sc.headline, sc.obstacles)
-        self.intake = command_intake(self, self.stepper, self.step_may_close, self.c_path)
-        self.subscribe_agents()
+        self.intake = BatchedCommandIntake(self, self.stepper, self.step_may_close) \
+            if self.batched else command_intake(self, self.stepper, self.step_may_close,
+                                                self.c_path)
+        self.subscribe_agents(per_agent=not self.batched)
         wall_timer(self, 1.0, self.check_claims)
         self.subscribe_leader()
         self.publish_provenance()
