@@ -1,7 +1,7 @@
 """The topic contract of flock_swarm: every topic's name, message type and QoS, in one place.
 
 The nodes, the recorder, the live view (``--foxglove``), ``analyze``, ``replay`` and the
-process launcher all read the topics from here (docs/ros.md, "Topics"; shared/DESIGN.md).
+process launcher all read the topics from here (docs/ros.md, "Topics").
 This module imports no rclpy: names and types are plain strings, and a QoS is a small
 frozen :class:`QosSpec` that :func:`qos_profile` turns into an rclpy ``QoSProfile`` where a
 node needs one. Topic names are relative (namespaces apply) except ``/clock``.

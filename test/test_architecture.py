@@ -8,6 +8,7 @@ rclpy, YAML, plotting, bag or file and process modules. Imports are read from th
 """
 
 from pathlib import Path
+import re
 
 import pytest
 
@@ -87,3 +88,60 @@ def test_the_layer_check_sees_a_violation(tmp_path):
     assert {'rclpy', 'flock_swarm.cli'} <= found
     assert layer_of('flock_swarm.cli.sim') == 'commands'
     assert ORDER.index('commands') > ORDER.index('core')
+
+
+# -- docs/architecture.md -----------------------------------------------------------------
+
+PAGE = PACKAGE.parent / 'docs' / 'architecture.md'
+
+
+def page_layers() -> dict[str, str]:
+    """Return every module path the page's "Modules" section names (``nodes/world.py``,
+    ``reproduce/experiments/*.py``), mapped to the layer heading it is named under."""
+    section = PAGE.read_text().split('\n## Modules\n', 1)[1].split('\n## ', 1)[0]
+    named: dict[str, str] = {}
+    layer = None
+    for line in section.splitlines():
+        if line.startswith('### '):
+            layer = line[4:].strip()
+        elif line.startswith('| `') and layer is not None:
+            named[line.split('`')[1]] = layer
+    return named
+
+
+def test_the_architecture_page_names_every_module_under_its_layer():
+    """Every module of the package is in the page's table of its layer (as LAYERS places it),
+    and the page names no module that is not there."""
+    named = page_layers()
+    assert set(named.values()) == set(LAYERS)
+    misplaced = []
+    for name, path in MODULES.items():
+        if path.name == '__init__.py':
+            continue
+        rel = path.relative_to(PACKAGE).as_posix()
+        key = rel if rel in named else f'{path.parent.relative_to(PACKAGE).as_posix()}/*.py'
+        if named.get(key) != layer_of(name):
+            misplaced.append(f'{rel}: {named.get(key, "not on the page")}, {layer_of(name)} '
+                             'by LAYERS')
+    assert misplaced == []
+    files = {p.relative_to(PACKAGE).as_posix() for p in MODULES.values()}
+    stale = [n for n in named if n not in files and not n.endswith('/*.py')]
+    assert stale == []
+
+
+def test_the_architecture_page_refers_to_nothing_outside_the_repository():
+    """Every path the page names relative to the repository is in it (the page pointed to a
+    design file that never was)."""
+    root = PACKAGE.parent
+    text = PAGE.read_text()
+    assert 'shared/' not in text and '../' not in text
+    for path in set(re.findall(r'\b((?:docs|examples|launch|config|test)/[\w./-]+\w)', text)):
+        assert (root / path).exists() or (root / path).with_suffix('').exists(), path
+
+
+def test_an_agent_name_is_built_only_by_the_contract():
+    """``agent_{i}`` is spelled in contract.py alone (six modules built it); the engine's
+    MJCF bodies carry the same prefix through the model it compiles."""
+    spelled = [p.relative_to(PACKAGE).as_posix() for p in MODULES.values()
+               if "f'agent_{" in p.read_text()]
+    assert spelled == ['engine/mujoco_world.py']
