@@ -28,7 +28,7 @@ import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.laws.base import swarm_control
+from flock_swarm.core.laws.evaluation import swarm_control
 from flock_swarm.core.laws.su2009 import SuParams
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.scenario import Scenario, realize

@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from flock_swarm.core.latency import CommandHistory, extrapolate
-from flock_swarm.core.laws.base import local_control
+from flock_swarm.core.laws.evaluation import local_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.robot_state import from_command, plant_state
 from flock_swarm.core.scenario import realize

@@ -203,11 +203,11 @@ def check_law(law_or_scenario: Any, overrides: Iterable[str] = (), steps: int = 
 
     - its ``antisymmetric`` claim (on random states, when the scenario is loaded);
     - the shapes and finiteness of ``pair``, ``combine`` and ``state_rate`` at every step;
-    - every agent alone (:func:`~flock_swarm.core.laws.base.local_control`, a robot that
+    - every agent alone (:func:`~flock_swarm.core.laws.evaluation.local_control`, a robot that
       knows its neighbours' states) equals its row of the simulator's ``u``
-      (:func:`~flock_swarm.core.laws.base.swarm_control`) to :data:`LOCAL_RTOL`, and each
+      (:func:`~flock_swarm.core.laws.evaluation.swarm_control`) to :data:`LOCAL_RTOL`, and each
       half of the swarm as a container hosts it
-      (:func:`~flock_swarm.core.laws.base.group_control`) equals its rows bit for bit.
+      (:func:`~flock_swarm.core.laws.evaluation.group_control`) equals its rows bit for bit.
 
     :param law_or_scenario: a law instance (run in a small 2-D swarm around it, see
         :data:`CHECK_STEPS`), or a scenario (preset name, file or mapping) that uses it.
@@ -223,7 +223,8 @@ def check_law(law_or_scenario: Any, overrides: Iterable[str] = (), steps: int = 
 
     from flock_swarm.core.dynamics import step_agents
     from flock_swarm.core.errors import ScenarioError
-    from flock_swarm.core.laws.base import Law, advance_state, output_problem, pair_sums
+    from flock_swarm.core.laws.base import Law
+    from flock_swarm.core.laws.evaluation import advance_state, output_problem, pair_sums
     from flock_swarm.core.leaders.base import VirtualLeader
     from flock_swarm.core.run import interaction_graph, static_graph
     from flock_swarm.presets import prepare
@@ -272,8 +273,8 @@ def _check_step(law, q, p, edges, state, agents, dt: float, t: float, halves):
     """
     import numpy as np
 
-    from flock_swarm.core.laws.base import (group_control, local_control, output_problem,
-                                            swarm_control)
+    from flock_swarm.core.laws.evaluation import (group_control, local_control, output_problem,
+                                                  swarm_control)
 
     u = swarm_control(law, q, p, edges, state, agents, dt, t)
     problem = output_problem(law, 'combine()', u, q.shape)

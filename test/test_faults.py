@@ -27,7 +27,7 @@ from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.nodes import stepper as world_module
 from flock_swarm.bag import BagReader
 from flock_swarm.core.leaders.base import LeaderState
-from flock_swarm.core.laws.base import swarm_control
+from flock_swarm.core.laws.evaluation import swarm_control
 from flock_swarm.core.scenario import parse_scenario, realize
 from flock_swarm.nodes.agent import AgentNode
 from flock_swarm.contract import LOCKSTEP_QOS, qos_profile

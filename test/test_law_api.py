@@ -16,7 +16,7 @@ from numpy.testing import assert_array_equal
 from flock_swarm.core import registry
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core.graphs import disk_graph
-from flock_swarm.core.laws import base
+from flock_swarm.core.laws import base, evaluation
 from flock_swarm.core.laws.base import AgentData, Law
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.run import simulate
@@ -175,11 +175,11 @@ def test_the_default_is_not_antisymmetric_and_every_builtin_law_claims_it_rightl
         for dim in (2, 3):
             if name == 'jadbabaie_leader' and dim == 3:
                 continue
-            assert base.antisymmetry_problem(cls(), dim) is None, name
+            assert evaluation.antisymmetry_problem(cls(), dim) is None, name
 
 
 def test_a_false_antisymmetric_claim_is_named_and_refused_when_the_scenario_loads(laws):
-    problem = base.antisymmetry_problem(NeighbourMeanClaimed(), 2)
+    problem = evaluation.antisymmetry_problem(NeighbourMeanClaimed(), 2)
     assert problem.startswith('neighbour_mean_claimed: declares antisymmetric = True')
     with pytest.raises(PluginError, match='protocol.name: neighbour_mean_claimed: declares'):
         prepare(mapping('neighbour_mean_claimed'))
@@ -187,7 +187,7 @@ def test_a_false_antisymmetric_claim_is_named_and_refused_when_the_scenario_load
 
 def test_the_neighbour_mean_pattern_is_right_with_the_default():
     q, p, edges, leader, agents = random_swarm()
-    u = base.swarm_control(NeighbourMean(), q, p, edges, leader, agents, 0.1)
+    u = evaluation.swarm_control(NeighbourMean(), q, p, edges, leader, agents, 0.1)
     for i in range(q.shape[0]):
         nb = np.concatenate((edges.j[edges.i == i], edges.i[edges.j == i]))
         want = (p[nb].mean(axis=0) if nb.size else np.zeros(2)) - p[i]
@@ -199,8 +199,9 @@ def test_combine_gets_the_time_and_an_old_combine_is_called_without_it(laws):
     assert base.accepted(OldCombine, 'combine') == frozenset()
     assert base.accepted(NeighbourAdaptive, 'state_rate') == {'s', 't'}
     q, p, edges, leader, agents = random_swarm()
-    assert_array_equal(base.swarm_control(Clock(), q, p, edges, leader, agents, 0.1, 2.5), 2.5)
-    base.swarm_control(OldCombine(), q, p, edges, leader, agents, 0.1, 2.5)
+    assert_array_equal(evaluation.swarm_control(Clock(), q, p, edges, leader, agents, 0.1, 2.5),
+                       2.5)
+    evaluation.swarm_control(OldCombine(), q, p, edges, leader, agents, 0.1, 2.5)
     sc, _ = prepare(mapping('clock'))
     series = simulate(sc).series
     # u at every recorded step is the step's time k dt.
@@ -213,7 +214,7 @@ def test_state_rate_gets_the_neighbour_sums(laws):
     sc, real = prepare(mapping('neighbour_adaptive'))
     res = simulate(sc)
     q0, p0 = real.q0, real.p0
-    s0 = base.pair_sums(sc.law, q0, p0, disk_graph(q0, 4.0, True))
+    s0 = evaluation.pair_sums(sc.law, q0, p0, disk_graph(q0, 4.0, True))
     np.testing.assert_allclose(res.series['e'][1], sc.dt * np.einsum('nk,nk->n', s0, s0),
                                rtol=1e-12)
     assert res.summary['neighbour_error_final'] == [float(x) for x in res.series['e'][-1]]
@@ -233,12 +234,12 @@ def test_a_wrong_shape_at_any_step_is_one_line_naming_the_law(which):
 
     def call(t):
         if which == 'swarm':
-            return base.swarm_control(Late(), q, p, edges, leader, agents, 0.1, t)
+            return evaluation.swarm_control(Late(), q, p, edges, leader, agents, 0.1, t)
         if which == 'group':
-            return base.group_control(Late(), ids, q, p, edges, leader, agents.subset(ids),
-                                      0.1, t)
-        return base.local_control(Late(), q[0], p[0], q[1:], p[1:], np.ones(6), leader,
-                                  agents.subset(np.array([0])), 0.1, t)
+            return evaluation.group_control(Late(), ids, q, p, edges, leader,
+                                            agents.subset(ids), 0.1, t)
+        return evaluation.local_control(Late(), q[0], p[0], q[1:], p[1:], np.ones(6), leader,
+                                        agents.subset(np.array([0])), 0.1, t)
 
     call(0.5)
     with pytest.raises(PluginError) as err:
@@ -258,7 +259,7 @@ def test_a_pair_of_the_wrong_length_is_refused():
 
     q, p, edges, leader, agents = random_swarm()
     with pytest.raises(PluginError, match=r'short: pair\(\) returned shape'):
-        base.swarm_control(Short(), q, p, edges, leader, agents, 0.1)
+        evaluation.swarm_control(Short(), q, p, edges, leader, agents, 0.1)
 
 
 def test_a_rate_for_an_unknown_state_is_refused():
@@ -270,7 +271,7 @@ def test_a_rate_for_an_unknown_state_is_refused():
     q, p, edges, leader, _ = random_swarm()
     agents = AgentData(np.ones(7, bool), state={'e': np.zeros(7)})
     with pytest.raises(PluginError, match=r"state_rate\(\) returned 'x', not a key"):
-        base.advance_state(Stray(), q, p, leader, agents, 0.1)
+        evaluation.advance_state(Stray(), q, p, leader, agents, 0.1)
 
 
 def test_a_required_field_and_a_vector_field(laws):

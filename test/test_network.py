@@ -12,7 +12,8 @@ from flock_swarm.core import delay_drag
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.laws import linear
-from flock_swarm.core.laws.base import AgentData, swarm_control
+from flock_swarm.core.laws.base import AgentData
+from flock_swarm.core.laws.evaluation import swarm_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.network import (LEADER, NetworkState, neighbourhood_of, parse_network,
                                       uniforms)

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from flock_swarm.core.laws import base as pr
+from flock_swarm.core.laws import evaluation as pr
 from flock_swarm.core.laws import jadbabaie2003 as jad
 from flock_swarm.core.graphs import EdgeList, disk_graph
 from flock_swarm.core.laws.base import AgentData

@@ -12,7 +12,8 @@ from numpy.testing import assert_allclose
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.core.graphs import diffusive_matrix, disk_graph
-from flock_swarm.core.laws.base import AgentData, advance_state, local_control
+from flock_swarm.core.laws.base import AgentData
+from flock_swarm.core.laws.evaluation import advance_state, local_control
 from flock_swarm.core.pseudo_leaders import minor_lambda_max
 from flock_swarm.core.scenario import realize
 from flock_swarm.core import run

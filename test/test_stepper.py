@@ -14,7 +14,7 @@ from numpy.testing import assert_array_equal
 
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
-from flock_swarm.core.laws.base import swarm_control
+from flock_swarm.core.laws.evaluation import swarm_control
 from flock_swarm.core.run import interaction_graph, static_graph
 from flock_swarm.core.scenario import realize
 from flock_swarm.nodes.clock import StepClock

@@ -28,7 +28,8 @@ from scipy.sparse.csgraph import connected_components
 from flock_swarm.core import potentials
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList
-from flock_swarm.core.laws.base import AgentData, swarm_control
+from flock_swarm.core.laws.base import AgentData
+from flock_swarm.core.laws.evaluation import swarm_control
 from flock_swarm.core.laws.su2009 import OlfatiSaber2006, SuInformedAccel
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import su_energy

@@ -19,7 +19,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from flock_swarm.core.errors import PluginError, one_line
-from flock_swarm.core.laws.base import Law, shape_problem
+from flock_swarm.core.laws.base import Law
+from flock_swarm.core.laws.evaluation import shape_problem
 from flock_swarm.core.leaders.base import LeaderModel, LeaderState, VirtualLeader
 from flock_swarm.core.registry import LAW_GROUP, LEADER_GROUP, entries
 
@@ -92,7 +93,7 @@ def evaluate_law(law: Law, step: int, ids: Sequence[int], dim: int,
     try:
         u = evaluate()
     except PluginError as exc:
-        # The law's evaluation checks each output's shape at every step (core/laws/base.py):
+        # The law's evaluation checks each output's shape at every step (core/laws/evaluation.py):
         # its line (key, law, hook, time) stays whole.
         raise RunFault(f'{law_label(law)}: {exc} (step {step})', SHAPE, step, ids) from None
     except Exception as exc:  # noqa: BLE001 - whatever a plugin raises is reported

@@ -40,7 +40,8 @@ import numpy as np
 from flock_swarm.core.checks import choice, integer, mapping, number, only
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.graphs import EdgeList, within_radius
-from flock_swarm.core.laws.base import AgentData, Law, control, state_rates
+from flock_swarm.core.laws.base import AgentData, Law
+from flock_swarm.core.laws.evaluation import control, state_rates
 from flock_swarm.core.leaders.base import LeaderState
 
 DELAY_LAWS = ('fixed', 'uniform', 'geometric')
@@ -819,7 +820,7 @@ class NetworkState:
                       agents: AgentData, dt: float, t: float = 0.0) -> None:
         """Advance the law's adaptive state in place with the leader's state held.
 
-        The same explicit step as :func:`flock_swarm.core.laws.base.advance_state`, each
+        The same explicit step as :func:`flock_swarm.core.laws.evaluation.advance_state`, each
         informed agent using the leader's state it holds (own state as in :meth:`control`).
         A ``state_rate`` that takes the pair sums receives ``s=None`` under the network model
         (the sums of the held states are :meth:`control`'s, not kept).

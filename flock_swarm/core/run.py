@@ -23,9 +23,9 @@ from flock_swarm.core.graphs import EdgeList, VerletDiskGraph, disk_graph, fixed
 from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import (STEP_METRICS, RunMetrics, step_metrics,
                                       update_stacked_from_edges)
-from flock_swarm.core.laws.base import (AgentData, Law, StepViolation, advance_state,
-                                        group_control, output_problem, pair_sums,
-                                        swarm_control)
+from flock_swarm.core.laws.base import AgentData, Law, StepViolation
+from flock_swarm.core.laws.evaluation import (advance_state, group_control, output_problem,
+                                              pair_sums, swarm_control)
 from flock_swarm.core.leaders.base import LeaderState, VirtualLeader
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.obstacles import (Geometry, ObstacleMetrics, ObstacleSpec, check_start,

@@ -21,8 +21,8 @@ from flock_swarm.core.checks import (choice, integer, mapping, matrix, number, o
 from flock_swarm.core.errors import PluginError, ScenarioError
 from flock_swarm.core.graphs import barabasi_albert, complete_graph, disk_graph
 from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
-from flock_swarm.core.laws.base import (AgentData, Law, LawContext, LawSetup, ObserverGroup,
-                                        antisymmetry_problem)
+from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
+from flock_swarm.core.laws.evaluation import antisymmetry_problem
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
 from flock_swarm.core.network import NetworkSpec, parse_network
 from flock_swarm.core.obstacles import ObstacleSpec, parse_obstacles

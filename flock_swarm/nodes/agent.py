@@ -3,7 +3,7 @@
 An agent node subscribes to the odometry of every agent (one topic per agent, as real robots
 would broadcast it), selects the neighbours within ``r`` (or the scenario's fixed graph), adds
 the leader's state if informed, and calls the same law functions as ``sim``
-(:func:`flock_swarm.core.laws.base.group_control`). Each command is stamped with the
+(:func:`flock_swarm.core.laws.evaluation.group_control`). Each command is stamped with the
 odometry stamp it answers. The decisions, and the adaptive state (Zhou's gain ``h_i``), are
 those of :class:`~flock_swarm.nodes.controller.AgentController` (no ROS); this node is its
 plumbing. A law that raises, returns the wrong shape or a non-finite command fails the run:

@@ -3,7 +3,7 @@
 :class:`AgentController` is what an agent node (one agent, or a container of many) decides:
 which inputs belong to which step, when a step can be answered (the leader's state or its
 timeout), the commands (the same law functions as ``sim``,
-:func:`flock_swarm.core.laws.base.group_control`) and the adaptive state, advanced as ``sim``
+:func:`flock_swarm.core.laws.evaluation.group_control`) and the adaptive state, advanced as ``sim``
 advances it and told with each step's commands (:meth:`AgentController.state_values`, the
 state they were computed with: what ``sim`` records at that step). The node turns messages
 into its calls and its commands into messages. In lockstep, a step's odometry is
@@ -26,7 +26,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.faults import (evaluate_law, evaluate_state, non_finite_fault,
                                      non_finite_rows, state_blew_up)
 from flock_swarm.core.latency import LATENCY_CHOICES, LATENCY_PREDICT, CommandHistory, extrapolate
-from flock_swarm.core.laws.base import advance_state, group_control, group_sums
+from flock_swarm.core.laws.evaluation import advance_state, group_control, group_sums
 from flock_swarm.core.network import NetworkState, neighbourhood_of
 from flock_swarm.core.obstacles import with_obstacles
 from flock_swarm.core.plants.models import DoubleIntegrator

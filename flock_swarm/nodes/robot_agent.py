@@ -45,7 +45,7 @@ from flock_swarm.contract import (AGENT_PATTERN, ESTOP, ESTOP_QOS, FRAME, LEADER
 from flock_swarm.core import registry
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.latency import CommandHistory, extrapolate
-from flock_swarm.core.laws.base import local_control
+from flock_swarm.core.laws.evaluation import local_control
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.robot_state import (PoseDifferentiator, from_command, plant_state,
                                           world_velocity)
