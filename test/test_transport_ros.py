@@ -4,6 +4,7 @@ for bit, in one process, in a container process and over several hosts, with the
 model, obstacles, robot plants and a law with adaptive state switched on. The bag holds the
 two clouds (read back by an independent MCAP reader), and bad input is one line."""
 
+import json
 from pathlib import Path
 import subprocess
 import sys
@@ -183,3 +184,28 @@ def test_swarm_transport_batched_runs_the_batched_transport(tmp_path, ros_domain
     bad = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', 'demo',
                           '--transport', 'bundled'], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and 'bundled' in bad.stderr.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize('scenario, overrides', [
+    ('demo', DEMO), ('demo', DEMO + FEATURES['unicycle accel']),
+    ('zhou2012_sec51', ['duration=0.1'])], ids=['demo', 'unicycle', 'adaptive state'])
+def test_analyze_reads_a_batched_bag_as_the_per_agent_one(tmp_path, ros_domain, scenario,
+                                                          overrides):
+    # analyze --verify rebuilds the batched run from its two clouds: the same series and
+    # summary as from the per-agent run's topics, and sim's run within its tolerance.
+    from flock_swarm.cli.analyze import main as analyze_main
+    results = {}
+    for name, extra in (('batched', BATCHED), ('per_agent', [])):
+        run = assert_matches_sim(scenario, tmp_path / name, overrides + extra,
+                                 domain_id=ros_domain, atol=0, timeout=RUN_TIMEOUT)
+        out = tmp_path / f'{name}_analysis'
+        assert analyze_main([str(run.out / 'bag'), '--verify', '--out', str(out), '-q',
+                             '--no-anim']) == 0
+        results[name] = (json.loads((out / 'summary.json').read_text()),
+                         dict(np.load(out / 'timeseries.npz')))
+    (ours, our_series), (theirs, their_series) = results['batched'], results['per_agent']
+    assert sorted(our_series) == sorted(their_series)
+    for key in our_series:
+        assert_array_equal(our_series[key], their_series[key], err_msg=key)
+    differ = {key for key in ours.keys() | theirs.keys() if ours.get(key) != theirs.get(key)}
+    assert differ <= {'bag', 'wall_time_s'}, {k: (ours.get(k), theirs.get(k)) for k in differ}

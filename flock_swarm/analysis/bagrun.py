@@ -26,6 +26,7 @@ from flock_swarm.bag.reader import UndecodableMessage
 from flock_swarm.core.errors import ScenarioError, one_line
 from flock_swarm.core.network import STATISTICS
 from flock_swarm.core.scenario import Scenario, realize
+from flock_swarm.nodes.cloud import ID, TWIST_FIELDS, decode_cloud
 from flock_swarm.nodes.recording import END_RECORD
 from flock_swarm.nodes.wire import (decode_accel, decode_odometry_state, decode_state,
                                     MalformedMessage, POSE_BYTES)
@@ -82,6 +83,11 @@ class SwarmTopics:
     metrics: str | None
     #: ``/agent_<i>/state`` of the agents that have one (a law with adaptive state).
     state: dict[int, str] = field(default_factory=dict)
+    #: The batched transport's state and command clouds (docs/ros.md, "Transports"):
+    #: ``/swarm/states`` replaces the odometry topics (``odom`` then names the per-agent
+    #: topics it stands for), ``/swarm/commands`` the command and state topics.
+    states: str | None = None
+    commands: str | None = None
 
 
 @dataclass
@@ -208,6 +214,9 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
             kinds[match['kind']][int(match['id'])] = name
     found = {ns: kinds for ns, kinds in found.items() if kinds['odom']}
     if not found:
+        batched = _batched_topics(topics, n_agents)
+        if batched is not None:
+            return batched
         raise AnalyzeError('the bag has no /agent_<i>/odom topics of type nav_msgs/msg/Odometry'
                            f' (it has {_topic_list(topics)}); {NEEDS}')
     if len(found) > 1:
@@ -239,6 +248,37 @@ def swarm_topics(topics: dict[str, str], n_agents: int | None = None) -> SwarmTo
                        {i: name for i, name in kinds['state'].items() if i < n})
 
 
+def _batched_topics(topics: dict[str, str], n_agents: int | None) -> SwarmTopics | None:
+    """Return the swarm's topics of a bag of the batched transport (``/swarm/states``, and
+    ``/swarm/commands`` when present), or ``None`` when it has no state cloud.
+
+    :raises AnalyzeError: for state clouds in several namespaces, or without the scenario
+        (which gives the number of agents).
+    """
+    suffix = '/' + contract.STATES
+    states = sorted(name for name, type_name in topics.items()
+                    if type_name == contract.CLOUD_TYPE and name.endswith(suffix))
+    if not states:
+        return None
+    if len(states) > 1:
+        raise AnalyzeError(f'the bag holds swarm states in several namespaces ({", ".join(states)}'
+                           '); not supported')
+    if n_agents is None:
+        raise AnalyzeError(f'the bag holds the batched transport\'s {states[0]} but no '
+                           'flock_swarm scenario (which gives the number of agents)')
+    ns = states[0][:-len(suffix)]
+
+    def topic(suffix: str, type_name: str) -> str | None:
+        name = f'{ns}/{suffix}'
+        return name if topics.get(name) == type_name else None
+
+    return SwarmTopics(ns, tuple(contract.absolute(contract.odom_topic(i), ns or '/')
+                                 for i in range(n_agents)), {},
+                       topic(contract.LEADER_ODOM, ODOMETRY), topic(contract.LEADER_ACCEL, ACCEL),
+                       topic(contract.METRICS, DIAGNOSTICS), {}, states[0],
+                       topic(contract.COMMANDS, contract.CLOUD_TYPE))
+
+
 def optional_topics_missing(topics: SwarmTopics) -> list[str]:
     """Return the topics ``analyze`` uses when present that a bag lacks.
 
@@ -249,6 +289,8 @@ def optional_topics_missing(topics: SwarmTopics) -> list[str]:
     missing = [f'{ns}/{suffix}' for suffix, name in (
         (contract.LEADER_ODOM, topics.leader_odom), (contract.LEADER_ACCEL, topics.leader_accel),
         (contract.METRICS, topics.metrics)) if name is None]
+    if topics.states is not None:
+        return missing + ([] if topics.commands else [f'{ns}/{contract.COMMANDS}'])
     no_cmd = [i for i in range(len(topics.odom)) if i not in topics.cmd]
     if no_cmd:
         missing.insert(0, f'{ns}/agent_<i>/cmd_accel of agent(s) {_id_list(no_cmd)}')
@@ -596,13 +638,16 @@ def _stamp_ns_of(data: bytes) -> int:
 def _read_messages(reader: BagReader, topics: SwarmTopics,
                    progress: Progress | None) -> _Messages:
     """Decode the swarm's topics of the bag."""
-    kinds: dict[str, tuple[str, int]] = {name: ('odom', i) for i, name in enumerate(topics.odom)}
+    kinds: dict[str, tuple[str, int]] = {} if topics.states is not None else \
+        {name: ('odom', i) for i, name in enumerate(topics.odom)}
     kinds.update({name: ('cmd', i) for i, name in topics.cmd.items()})
     kinds.update({name: ('state', i) for i, name in topics.state.items()})
     for kind, name in (('leader_odom', topics.leader_odom),
-                       ('leader_accel', topics.leader_accel), ('metrics', topics.metrics)):
+                       ('leader_accel', topics.leader_accel), ('metrics', topics.metrics),
+                       ('states', topics.states), ('commands', topics.commands)):
         if name is not None:
             kinds[name] = (kind, -1)
+    clouds = _Clouds(len(topics.odom))
     counts = reader.message_counts()
     total = sum(counts.get(name, 0) for name in kinds)
     out = _Messages()
@@ -663,7 +708,9 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
             tick(lambda: f'[analyze] reading {reader.path}: {read}/{total} messages '
                          f'({100 * read / max(total, 1):.0f} %)')
         topic = record[1][0]
-        if topic != metrics_topic:
+        if kinds[topic][0] in ('states', 'commands'):
+            clouds.take(kinds[topic][0], topic, record, bad)
+        elif topic != metrics_topic:
             batch = pending.get(topic)
             if batch is None:
                 batch = pending[topic] = []
@@ -685,9 +732,79 @@ def _read_messages(reader: BagReader, topics: SwarmTopics,
                     out.metrics.append((stamp, {kv.key: kv.value for kv in status.values}))
     for topic in list(pending):
         flush(topic)
+    clouds.into(out)
     bad.sort(key=lambda item: item[0])
     out.undecodable = [text for _, text in bad]
     return out
+
+
+class _Clouds:
+    """The batched transport's clouds of a bag (:mod:`flock_swarm.nodes.cloud`), turned into
+    what the per-agent topics give: every agent's odometry columns, commands and states."""
+
+    def __init__(self, n: int) -> None:
+        """Collect the clouds of a swarm of ``n`` agents."""
+        self.n = n
+        self.stamps: list[int] = []
+        self.odometry: list[np.ndarray] = []
+        self.cmd: list[tuple[int, int, tuple[float, float, float]]] = []
+        self.state: list[tuple[int, int, tuple[str, ...], tuple[float, ...]]] = []
+
+    def take(self, kind: str, topic: str, record: tuple, bad: list) -> None:
+        """Decode one recorded cloud (``kind``: ``states`` or ``commands``); a cloud that
+        does not decode, or lacks a field, goes to ``bad``."""
+        log_time, _, data, _ = record
+        try:
+            cloud = decode_cloud(data)
+            ids = cloud.ids()
+            if kind == 'states':
+                self.states(cloud, ids)
+            else:
+                self.commands(cloud, ids)
+        except MalformedMessage as exc:
+            bad.append((log_time, f'{topic} at {log_time} ns ({exc})'))
+
+    def states(self, cloud, ids: np.ndarray) -> None:
+        """Keep a state cloud as the ODOM_COLUMNS of every agent."""
+        names = cloud.names()
+        if len(ids) != self.n or not np.array_equal(np.sort(ids), np.arange(self.n)):
+            raise MalformedMessage(f'{len(ids)} points, not one of each of the {self.n} agents')
+        table = np.zeros((self.n, ODOM_COLUMNS))
+        table[:, 9] = 1.0
+        for name in ('x', 'y', 'vx', 'vy'):
+            if name not in names:
+                raise MalformedMessage(f'no field {name!r} (fields {list(names)})')
+        # A 2-D cloud has no z, vz; one without a heading the identity orientation.
+        for column, name in ((0, 'x'), (1, 'y'), (2, 'z'), (3, 'vx'), (4, 'vy'), (5, 'vz'),
+                             (8, 'qz'), (9, 'qw'), (12, 'wz')):
+            if name in names:
+                table[ids, column] = cloud.points[name]
+        self.stamps.append(cloud.stamp_ns)
+        self.odometry.append(table)
+
+    def commands(self, cloud, ids: np.ndarray) -> None:
+        """Keep a command cloud's accelerations and adaptive states, agent by agent."""
+        names = cloud.names()
+        accel = [name for name in ('ax', 'ay', 'az') if name in names]
+        u = np.zeros((len(ids), 3))
+        u[:, :len(accel)] = cloud.columns(accel)
+        labels = tuple(name for name in names if name not in ('ax', 'ay', 'az', ID)
+                       and name not in TWIST_FIELDS)
+        ns = cloud.stamp_ns
+        self.cmd.extend(zip(itertools.repeat(ns), ids.tolist(), map(tuple, u.tolist())))
+        if labels:
+            self.state.extend((ns, i, labels, tuple(values)) for i, values in
+                              zip(ids.tolist(), cloud.columns(labels).tolist()))
+
+    def into(self, out: '_Messages') -> None:
+        """Add what the clouds hold to ``out``, as the per-agent topics would have."""
+        if self.odometry:
+            stamps = np.array(self.stamps, dtype=np.int64)
+            table = np.stack(self.odometry)
+            for i in range(self.n):
+                out.odom.setdefault(i, []).append((stamps, table[:, i]))
+        out.cmd.extend(self.cmd)
+        out.state.extend(self.state)
 
 
 def _assemble(reader: BagReader, topics: SwarmTopics, sc: Scenario | None,

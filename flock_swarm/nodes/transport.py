@@ -239,39 +239,23 @@ class BatchedCommandIntake(CommandIntake):
                         window=st.window())
         if k is None:
             return
-        if st.lockstep and st.started and not st.done and k == st.k:
-            self.open_step(k, ids, u, state, twist)
+        now, rows = time.monotonic(), ids.tolist()
+        if state is not None:
+            for i, values in zip(rows, state):
+                st.agent_state(i, k, values)
+        if twist is not None and (not st.lockstep or k == st.k):
+            # A Twist answers the open step (a repeated cloud of the step before does not).
+            for i, values in zip(rows, twist):
+                st.twist(i, values[:3], values[3:], now)
+        if st.lockstep and k == st.k and len(ids) == n and (ids == np.arange(n)).all():
+            # One host commanding every agent: the step's commands at once.
+            st.commands_all(k, u)
         else:
-            now = time.monotonic()
-            late = [i for i, row in zip(ids.tolist(), u) if st.command(i, k, row, now)]
+            late = [i for i, row in zip(rows, u) if st.command(i, k, row, now)]
             if late:
                 guard.reject(topic, 'late', f'commands of agents {late[:8]} for step {k} at '
                              f'step {st.k}')
-            if not st.lockstep:
-                for i, row in zip(ids.tolist(), state if state is not None else ()):
-                    st.agent_state(i, k, row)
-                for i, row in zip(ids.tolist(), twist if twist is not None else ()):
-                    st.twist(i, row[:3], row[3:], now)
         self.closed()
-
-    def open_step(self, k: int, ids: np.ndarray, u: np.ndarray, state: np.ndarray | None,
-                  twist: np.ndarray | None) -> None:
-        """Lockstep: give the stepper the rows of the open step ``k`` at once (as
-        :meth:`WorldStepper.command`, ``agent_state`` and ``twist`` would row by row)."""
-        st = self.stepper
-        n = st.scenario.n_agents
-        if state is not None:
-            for key, shape, part in st.state_layout:
-                st.state[key][ids] = state[:, part].reshape(len(ids), *shape)
-            st.state_in.update(ids.tolist())
-        if twist is not None:
-            st.twists.update(zip(ids.tolist(), twist))
-        if not st.commands and len(ids) == n and (ids == np.arange(n)).all():
-            st.commands_all(k, u)
-        else:
-            st.commands.update(zip(ids.tolist(), u))
-            st.command_rows = None
-            st.heard[ids] = True
 
 
 def host_commands(encoder: CloudEncoder, ids: np.ndarray, ns: int, u: np.ndarray,
