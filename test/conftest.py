@@ -131,30 +131,100 @@ def imported_modules(path) -> set[str]:
 #: How long a pytest-xdist worker waits for another's quick reproduction (it took 31 s in one
 #: process on a loaded machine, 78 s on two worker processes, whose start per study dominated).
 QUICK_REPRODUCTION_WAIT = 600.0
+#: Niceness of the quick reproduction started in the background: it yields to the tests
+#: (their realtime nodes) and takes the cores they leave idle.
+QUICK_REPRODUCTION_NICE = 10
+#: The quick reproduction's command line (its outputs go under the directory given).
+QUICK_REPRODUCTION_ARGS = ('--quick', '--skip-ros', '--jobs', '1')
+
+
+def shared_temp(factory) -> Path:
+    """Return the session's temporary directory that every pytest-xdist worker shares (the
+    worker's own base directory's parent; the base directory without xdist)."""
+    base = factory.getbasetemp()
+    return base.parent if os.environ.get('PYTEST_XDIST_WORKER') else base
+
+
+def quick_reproduction_files(base: Path) -> dict[str, Path]:
+    """Return the paths of the session's quick reproduction in ``base``: its outputs
+    (``root``), the mark of a finished run (``done``), the lock the fixture takes, and those
+    of the run started in the background (``started``, ``status``: its exit status, ``log``).
+    """
+    keys = ('done', 'lock', 'started', 'status', 'log')
+    return {'root': base / 'quick_reproduction',
+            **{key: base / f'quick_reproduction.{key}' for key in keys}}
+
+
+def quick_reproduction_command(root: Path) -> list[str]:
+    """Return the command line of the quick reproduction writing into ``root``."""
+    return [sys.executable, '-m', 'flock_swarm.reproduce', *QUICK_REPRODUCTION_ARGS,
+            '--out', str(root / 'out'), '--report', str(root / 'report.md'),
+            '--figures', str(root / 'figures')]
+
+
+def pytest_collection_finish(session):
+    """Start the session's quick reproduction in the background (at nice 10) as soon as the
+    collection holds a test that needs it (issue 39): it then runs on the cores' idle time
+    (tests waiting on DDS and on child processes) while the tests before its own run. It
+    held a pytest-xdist worker for its whole run when the first of its tests came, and the
+    other worker, needing it as well, waited idle. Once per session (the first worker to
+    collect starts it); :func:`quick_reproduction` waits for its status."""
+    config = session.config
+    if config.option.collectonly or not any(
+            'quick_reproduction' in getattr(item, 'fixturenames', ()) for item in session.items):
+        return
+    files = quick_reproduction_files(shared_temp(config._tmp_path_factory))
+    try:
+        os.close(os.open(files['started'], os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return  # another worker's
+    with files['log'].open('w') as log:
+        # bash writes the exit status once the run ends (a file: every worker can read it).
+        config.flock_swarm_quick_reproduction = subprocess.Popen(
+            ['bash', '-c', '"$@"; echo $? > "$0.tmp" && mv "$0.tmp" "$0"', str(files['status']),
+             *quick_reproduction_command(files['root'])],
+            cwd=REPO, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+            preexec_fn=lambda: os.nice(QUICK_REPRODUCTION_NICE))
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Wait for the background quick reproduction this process started (another worker may
+    still need it), at most :data:`QUICK_REPRODUCTION_WAIT`; end it at once if the session
+    was interrupted."""
+    proc = getattr(session.config, 'flock_swarm_quick_reproduction', None)
+    if proc is None or proc.poll() is not None:
+        return
+    if exitstatus != pytest.ExitCode.INTERRUPTED:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(QUICK_REPRODUCTION_WAIT)
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 @pytest.fixture(scope='session')
 def quick_reproduction(tmp_path_factory) -> Path:
-    """Run ``python -m flock_swarm.reproduce --quick --skip-ros --jobs 1`` once for the whole
-    session into a temporary directory: ``out/``, ``report.md``, ``figures/``. In this process:
-    its runs take a few seconds, and starting two worker processes for each of its studies
-    took longer than all of them (the pool is test_reproduce_seeds's and test_sweep's).
+    """The session's ``python -m flock_swarm.reproduce --quick --skip-ros --jobs 1``, in a
+    temporary directory: ``out/``, ``report.md``, ``figures/``.
 
     Read-only for the tests that share it; a test that runs the reproduction again copies
     ``out/`` first (test_reproduce_seeds). Under pytest-xdist (scripts/test's default) the
-    workers share one run: it goes in the session's common temporary directory, and the first
-    worker to need it runs it holding a lock while the others wait (at most
-    :data:`QUICK_REPRODUCTION_WAIT`) and then read it. (xdist's ``--dist loadgroup`` would
-    send its tests to one worker instead, but 3.8.0 cannot mark a test's id under pytest 9.2.)
+    workers share one run: it goes in the session's common temporary directory. It was
+    started in the background at the collection (:func:`pytest_collection_finish`): the
+    first worker to need it waits for its status holding a lock, the others wait for the
+    lock (each at most :data:`QUICK_REPRODUCTION_WAIT`) and then read it. Without that start
+    (a test collected otherwise) it runs here, in this process. (xdist's ``--dist
+    loadgroup`` would send its tests to one worker instead, but 3.8.0 cannot mark a test's
+    id under pytest 9.2.)
     """
     import fcntl
     import threading
+
     from flock_swarm.cli import reproduce
-    base = tmp_path_factory.getbasetemp()
-    if os.environ.get('PYTEST_XDIST_WORKER'):
-        base = base.parent  # the session's, shared by its workers (each has a directory in it)
-    root, done = base / 'quick_reproduction', base / 'quick_reproduction.done'
-    with open(base / 'quick_reproduction.lock', 'w') as lock:
+    from flock_swarm.testing import wait_for
+    files = quick_reproduction_files(shared_temp(tmp_path_factory))
+    root, done, status = files['root'], files['done'], files['status']
+    with open(files['lock'], 'w') as lock:
         # flock blocks without a timeout: it waits in a thread, the test for at most the bound.
         locked = threading.Event()
         threading.Thread(target=lambda: (fcntl.flock(lock, fcntl.LOCK_EX), locked.set()),
@@ -162,12 +232,17 @@ def quick_reproduction(tmp_path_factory) -> Path:
         assert locked.wait(QUICK_REPRODUCTION_WAIT), (
             f'another worker held {lock.name} for {QUICK_REPRODUCTION_WAIT:.0f} s')
         if not done.exists():
-            shutil.rmtree(root, ignore_errors=True)  # what a failed attempt left
-            status = reproduce.main(['--quick', '--skip-ros', '--jobs', '1',
-                                     '--out', str(root / 'out'),
-                                     '--report', str(root / 'report.md'),
-                                     '--figures', str(root / 'figures')])
-            assert status == 0
+            if files['started'].exists():
+                wait_for(status.exists, QUICK_REPRODUCTION_WAIT,
+                         'the quick reproduction started in the background')
+                code = status.read_text().strip()
+                assert code == '0', (f'{" ".join(quick_reproduction_command(root))} exited '
+                                     f'{code}:\n{files["log"].read_text()[-3000:]}')
+            else:
+                shutil.rmtree(root, ignore_errors=True)  # what a failed attempt left
+                assert reproduce.main([*QUICK_REPRODUCTION_ARGS, '--out', str(root / 'out'),
+                                       '--report', str(root / 'report.md'),
+                                       '--figures', str(root / 'figures')]) == 0
             done.touch()
     return root
 
