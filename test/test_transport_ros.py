@@ -209,3 +209,19 @@ def test_analyze_reads_a_batched_bag_as_the_per_agent_one(tmp_path, ros_domain, 
         assert_array_equal(our_series[key], their_series[key], err_msg=key)
     differ = {key for key in ours.keys() | theirs.keys() if ours.get(key) != theirs.get(key)}
     assert differ <= {'bag', 'wall_time_s'}, {k: (ours.get(k), theirs.get(k)) for k in differ}
+
+
+def test_a_realtime_batched_run_misses_no_command(tmp_path, ros_domain):
+    # Issue 41: realtime batched at N = 100, the world on its wall-clock timer, the host
+    # answering the latest state cloud: every step has every agent's command.
+    from flock_swarm.testing import run_swarm
+    run = run_swarm('demo', tmp_path / 'run', ['n_agents=100', 'informed.count=33',
+                                               'initial.position_box=[[0, 36.5], [0, 36.5]]',
+                                               'duration=2', 'record_every=10'] + BATCHED,
+                    domain_id=ros_domain, timeout=RUN_TIMEOUT, mode='realtime')
+    summary = run.summary
+    assert summary['status'] == 'completed' and summary['mode'] == 'realtime'
+    assert summary['missed_commands'] == 0 and summary['rejected_messages'] == {}
+    assert summary['command_latency_ms']['count'] > 0
+    topics = read_bag(run.out)
+    assert len(topics['/swarm/states']) == summary['steps'] + 1

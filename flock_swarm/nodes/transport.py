@@ -35,10 +35,11 @@ from flock_swarm.core.scenario import TRANSPORTS, Scenario
 from flock_swarm.nodes.cloud import (BATCHED, COMMANDS, PER_AGENT, STATES, TWIST_FIELDS,
                                      CloudEncoder, command_fields, decode_cloud, state_fields)
 from flock_swarm.nodes.guard import InputGuard
-from flock_swarm.nodes.stepper import CommandInbox, WorldStepper
+from flock_swarm.nodes.inbox import StepInbox
+from flock_swarm.nodes.stepper import WorldStepper
 from flock_swarm.nodes.world_io import CommandIntake, StatePublisher
 from flock_swarm.nodes.parameters import Param
-from flock_swarm.nodes.wire import MalformedMessage
+from flock_swarm.nodes.wire import AccelBatch, MalformedMessage
 
 #: The world's and the agents' ``transport`` parameter.
 TRANSPORT = Param('transport', '', "'' (the scenario's transport key), per_agent (one odometry "
@@ -185,7 +186,8 @@ class BatchedCommandIntake(CommandIntake):
         self.node, self.stepper, self.closed = node, stepper, closed
         self.handlers, self.topics = [], []
         # Empty for good: each cloud is handled as it comes (the lockstep timer asks it).
-        self.inbox = CommandInbox(stepper, node.guard, self.topics)
+        self.inbox = StepInbox(0, AccelBatch(0))
+        self.inbox.steps_at_once = 0
         sc = stepper.scenario
         self.accel = command_fields(sc.dim)
         self.labels = stepper.state_labels
