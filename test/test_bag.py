@@ -391,7 +391,7 @@ def test_dump_yaml_is_pyyamls_text(bag):
     """dump_yaml lays out mappings, lists and scalars itself (PyYAML's emitter took seconds
     for a bag of 2000 topics): the text is _RosbagDumper's character for character, on the
     bag's metadata and on data with every kind of scalar PyYAML quotes, folds or refuses."""
-    from flock_swarm.bag.writer import _pyyaml_dump, dump_yaml
+    from flock_swarm.bag.yaml_emitter import _pyyaml_dump, dump_yaml
     metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())
     assert dump_yaml(metadata) == _pyyaml_dump(metadata)
     assert (bag / 'metadata.yaml').read_text() == _pyyaml_dump(metadata)
@@ -819,6 +819,23 @@ def test_batched_writes_fall_back_without_the_chunk_builder(tmp_path, monkeypatc
     monkeypatch.setattr(BagWriter, '_fast_path', lambda self: None)
     many = _write_steps(tmp_path / 'many' / 'bag', batched=True, steps=20)
     assert one.mcap_path.read_bytes() == many.mcap_path.read_bytes()
+
+
+def test_mcaps_private_writer_is_reached_through_one_adapter_with_its_version(tmp_path):
+    """Only bag/mcap_chunk.py names mcap's private attributes, and it hands them out for the
+    pinned mcap series alone: another series takes the public path."""
+    from flock_swarm.bag.mcap_chunk import installed_mcap, MCAP_SERIES, open_chunk
+    package = Path(__file__).resolve().parent.parent / 'flock_swarm'
+    naming = sorted(p.relative_to(package).as_posix() for p in package.rglob('*.py')
+                    if '_Writer__' in p.read_text())
+    assert naming == ['bag/mcap_chunk.py']
+    pinned = (package.parent / 'requirements' / 'run.txt').read_text()
+    assert f'mcap=={MCAP_SERIES}.' in pinned and installed_mcap().startswith(MCAP_SERIES + '.')
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/clock', Clock)
+        assert open_chunk(writer._writer) is not None
+        assert open_chunk(writer._writer, '1.7.0') is None
+        assert open_chunk(writer._writer, '2.6.0') is None
 
 
 def test_batched_writes_misuse(tmp_path):

@@ -41,12 +41,13 @@ from typing import Any, BinaryIO, Iterable, Sequence
 from mcap.opcode import Opcode
 import numpy as np
 from mcap.records import MessageIndex
-from mcap.writer import CompressionType, IndexType, LIBRARY_IDENTIFIER, Writer
+from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
-import yaml
 
+from flock_swarm.bag.mcap_chunk import open_chunk, OpenChunk
 from flock_swarm.bag.msgdefs import encoded_definition, message_class, type_hash, type_name_of
+from flock_swarm.bag.yaml_emitter import dump_yaml
 
 #: MCAP profile of ROS 2 bags.
 PROFILE = 'ros2'
@@ -83,10 +84,6 @@ _ONE_ENTRY_DTYPE = np.dtype([('op', 'u1'), ('length', '<u8'), ('channel', '<u2')
 _INDEX_DTYPE = np.dtype([('op', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('size', '<u4')])
 _INDEX_ENTRY_DTYPE = np.dtype([('log_time', '<u8'), ('offset', '<u8')])
 
-#: What :meth:`BagWriter._finish_chunk` uses of ``mcap.writer.Writer`` (1.6), besides the
-#: chunk builder and statistics.
-_WRITER_PARTS = ('chunk_indices', 'maybe_finalize_chunk', 'stream', 'record_builder', 'flush',
-                 'index_types')
 #: The channel id of a :class:`_Topic` in the open file.
 _CHANNEL_ID = attrgetter('channel_id')
 
@@ -139,145 +136,6 @@ def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
         'liveliness_lease_duration': _duration_yaml(qos.liveliness_lease_duration.nanoseconds),
         'avoid_ros_namespace_conventions': bool(qos.avoid_ros_namespace_conventions),
     }
-
-
-class _RosbagDumper(yaml.SafeDumper):
-    """A YAML dumper whose output looks like yaml-cpp's, which rosbag2 uses."""
-
-    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
-        # yaml-cpp indents a block sequence under its key; PyYAML would not.
-        super().increase_indent(flow, False)
-
-
-def _represent_str(dumper: yaml.SafeDumper, data: str) -> yaml.ScalarNode:
-    if data == '':
-        return dumper.represent_scalar('tag:yaml.org,2002:str', '', style='"')
-    return dumper.represent_str(data)
-
-
-def _represent_none(dumper: yaml.SafeDumper, data: None) -> yaml.ScalarNode:
-    return dumper.represent_scalar('tag:yaml.org,2002:null', '~')
-
-
-_RosbagDumper.add_representer(str, _represent_str)
-_RosbagDumper.add_representer(type(None), _represent_none)
-
-
-def _pyyaml_dump(data: Any) -> str:
-    """Dump ``data`` with PyYAML and :class:`_RosbagDumper` (the reference layout)."""
-    return yaml.dump(data, Dumper=_RosbagDumper, default_flow_style=False, sort_keys=False,
-                     allow_unicode=True, width=1 << 16)
-
-
-def dump_yaml(data: Any) -> str:
-    """Dump data as block-style YAML in the layout of rosbag2's files, keys kept in order.
-
-    The text is :class:`_RosbagDumper`'s (PyYAML) character for character; mappings, lists,
-    strings, integers, booleans and ``None`` are laid out here directly (each distinct
-    string's scalar is still PyYAML's), since PyYAML's pure-Python emitter took about 10 s
-    for the metadata of a bag of 2000 topics (the world's at N = 1000, dumped twice on
-    close). Anything else (a float, a string PyYAML would fold or break, a nested list)
-    goes to PyYAML whole.
-
-    :param data: plain dictionaries, lists, strings, numbers, booleans and ``None``.
-    :return: the YAML text.
-    """
-    lines: list[str] = []
-    try:
-        if isinstance(data, dict) and data:
-            _emit_mapping(data, '', lines)
-        elif isinstance(data, list) and data:
-            _emit_sequence(data, '', lines)
-        else:
-            raise _NotPlain
-    except _NotPlain:
-        return _pyyaml_dump(data)
-    lines.append('')
-    return '\n'.join(lines)
-
-
-class _NotPlain(Exception):
-    """Data :func:`dump_yaml` leaves to PyYAML."""
-
-
-#: Strings PyYAML writes as one line whatever the column (no space to fold at, short).
-_ONE_LINE = re.compile(r'[^\s]{0,1000}')
-#: A scalar's text as a mapping value and as a key, by value (:func:`_scalar`, :func:`_key`).
-_SCALARS: dict[str, str] = {}
-_KEYS: dict[str, str] = {}
-
-
-def _scalar(value: Any) -> str:
-    """Return the text of a scalar as PyYAML writes it in block context."""
-    kind = type(value)
-    if kind is str:
-        text = _SCALARS.get(value)
-        if text is None:
-            if not _ONE_LINE.fullmatch(value):
-                raise _NotPlain
-            dumped = _pyyaml_dump({'k': value})
-            if not dumped.startswith('k: ') or dumped.count('\n') != 1:
-                raise _NotPlain
-            text = _SCALARS[value] = dumped[3:-1]
-        return text
-    if kind is bool:
-        return 'true' if value else 'false'
-    if kind is int:
-        return str(value)
-    if value is None:
-        return '~'
-    raise _NotPlain
-
-
-def _key(key: Any) -> str:
-    """Return the text of a mapping key as PyYAML writes it (a simple key)."""
-    text = _KEYS.get(key)
-    if text is None:
-        if type(key) is not str or not key or not _ONE_LINE.fullmatch(key):
-            raise _NotPlain
-        dumped = _pyyaml_dump({key: 0})
-        if not dumped.endswith(': 0\n') or dumped.count('\n') != 1:
-            raise _NotPlain
-        text = _KEYS[key] = dumped[:-4]
-    return text
-
-
-def _emit_mapping(data: dict, indent: str, lines: list[str], first: str | None = None) -> None:
-    """Append a non-empty block mapping at ``indent``; ``first``: the prefix of its first line
-    (a sequence item's ``- ``) instead of ``indent``."""
-    for key, value in data.items():
-        head = f'{indent if first is None else first}{_key(key)}:'
-        first = None
-        kind = type(value)
-        if kind is dict:
-            if value:
-                lines.append(head)
-                _emit_mapping(value, indent + '  ', lines)
-            else:
-                lines.append(head + ' {}')
-        elif kind is list:
-            if value:
-                lines.append(head)
-                _emit_sequence(value, indent + '  ', lines)
-            else:
-                lines.append(head + ' []')
-        else:
-            lines.append(f'{head} {_scalar(value)}')
-
-
-def _emit_sequence(data: list, indent: str, lines: list[str]) -> None:
-    """Append a non-empty block sequence at ``indent`` (items: non-empty mappings or
-    scalars)."""
-    for item in data:
-        kind = type(item)
-        if kind is dict:
-            if not item:
-                raise _NotPlain
-            _emit_mapping(item, indent + '  ', lines, first=indent + '- ')
-        elif kind is list:
-            raise _NotPlain
-        else:
-            lines.append(f'{indent}- {_scalar(item)}')
 
 
 #: Plain CDR of the primitive types rclpy names (``get_fields_and_field_types``): the
@@ -826,8 +684,9 @@ class BagWriter:
         directly, as runs of records joined into one write, instead of one
         ``mcap.records.Message`` object and seven stream writes each (12 us a message in
         ``mcap`` 1.6 against well under 1 here). That reaches into ``mcap.writer.Writer``'s
-        chunk builder; where it is not there (another ``mcap`` version, chunking off), each
-        message goes through :meth:`write_serialized`.
+        chunk builder, through :mod:`flock_swarm.bag.mcap_chunk` alone; where it is not there
+        (another ``mcap`` series, chunking off), each message goes through
+        :meth:`write_serialized`.
 
         :param topics: the messages' topics, declared with :meth:`add_topic`.
         :param data: the serialised messages (as many as ``topics``).
@@ -856,7 +715,7 @@ class BagWriter:
             for entry, message in zip(entries, data):
                 self.write_serialized(entry.name, message, t_ns)
             return
-        chunk, stats, limit, finish = fast
+        chunk, stats, limit = fast.builder, fast.statistics, fast.limit
         count = len(entries)
         channels = list(map(_CHANNEL_ID, entries))
         # Writer.add_message's statistics (all messages have one time: once for the batch),
@@ -892,7 +751,7 @@ class BagWriter:
         channel_ids = np.array(channels, dtype=np.int64)
         first = done = 0
         while first < count:
-            stream = chunk.record_writer._buffer
+            stream = fast.buffer()
             at = stream.tell()
             # The first record ending past the limit closes this run (and the chunk).
             last = first + int(np.searchsorted(ends[first:], limit - at + done, side='right'))
@@ -909,27 +768,15 @@ class BagWriter:
             chunk.num_messages += stop - first
             done, first = int(ends[stop - 1]), stop
             if full:
-                finish()
+                self._finish_chunk()
                 # A fresh chunk (reset by mcap): its first message is the batch's next.
                 chunk.message_start_time = chunk.message_end_time = t_ns
         self._files[-1].took(t_ns, count)
 
-    def _fast_path(self) -> tuple | None:
-        """Return the mcap writer's ``(chunk builder, statistics, chunk size, finish)``
-        (``finish()``: :meth:`_finish_chunk`), or ``None`` where they are not as ``mcap``
-        1.6 has them."""
-        writer = self._writer
-        chunk = getattr(writer, '_Writer__chunk_builder', None)
-        stats = getattr(writer, '_Writer__statistics', None)
-        limit = getattr(writer, '_Writer__chunk_size', None)
-        stream = getattr(getattr(chunk, 'record_writer', None), '_buffer', None)
-        if stream is None or stats is None or not isinstance(limit, int) \
-                or not hasattr(stats, 'channel_message_counts') \
-                or not hasattr(chunk, 'message_indices') \
-                or any(not hasattr(writer, f'_Writer__{name}') for name in _WRITER_PARTS) \
-                or not writer._Writer__index_types & IndexType.MESSAGE:
-            return None
-        return chunk, stats, limit, self._finish_chunk
+    def _fast_path(self) -> OpenChunk | None:
+        """Return the mcap writer's open chunk (:func:`~flock_swarm.bag.mcap_chunk.open_chunk`),
+        or ``None`` where a batch must take mcap's public path."""
+        return open_chunk(self._writer)
 
     def _settle(self) -> None:
         """Put the open chunk's pending index entries (:meth:`write_serialized_batch`'s)
@@ -938,7 +785,7 @@ class BagWriter:
         if not self._pending:
             return
         pending, self._pending = self._pending, []
-        indices = self._writer._Writer__chunk_builder.message_indices
+        indices = OpenChunk(self._writer).builder.message_indices
         for channels, offsets, t_ns in pending:
             for channel, offset in zip(channels.tolist(), offsets.tolist()):
                 index = indices.get(channel)
@@ -954,28 +801,23 @@ class BagWriter:
         with several Python calls each (at N = 1000 a chunk indexes 2000 channels), here
         they are one NumPy pass and one write, the same bytes, their offsets in the
         ChunkIndex as mcap puts them."""
-        writer = self._writer
-        if writer._Writer__chunk_builder.message_indices:
+        chunk = OpenChunk(self._writer)
+        if chunk.builder.message_indices:
             # mcap's add_message indexed some of the chunk's messages: its own way.
             self._settle()
-            writer._Writer__maybe_finalize_chunk()
+            chunk.finalize()
             return
         pending, self._pending = self._pending, []
-        count = len(writer._Writer__chunk_indices)
-        writer._Writer__maybe_finalize_chunk()
-        if len(writer._Writer__chunk_indices) == count:
+        count = chunk.chunk_count()
+        chunk.finalize()
+        if chunk.chunk_count() == count:
             # Not finished after all (never, from write_serialized_batch): as they were.
             self._pending = pending
             return
         if not pending:
             return
         data, channels, offsets = _index_records(pending)
-        start = writer._Writer__stream.tell()
-        chunk_index = writer._Writer__chunk_indices[-1]
-        chunk_index.message_index_offsets.update(zip(channels, (offsets + start).tolist()))
-        chunk_index.message_index_length = len(data)
-        writer._Writer__record_builder.write(data)
-        writer._Writer__flush()
+        chunk.write_message_indexes(data, channels, offsets.tolist())
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write an MCAP metadata record (string keys and values), such as run provenance.
