@@ -2,6 +2,7 @@
 
     python bench/bench_ros.py [--sizes 5 10 20 50 100] [--layouts one container processes]
                               [--steps 300] [--repeat 3] [--memory] [--json out/bench/ros.json]
+                              [--transports per_agent batched]
 
 For each layout and N it runs, in fresh processes and one after the other:
 
@@ -32,6 +33,14 @@ For each layout and N it runs, in fresh processes and one after the other:
     message's callback, the host's commands published in one call. Not run when the
     extension is not built or ``FLOCK_SWARM_MESSAGE_PATH=rclpy`` (the pipeline then runs
     on rclpy too).
+
+``batched`` (``--transports batched``; issue 41)
+    the pipeline with ``swarm --transport batched`` (the swarm's state as one PointCloud2 a
+    step, the agents host's commands as one: docs/ros.md, "Transports"), recording on and
+    off, in the ``one`` and ``container`` layouts, beside ``sim``'s steps/s on the same
+    scenario in the same invocation (``sim``'s own ``wall_time_s``: the limit without ROS).
+    Targets: N = 1000 in one process >= 200 steps/s with recording and >= 0.3 of ``sim``;
+    N = 10,000 >= 50 steps/s, its cost per agent-step within 1.3x that at N = 1000.
 
 Each variant runs ``--repeat`` times, interleaved, and the best run counts (on a shared
 machine the least disturbed one); every run is in the JSON.
@@ -454,10 +463,11 @@ def last_json(stdout: str) -> dict:
     raise RuntimeError('the floor world printed no result')
 
 
-def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool) -> list[str]:
-    """Return the ``swarm`` command of a pipeline run."""
+def swarm_command(layout: str, n: int, steps: int, out: Path, record: bool,
+                  transport: str = 'per_agent') -> list[str]:
+    """Return the ``swarm`` command of a pipeline run (``transport``: ``swarm --transport``)."""
     cmd = [sys.executable, '-m', 'flock_swarm.cli.swarm', 'demo', '--out', str(out), '--no-plots',
-           '--domain-id', str(DOMAIN)]
+           '--domain-id', str(DOMAIN), '--transport', transport]
     for item in scenario_overrides(n, steps):
         cmd += ['--set', item]
     if layout == 'container':
@@ -489,13 +499,13 @@ def wait_bounded(proc: subprocess.Popen, timeout: float):
     return None
 
 
-def pipeline(layout: str, n: int, steps: int, record: bool) -> dict:
+def pipeline(layout: str, n: int, steps: int, record: bool, transport: str = 'per_agent') -> dict:
     """Run the pipeline once; return steps/s, real-time factor, microseconds per agent-step,
     the seconds outside the steps (start-up and teardown) and the child's peak RSS."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
         launched = time.monotonic()
-        proc = subprocess.Popen(swarm_command(layout, n, steps, out, record),
+        proc = subprocess.Popen(swarm_command(layout, n, steps, out, record, transport),
                                 env=_env(layout, n), stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
         usage = wait_bounded(proc, RUN_TIMEOUT)
@@ -519,6 +529,80 @@ def pipeline(layout: str, n: int, steps: int, record: bool) -> dict:
             'outside_steps_s': elapsed - summary['wall_time_s'],
             'resent_steps': summary['resent_steps'],
             'peak_rss_mib': usage.ru_maxrss / 1024.0}
+
+
+def sim_rate(n: int, steps: int) -> dict:
+    """Run ``sim`` once on the pipeline's scenario (no figures); return its steps/s (from its
+    summary's ``wall_time_s``: the steps alone) and microseconds per agent-step."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, '-m', 'flock_swarm.cli.sim', 'demo', '--out',
+               str(Path(tmp) / 'sim'), '-q']
+        for item in scenario_overrides(n, steps):
+            cmd += ['--set', item]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, timeout=RUN_TIMEOUT)
+        summary = json.loads((Path(tmp) / 'sim' / 'summary.json').read_text())
+    rate = summary['steps'] / summary['wall_time_s']
+    return {'steps_per_s': rate, 'us_per_agent_step': 1e6 / (rate * n)}
+
+
+def batched_rows(layouts: list[str], sizes: list[int], steps: int,
+                 repeat: int) -> tuple[list[dict], list[dict]]:
+    """Run the batched transport (``swarm --transport batched``, recording on and off) and
+    ``sim`` at each N, interleaved, best of ``repeat``; print and return the rows and the
+    failed ones. ``sim`` is the limit: the same scenario without ROS."""
+    rows, failed = [], []
+    print(f'{"batched":>10} {"N":>5} {"sim":>8} {"pipeline":>9} {"/ sim":>6} {"no-rec":>7} '
+          f'{"RTF":>6} {"us/a-st":>8} {"sim us":>7} {"outside":>8} {"RSS MiB":>8}  '
+          '[steps/s; us per agent-step, s outside the steps]', flush=True)
+    for layout in [name for name in layouts if name != 'processes']:
+        for n in sizes:
+            sims, fulls, bares = [], [], []
+            try:
+                for _ in range(repeat):
+                    sims.append(sim_rate(n, steps))
+                    fulls.append(pipeline(layout, n, steps, record=True, transport='batched'))
+                    bares.append(pipeline(layout, n, steps, record=False, transport='batched'))
+            except (RuntimeError, subprocess.SubprocessError, ValueError) as exc:
+                failed.append({'layout': layout, 'n': n, 'transport': 'batched',
+                               'error': str(exc), 'pipeline_runs': rates(fulls)})
+                print(f'{"batched " + layout:>10} {n:>5} failed: {exc}', flush=True)
+                continue
+            best = max(sims, key=lambda r: r['steps_per_s'])
+            full = max(fulls, key=lambda r: r['steps_per_s'])
+            bare = max(bares, key=lambda r: r['steps_per_s'])
+            row = {'layout': layout, 'n': n, 'steps': steps, 'transport': 'batched',
+                   'sim': best['steps_per_s'], 'sim_runs': rates(sims),
+                   'sim_us_per_agent_step': best['us_per_agent_step'],
+                   'pipeline': full['steps_per_s'], 'pipeline_runs': rates(fulls),
+                   'no_record': bare['steps_per_s'], 'no_record_runs': rates(bares),
+                   'ratio_to_sim': full['steps_per_s'] / best['steps_per_s'],
+                   'rtf': full['rtf'], 'us_per_agent_step': full['us_per_agent_step'],
+                   'outside_steps_s': full['outside_steps_s'],
+                   'resent_steps': [r['resent_steps'] for r in fulls],
+                   'peak_rss_mib': full['peak_rss_mib']}
+            rows.append(row)
+            print(f'{layout:>10} {n:>5} {row["sim"]:8.1f} {row["pipeline"]:9.1f} '
+                  f'{row["ratio_to_sim"]:6.2f} {row["no_record"]:7.1f} {row["rtf"]:6.2f} '
+                  f'{row["us_per_agent_step"]:8.1f} {row["sim_us_per_agent_step"]:7.1f} '
+                  f'{row["outside_steps_s"]:8.1f} {row["peak_rss_mib"]:8.0f}', flush=True)
+    return rows, failed
+
+
+def batched_checks(rows: list[dict]) -> list[tuple[str, bool]]:
+    """Return issue 41's targets over the batched rows."""
+    checks = [(f'batched {r["layout"]} N=1000: >= 200 steps/s with recording '
+               f'({r["pipeline"]:.1f})', r['pipeline'] >= 200) for r in rows if r['n'] == 1000]
+    checks += [(f'batched {r["layout"]} N=1000: >= 0.3 of sim ({r["ratio_to_sim"]:.2f})',
+                r['ratio_to_sim'] >= 0.3) for r in rows if r['n'] == 1000]
+    checks += [(f'batched {r["layout"]} N=10000: >= 50 steps/s ({r["pipeline"]:.1f})',
+                r['pipeline'] >= 50) for r in rows if r['n'] == 10000]
+    for layout in {r['layout'] for r in rows}:
+        by_n = {r['n']: r for r in rows if r['layout'] == layout}
+        if 1000 in by_n and 10000 in by_n:
+            growth = by_n[10000]['us_per_agent_step'] / by_n[1000]['us_per_agent_step']
+            checks.append((f'batched {layout}: cost per agent-step at N=10000 within 1.3x that '
+                           f'at N=1000 ({growth:.2f}x)', growth <= 1.3))
+    return checks
 
 
 def rates(runs: list[dict]) -> list[float]:
@@ -573,6 +657,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--memory-n', type=int, default=30,
                         help='agents of the memory runs (default: 30)')
     parser.add_argument('--json', type=Path, help='write the results here')
+    parser.add_argument('--transports', nargs='+', default=['per_agent'],
+                        choices=['per_agent', 'batched'],
+                        help="the transports measured (batched: 'one' and 'container' layouts, "
+                        "beside sim's steps/s at the same N)")
     parser.add_argument('--discovery', default='auto', choices=['auto', 'LOCALHOST', 'SUBNET'],
                         help='ROS_AUTOMATIC_DISCOVERY_RANGE of the runs (default auto: '
                         f'LOCALHOST, SUBNET for the processes layout beyond '
@@ -598,12 +686,13 @@ def main(argv: list[str] | None = None) -> int:
     if not with_c:
         print(f'# no C floor: the pipeline runs on pure rclpy ({why_not_built() or ENV_RCLPY})',
               flush=True)
-    print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"C fl.":>8} {"pipeline":>9} '
-          f'{"ratio":>6} {"raw r.":>6} {"C r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6} '
-          f'{"us/a-st":>8} {"outside":>8} {"RSS MiB":>8}  '
-          '[steps/s; us per agent-step, s outside the steps]',
-          flush=True)
-    for layout in args.layouts:
+    if 'per_agent' in args.transports:
+        print(f'{"layout":>10} {"N":>4} {"floor":>8} {"raw fl.":>8} {"C fl.":>8} {"pipeline":>9} '
+              f'{"ratio":>6} {"raw r.":>6} {"C r.":>6} {"no-rec":>7} {"rec cost":>8} {"RTF":>6} '
+              f'{"us/a-st":>8} {"outside":>8} {"RSS MiB":>8}  '
+              '[steps/s; us per agent-step, s outside the steps]',
+              flush=True)
+    for layout in args.layouts if 'per_agent' in args.transports else []:
         for n in args.sizes:
             if layout == 'processes' and n > args.max_process_agents:
                 continue
@@ -681,6 +770,11 @@ def main(argv: list[str] | None = None) -> int:
                 f'({r["pipeline"]:.1f})', r['pipeline'] >= 50)
                for r in rows if r['n'] == 1000]
     checks += growth_checks(rows, args.layouts, 2000, 1.3)
+    if 'batched' in args.transports:
+        batched, failed_batched = batched_rows(args.layouts, args.sizes, args.steps, args.repeat)
+        rows += batched
+        failed += failed_batched
+        checks += batched_checks(batched)
     checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:
