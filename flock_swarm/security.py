@@ -12,10 +12,10 @@ import argparse
 import sys
 from xml.sax.saxutils import escape
 
-from flock_swarm.contract import (agent_name, CLOCK, DIAGNOSTICS, FAULTS, LEADER_ACCEL,
-                                  LEADER_ODOM, MARKERS, METRICS, OBSTACLES, SCENARIO, STATUS,
-                                  cmd_topic, cmd_vel_topic, network_topic, odom_topic,
-                                  state_topic)
+from flock_swarm.contract import (agent_name, CLOCK, COMMANDS, DIAGNOSTICS, FAULTS,
+                                  LEADER_ACCEL, LEADER_ODOM, MARKERS, METRICS, OBSTACLES,
+                                  SCENARIO, STATES, STATUS, cmd_topic, cmd_vel_topic,
+                                  network_topic, odom_topic, state_topic)
 
 #: The enclave paths live under this prefix: ``/flock_swarm/world``, ``/flock_swarm/agent_3``.
 ENCLAVE_PREFIX = '/flock_swarm'
@@ -33,15 +33,18 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     Each agent may publish its adaptive state (``agent_<i>/state``, a topic only for a law
     with one), its network report (``agent_<i>/network``, realtime mode with a ``network:``
     section only) and its velocity command (``agent_<i>/cmd_vel``, only for a robot plant
-    commanded by velocity): the policy depends neither on the law, the mode nor the plant.
+    commanded by velocity), and the world and each agent the batched transport's clouds
+    (``swarm/states``, ``swarm/commands``: docs/ros.md, "Transports"): the policy depends
+    neither on the law, the mode, the plant nor the transport.
 
     :param n_agents: the swarm's size.
     :return: the world's, the leader's and each ``agent_<i>``'s topics.
     """
     odom = [odom_topic(i) for i in range(n_agents)]
     out = {
-        'world': ([CLOCK, *odom, MARKERS, METRICS, DIAGNOSTICS, STATUS, SCENARIO, OBSTACLES],
-                  [*(cmd_topic(i) for i in range(n_agents)),
+        'world': ([CLOCK, *odom, STATES, MARKERS, METRICS, DIAGNOSTICS, STATUS, SCENARIO,
+                   OBSTACLES],
+                  [*(cmd_topic(i) for i in range(n_agents)), COMMANDS,
                    *(state_topic(i) for i in range(n_agents)),
                    *(network_topic(i) for i in range(n_agents)),
                    *(cmd_vel_topic(i) for i in range(n_agents)), LEADER_ODOM, LEADER_ACCEL,
@@ -50,8 +53,8 @@ def grants(n_agents: int) -> dict[str, tuple[list[str], list[str]]]:
     }
     for i in range(n_agents):
         out[agent_name(i)] = ([cmd_topic(i), state_topic(i), network_topic(i),
-                               cmd_vel_topic(i), FAULTS],
-                              [*odom, LEADER_ODOM, LEADER_ACCEL, STATUS])
+                               cmd_vel_topic(i), COMMANDS, FAULTS],
+                              [*odom, STATES, LEADER_ODOM, LEADER_ACCEL, STATUS])
     return out
 
 

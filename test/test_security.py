@@ -41,6 +41,8 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     # A robot plant's velocity commands (docs/plants.md): to the world.
     twists = {contract.cmd_vel_topic(i) for i in range(n)}
     leader = {contract.LEADER_ODOM, contract.LEADER_ACCEL}
+    # The batched transport's clouds: the swarm's state from the world, each host's commands.
+    clouds = ({contract.STATES}, {contract.COMMANDS})
     status = {contract.STATUS}  # the world announces the end of its run to the others
     # The world also publishes the run's scenario (latched, recorded at t = 0), and the
     # obstacle map of a scenario with obstacles (the same).
@@ -48,13 +50,13 @@ def expected(n: int) -> dict[str, tuple[set, set]]:
     faults = {contract.FAULTS}
     # The metrics go to /diagnostics too (rqt_robot_monitor, diagnostic_aggregator).
     nodes = {'world': ({contract.CLOCK, contract.MARKERS, contract.METRICS, contract.SCENARIO,
-                        contract.OBSTACLES, contract.DIAGNOSTICS} | odom | status,
-                       cmds | states | reports | twists | leader | faults),
+                        contract.OBSTACLES, contract.DIAGNOSTICS} | odom | clouds[0] | status,
+                       cmds | clouds[1] | states | reports | twists | leader | faults),
              'leader': (leader | faults, {contract.CLOCK} | status)}
     for i in range(n):
         nodes[f'agent_{i}'] = ({contract.cmd_topic(i), contract.state_topic(i),
-                                contract.network_topic(i), contract.cmd_vel_topic(i)} | faults,
-                               odom | leader | status)
+                                contract.network_topic(i), contract.cmd_vel_topic(i)}
+                               | clouds[1] | faults, odom | clouds[0] | leader | status)
     return {node: ({absolute(t) for t in pub} | {ROSOUT, PARAMETER_EVENTS},
                    {absolute(t) for t in sub}) for node, (pub, sub) in nodes.items()}
 
@@ -127,6 +129,8 @@ def test_policy_matches_the_topics_of_live_nodes(tmp_path, ros_domain, scenario,
     optional.add(absolute(contract.OBSTACLES))
     # Nor velocity commands (a robot plant commanded by velocity only, docs/plants.md).
     optional |= {absolute(contract.cmd_vel_topic(i)) for i in range(N_AGENTS)}
+    # Nor the batched transport's clouds (transport: batched only, docs/ros.md).
+    optional |= {absolute(contract.STATES), absolute(contract.COMMANDS)}
     if not adaptive:
         optional |= {absolute(contract.state_topic(i)) for i in range(N_AGENTS)}
     nodes = []
