@@ -135,13 +135,9 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
             f'of {sc.dt:g} s, seed {sc.seed}')
     try:
         result = simulate(sc, progress=say, integrator=integrator)
-    except RunFault as fault:
-        # The fault came before the first recorded instant: nothing to write.
-        print(f'sim: error: {fault}', file=sys.stderr)
-        return EXIT_FAILURE
-    except PluginError as exc:
-        # A law's output of the wrong shape at some step: the run cannot go on (status 1,
-        # a failed run, not a usage error).
+    except (RunFault, PluginError) as exc:
+        # A fault before the first recorded instant (nothing to write), or a law's output of
+        # the wrong shape at some step: the run cannot go on (a failed run, not a usage error).
         print(f'sim: error: {exc}', file=sys.stderr)
         return EXIT_FAILURE
     with stop.held():
