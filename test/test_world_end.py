@@ -28,6 +28,20 @@ def summary_of(out):
     return json.loads((out / 'summary.json').read_text())
 
 
+def fly(tmp_path, name, domain, stop_at=None):
+    """Fly the small demo in one process into ``tmp_path / name``, to its end or until the
+    world has opened step ``stop_at`` (then closed, as a stop signal closes it); return the
+    output directory, the world's summary and the end its bag records."""
+    out = tmp_path / name
+    path = resolve_scenario('demo', SETS, None, out)
+    with InProcessSwarm(path, out, domain_id=domain) as swarm:
+        if stop_at is None:
+            swarm.spin_to_end(RUN_TIMEOUT)
+        else:
+            swarm.spin_until(lambda: swarm.world.k >= stop_at, RUN_TIMEOUT)
+    return out, summary_of(out), BagReader(out / 'bag').metadata(END_RECORD)
+
+
 def analysed(tmp_path, out):
     """Run ``analyze`` on the bag of the run in ``out``; return its summary."""
     where = tmp_path / f'{out.name}_analysis'
@@ -42,15 +56,10 @@ def test_analyze_of_a_failed_run_says_failed_with_the_worlds_line(
     line, records that end in the bag, and ``analyze`` of the bag reports ``failed`` with
     the same line (it said ``interrupted``)."""
     nan_command_for(monkeypatch, 1, after=5)
-    out = tmp_path / 'failed'
-    path = resolve_scenario('demo', SETS, None, out)
-    with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
-        swarm.spin_to_end(RUN_TIMEOUT)
-    world = summary_of(out)
+    out, world, end = fly(tmp_path, 'failed', ros_domain)
     assert world['status'] == 'failed' and world['steps'] == 5
     assert 'returned a non-finite command at step 5 (agent 1)' in world['failure']
-    assert BagReader(out / 'bag').metadata(END_RECORD) == {
-        'status': 'failed', 'steps': '5', 'failure': world['failure']}
+    assert end == {'status': 'failed', 'steps': '5', 'failure': world['failure']}
     ours = analysed(tmp_path, out)
     assert ours['status'] == 'failed' and ours['failure'] == world['failure']
     # The failure line in its place, after the status, as the world writes it.
@@ -63,24 +72,14 @@ def test_analyze_of_a_stopped_and_of_a_completed_run_says_so(tmp_path, ros_domai
     """A run whose world is closed at step 3 (as a stop signal closes it) records
     ``interrupted``; a run to its end records ``completed``; ``analyze`` reports each, with
     no failure line."""
-    stopped = tmp_path / 'stopped'
-    path = resolve_scenario('demo', SETS, None, stopped)
-    with InProcessSwarm(path, stopped, domain_id=ros_domain) as swarm:
-        swarm.spin_until(lambda: swarm.world.k >= 3, RUN_TIMEOUT)
-    world = summary_of(stopped)
+    stopped, world, end = fly(tmp_path, 'stopped', ros_domain, stop_at=3)
     assert world['status'] == 'interrupted'
-    assert BagReader(stopped / 'bag').metadata(END_RECORD) == {
-        'status': 'interrupted', 'steps': str(world['steps'])}
+    assert end == {'status': 'interrupted', 'steps': str(world['steps'])}
     ours = analysed(tmp_path, stopped)
     assert ours['status'] == 'interrupted' and 'failure' not in ours
 
-    done = tmp_path / 'done'
-    path = resolve_scenario('demo', SETS, None, done)
-    with InProcessSwarm(path, done, domain_id=ros_domain) as swarm:
-        swarm.spin_to_end(RUN_TIMEOUT)
-    world = summary_of(done)
+    done, world, end = fly(tmp_path, 'done', ros_domain)
     assert world['status'] == 'completed' and world['steps'] == 25
-    assert BagReader(done / 'bag').metadata(END_RECORD) == {'status': 'completed',
-                                                            'steps': '25'}
+    assert end == {'status': 'completed', 'steps': '25'}
     ours = analysed(tmp_path, done)
     assert ours['status'] == 'completed' and 'failure' not in ours

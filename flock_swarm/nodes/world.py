@@ -31,22 +31,18 @@ import time
 from typing import Callable
 
 from std_msgs.msg import String
-from visualization_msgs.msg import MarkerArray
 
-from flock_swarm.bag.writer import serialize
 from flock_swarm.console import EXIT_USAGE
-from flock_swarm.contract import (FRAME, OBSTACLES, OBSTACLES_QOS, RUNNING, SCENARIO,
-                                  SCENARIO_QOS, STATUS, STATUS_QOS, qos_profile)
-from flock_swarm.core.errors import ScenarioError
+from flock_swarm.contract import RUNNING, STATUS, STATUS_QOS, qos_profile
 from flock_swarm.nodes.batch import MESSAGE_PATH, use_c_path
 from flock_swarm.nodes.cloud import BATCHED
 from flock_swarm.nodes.transport import (TRANSPORT, BatchedCommandIntake,
                                          batched_state_publisher, transport_of)
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
-from flock_swarm.nodes.markers import Telemetry, obstacle_markers
+from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
-from flock_swarm.nodes.recording import RecordedNode, provenance, provenance_text
+from flock_swarm.nodes.recording import RecordedNode
 from flock_swarm.nodes.spin import run_node, wall_timer
 from flock_swarm.nodes.stepper import SETTING_PARAMS, Observation, WorldSettings, WorldStepper
 from flock_swarm.nodes.world_end import WorldEnd
@@ -136,48 +132,6 @@ class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
         self.publish_provenance()
         self.timer = wall_timer(self, 0.01, self.on_lockstep_timer) if self.lockstep else \
             wall_timer(self, params.timer_period(sc.dt), self.on_realtime_timer)
-
-    def init_waiting(self, params: NodeParameters) -> None:
-        """Read what the start waits for and the pace; nobody refused, nothing waited yet."""
-        self.expect_subscribers = params['expect_subscribers']
-        self.expect_telemetry = params['expect_telemetry_subscribers']
-        self.pace = params['pace']
-        #: Lockstep with ``pace``: the next step is held until its wall time.
-        self.paced = False
-        #: The pace in force (:meth:`pace_now`) and the step and wall time it counts from
-        #: (``None``: the start of the run).
-        self.pace_in_force = self.pace
-        self.pace_anchor: tuple[int, float] | None = None
-        self.created = self.wait_logged = time.monotonic()
-        #: Why the world refused to start (another world on the domain), or ``None``.
-        self.refusal: ScenarioError | None = None
-        self.other_world_reported = False
-        self.subscribers_needed = self.expect_subscribers
-        self.duplicates: set[int] = set()
-        # The node that published each agent's commands, as the graph last told.
-        self.hosts: dict[int, str] = {}
-
-    def publish_provenance(self) -> None:
-        """Publish and record the scenario and the obstacle map at t = 0 (latched), then
-        write them to the sinks."""
-        sc = self.scenario
-        # Latched, and recorded at t = 0: the bag keeps the scenario where tools that drop
-        # MCAP metadata (rosbags-convert) keep it too (analyze reads it there).
-        self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
-        self.publish_recorded(self.scenario_pub, String(data=provenance_text(
-            provenance(sc, self.stepper.real, self.mode))), 0)
-        #: The obstacle map's bytes as published (None without obstacles): a live view
-        #: served after the start sends them to its viewers (InProcessSwarm.serve).
-        self.obstacles_map: bytes | None = None
-        if sc.obstacles.active:
-            # The map for viewers, latched and recorded at t = 0 (docs/obstacles.md).
-            self.obstacles_pub = self.recorded_publisher(MarkerArray, OBSTACLES,
-                                                         qos_profile(OBSTACLES_QOS))
-            self.obstacles_map = serialize(obstacle_markers(
-                sc.obstacles, sc.dim, self.clock.stamp(0), FRAME))
-            self.publish_recorded(self.obstacles_pub, self.obstacles_map, 0)
-        for sink in self.sinks:
-            sink.flush()
 
     # The stepper's state and the message paths' topics, as the runner and the tests read
     # them off the node.

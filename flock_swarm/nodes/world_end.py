@@ -2,7 +2,8 @@
 
 :class:`WorldEnd` is the part of the world node (:mod:`flock_swarm.nodes.world`) that opens
 its outputs (the bag, :class:`~flock_swarm.nodes.recording.BagSink`; the spooled time
-series) and ends the run: ``completed``, ``failed`` with the line telling why,
+series; the scenario and the obstacle map published and recorded at t = 0) and ends the
+run: ``completed``, ``failed`` with the line telling why,
 ``recording_failed``, ``interrupted`` by a stop signal, or ``refused`` beside another world.
 It announces the end on ``swarm/status``, records it in the bag (the ``flock_swarm_end``
 metadata record ``analyze`` reads), writes ``summary.json`` and ``timeseries.npz``, closes
@@ -15,11 +16,16 @@ from pathlib import Path
 
 from rclpy.duration import Duration
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
+from flock_swarm.bag.writer import serialize
+from flock_swarm.contract import FRAME, OBSTACLES, OBSTACLES_QOS, SCENARIO, SCENARIO_QOS, \
+    qos_profile
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
 from flock_swarm.core.summary import with_failure
-from flock_swarm.nodes.recording import BagSink
+from flock_swarm.nodes.markers import obstacle_markers
+from flock_swarm.nodes.recording import BagSink, provenance, provenance_text
 from flock_swarm.outputs import (SpooledRecorder, json_text, write_error, write_outputs,
                                  write_text)
 
@@ -57,6 +63,28 @@ class WorldEnd:
             raise ScenarioError('out_dir', f'cannot write to {self.out}: {exc.strerror}') \
                 from None
         self.sinks = [] if self.bag is None else [self.bag]
+
+    def publish_provenance(self) -> None:
+        """Publish and record the scenario and the obstacle map at t = 0 (latched), then
+        write them to the sinks."""
+        sc = self.scenario
+        # Latched, and recorded at t = 0: the bag keeps the scenario where tools that drop
+        # MCAP metadata (rosbags-convert) keep it too (analyze reads it there).
+        self.scenario_pub = self.recorded_publisher(String, SCENARIO, qos_profile(SCENARIO_QOS))
+        self.publish_recorded(self.scenario_pub, String(data=provenance_text(
+            provenance(sc, self.stepper.real, self.mode))), 0)
+        #: The obstacle map's bytes as published (None without obstacles): a live view
+        #: served after the start sends them to its viewers (InProcessSwarm.serve).
+        self.obstacles_map: bytes | None = None
+        if sc.obstacles.active:
+            # The map for viewers, latched and recorded at t = 0 (docs/obstacles.md).
+            self.obstacles_pub = self.recorded_publisher(MarkerArray, OBSTACLES,
+                                                         qos_profile(OBSTACLES_QOS))
+            self.obstacles_map = serialize(obstacle_markers(
+                sc.obstacles, sc.dim, self.clock.stamp(0), FRAME))
+            self.publish_recorded(self.obstacles_pub, self.obstacles_map, 0)
+        for sink in self.sinks:
+            sink.flush()
 
     def finish(self, status: str, failure: str | None = None) -> None:
         """Write ``summary.json`` and ``timeseries.npz``, close the bag; idempotent.

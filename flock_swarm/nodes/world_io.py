@@ -157,6 +157,8 @@ class CommandIntake:
         """
         node = self.node
         queue = self.inbox.take()
+        if not queue:
+            return
         k = self.inbox.take_step(queue)
         if k is not None:
             node.record_messages([self.topics[i] for i, _ in queue],

@@ -6,6 +6,8 @@ discovered and subscribed (:meth:`WorldPeers.ready_to_start`, naming who is miss
 :data:`WAIT_LOG_EVERY` seconds); and once a second (:meth:`WorldPeers.check_claims`) two
 nodes claiming one agent, a peer gone from the graph (the run fails after
 ``peer_timeout``), another world or a replay on the same domain (the start is refused).
+What the start waits for (``expect_subscribers``, ``expect_telemetry_subscribers``) and the
+pace are read here too (:meth:`WorldPeers.init_waiting`).
 """
 
 import time
@@ -32,6 +34,28 @@ def id_list(ids: list[int]) -> str:
 class WorldPeers:
     """The world node's view of the ROS graph (a part of
     :class:`~flock_swarm.nodes.world.WorldNode`: it reads the node's topics and stepper)."""
+
+    def init_waiting(self, params) -> None:
+        """Read what the start waits for and the pace (``params``: the node's
+        :class:`~flock_swarm.nodes.parameters.NodeParameters`); nobody refused, nothing
+        waited yet."""
+        self.expect_subscribers = params['expect_subscribers']
+        self.expect_telemetry = params['expect_telemetry_subscribers']
+        self.pace = params['pace']
+        #: Lockstep with ``pace``: the next step is held until its wall time.
+        self.paced = False
+        #: The pace in force (:meth:`pace_now`) and the step and wall time it counts from
+        #: (``None``: the start of the run).
+        self.pace_in_force = self.pace
+        self.pace_anchor: tuple[int, float] | None = None
+        self.created = self.wait_logged = time.monotonic()
+        #: Why the world refused to start (another world on the domain), or ``None``.
+        self.refusal: ScenarioError | None = None
+        self.other_world_reported = False
+        self.subscribers_needed = self.expect_subscribers
+        self.duplicates: set[int] = set()
+        # The node that published each agent's commands, as the graph last told.
+        self.hosts: dict[int, str] = {}
 
     def ready_to_start(self) -> bool:
         """Return whether every agent and the leader are discovered and subscribed; say who
