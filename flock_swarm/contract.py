@@ -249,7 +249,8 @@ class Topic:
     publisher: str
 
 
-def contract(n_agents: int, state: bool = False, velocity: bool = False) -> list[Topic]:
+def contract(n_agents: int, state: bool = False, velocity: bool = False,
+             batched: bool = False) -> list[Topic]:
     """Return every topic of the contract for ``n_agents`` agents, ``/clock`` first.
 
     The recorded topics of a bag, in the order the live view advertises them.
@@ -257,11 +258,16 @@ def contract(n_agents: int, state: bool = False, velocity: bool = False) -> list
     :param n_agents: the number of agents.
     :param state: whether the law has adaptive state (the agents publish it then).
     :param velocity: whether the agents publish velocity commands (``cmd_vel``).
+    :param batched: the batched transport: :data:`STATES` and :data:`COMMANDS` instead of
+        the per-agent topics (which carry the state and velocity commands then).
     """
     topics = [Topic(CLOCK, CLOCK_TYPE, CLOCK_QOS, 'world'),
               Topic(LEADER_ODOM, ODOMETRY_TYPE, LOCKSTEP_QOS, 'leader'),
               Topic(LEADER_ACCEL, ACCEL_TYPE, LOCKSTEP_QOS, 'leader')]
-    for i in range(n_agents):
+    if batched:
+        topics += [Topic(STATES, CLOUD_TYPE, LOCKSTEP_QOS, 'world'),
+                   Topic(COMMANDS, CLOUD_TYPE, LOCKSTEP_QOS, 'agents')]
+    for i in range(0 if batched else n_agents):
         topics += [Topic(odom_topic(i), ODOMETRY_TYPE, LOCKSTEP_QOS, 'world'),
                    Topic(cmd_topic(i), ACCEL_TYPE, LOCKSTEP_QOS, agent_name(i))]
         if state:
@@ -284,12 +290,14 @@ def absolute(name: str, namespace: str = '/') -> str:
     return f"{namespace.rstrip('/')}/{name}"
 
 
-def contract_topics(n_agents: int, namespace: str = '/',
-                    state: bool = False) -> list[tuple[str, str]]:
+def contract_topics(n_agents: int, namespace: str = '/', state: bool = False,
+                    batched: bool = False) -> list[tuple[str, str]]:
     """Return ``(absolute topic, pkg/msg/Type)`` of the contract's topics, ``/clock`` first.
 
     :param n_agents: number of agents.
     :param namespace: the namespace the nodes run in (``/``: none).
     :param state: whether the law has adaptive state (:func:`contract`).
+    :param batched: the batched transport's topics (:func:`contract`).
     """
-    return [(absolute(t.name, namespace), t.type) for t in contract(n_agents, state)]
+    return [(absolute(t.name, namespace), t.type)
+            for t in contract(n_agents, state, batched=batched)]

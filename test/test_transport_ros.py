@@ -225,3 +225,39 @@ def test_a_realtime_batched_run_misses_no_command(tmp_path, ros_domain):
     assert summary['command_latency_ms']['count'] > 0
     topics = read_bag(run.out)
     assert len(topics['/swarm/states']) == summary['steps'] + 1
+
+
+def test_the_live_view_serves_the_state_cloud(tmp_path, ros_domain):
+    # swarm --foxglove of a batched run: the viewer gets /swarm/states as a PointCloud2
+    # channel (Foxglove draws it as points), the recorded bytes of every step.
+    import threading
+
+    from foxglove_client import FoxgloveClient
+
+    from flock_swarm.foxglove_ws import start_live
+    from flock_swarm.testing import wait_for
+    out = tmp_path / 'run'
+    path = resolve_scenario('demo', DEMO + BATCHED, None, out)
+    topics = ['/clock', '/swarm/states', '/swarm/commands']
+    with start_live(port=0) as live:
+        with InProcessSwarm(path, out, domain_id=ros_domain) as swarm:
+            swarm.serve(live)
+            client = FoxgloveClient(live.url)
+            client.pump_until(lambda: set(topics) <= set(client.topics()), 60.0, 'advertise')
+            client.subscribe(topics)
+            wait_for(lambda: all(live.channels[t].has_sinks() for t in topics), 60.0,
+                     'the subscriptions to reach the server')
+            reader = threading.Thread(target=client.pump, args=(2.0,))
+            reader.start()
+            try:
+                swarm.spin_to_end(RUN_TIMEOUT)
+            finally:
+                reader.join()
+            steps = swarm.scenario.steps
+        client.close()
+    channel = client.topics()['/swarm/states']
+    assert (channel['encoding'], channel['schemaName']) == ('cdr', 'sensor_msgs/msg/PointCloud2')
+    served = [data for topic, _, data in client.messages if topic == '/swarm/states']
+    recorded = [bytes(msg.data) for _, _, msg in read_bag(out)['/swarm/states']]
+    assert len(served) == steps + 1
+    assert [decode_cloud(data).points.tobytes() for data in served] == recorded

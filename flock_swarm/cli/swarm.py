@@ -202,7 +202,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
         # on the announcement gets them all at once, not while the nodes are being built
         # (a subscription sent the moment the last channel appeared could be lost with it).
         from flock_swarm.contract import contract_topics
-        live.add_topics(contract_topics(sc.n_agents, '/', bool(sc.law.initial_state(1))))
+        live.add_topics(contract_topics(sc.n_agents, '/', bool(sc.law.initial_state(1)),
+                                        sc.transport == 'batched'))
         say(f'[swarm] live view on {live.url} (Foxglove / Lichtblick: open a connection, '
             'Foxglove WebSocket)')
         if args.wait_for_viewer:

@@ -71,7 +71,8 @@ class LiveBridge(Node):
         self.time_ns = 0
         self.subscriptions_by_topic = {}
         for topic, type_name in contract_topics(sc.n_agents, self.get_namespace(),
-                                                bool(sc.law.initial_state(1))):
+                                                bool(sc.law.initial_state(1)),
+                                                sc.transport == 'batched'):
             sub = self.create_subscription(
                 message_class(type_name), topic, self._forward(topic, type_name), BRIDGE_QOS,
                 raw=True)

@@ -335,7 +335,7 @@ class InProcessSwarm:
         from flock_swarm.contract import contract_topics
         from flock_swarm.foxglove_ws import LiveSink
         live.add_topics(contract_topics(self.scenario.n_agents, self.world.get_namespace(),
-                                        bool(self.world.stepper.state)))
+                                        bool(self.world.stepper.state), self.world.batched))
         self.world.sinks.append(LiveSink(live))
         if self.world.obstacles_map is not None:
             # Published at the world's start, before this sink: the server keeps the map
