@@ -45,30 +45,34 @@ def fly(tmp_path, name, domain, stop_at=None):
 def analysed(tmp_path, out):
     """Run ``analyze`` on the bag of the run in ``out``; return its summary."""
     where = tmp_path / f'{out.name}_analysis'
-    assert analyze_main([str(out / 'bag'), '--out', str(where), '--no-anim', '--quiet']) == 0
+    assert analyze_main([str(out / 'bag'), '--out', str(where), '--no-anim']) == 0
     return summary_of(where)
 
 
 @pytest.mark.ros
 def test_analyze_of_a_failed_run_says_failed_with_the_worlds_line(
-        tmp_path, ros_domain, monkeypatch):
+        tmp_path, ros_domain, monkeypatch, capfd):
     """Agent 1's law gives NaN from step 5 on: the world ends the run ``failed`` with one
     line, records that end in the bag, and ``analyze`` of the bag reports ``failed`` with
-    the same line (it said ``interrupted``)."""
+    the same line, in its summary and on its terminal (it said ``interrupted``)."""
     nan_command_for(monkeypatch, 1, after=5)
     out, world, end = fly(tmp_path, 'failed', ros_domain)
     assert world['status'] == 'failed' and world['steps'] == 5
     assert 'returned a non-finite command at step 5 (agent 1)' in world['failure']
     assert end == {'status': 'failed', 'steps': '5', 'failure': world['failure']}
+    capfd.readouterr()
     ours = analysed(tmp_path, out)
     assert ours['status'] == 'failed' and ours['failure'] == world['failure']
+    err = capfd.readouterr().err
+    assert f'[analyze] failed at t = {world["t_final"]:g} s' in err
+    assert f'[analyze] the run failed: {world["failure"]}\n' in err
     # The failure line in its place, after the status, as the world writes it.
     keys = list(ours)
     assert keys.index('failure') == keys.index('status') + 1
 
 
 @pytest.mark.ros
-def test_analyze_of_a_stopped_and_of_a_completed_run_says_so(tmp_path, ros_domain):
+def test_analyze_of_a_stopped_and_of_a_completed_run_says_so(tmp_path, ros_domain, capfd):
     """A run whose world is closed at step 3 (as a stop signal closes it) records
     ``interrupted``; a run to its end records ``completed``; ``analyze`` reports each, with
     no failure line."""
@@ -77,6 +81,7 @@ def test_analyze_of_a_stopped_and_of_a_completed_run_says_so(tmp_path, ros_domai
     assert end == {'status': 'interrupted', 'steps': str(world['steps'])}
     ours = analysed(tmp_path, stopped)
     assert ours['status'] == 'interrupted' and 'failure' not in ours
+    assert 'the run failed' not in capfd.readouterr().err
 
     done, world, end = fly(tmp_path, 'done', ros_domain)
     assert world['status'] == 'completed' and world['steps'] == 25

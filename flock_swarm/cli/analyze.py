@@ -165,6 +165,9 @@ def _run(args: argparse.Namespace, say: Progress | None, warn: Progress,
             f'velocity mismatch = {s["velocity_mismatch_max"]:.3g}, '
             f'collisions = {s["collisions"]}, components = {s["components_final"]} '
             f'({time.monotonic() - started:.1f} s)')
+        if 'failure' in s:
+            # The world's line telling why its run failed, as the bag records it.
+            say(f'[analyze] the run failed: {s["failure"]}')
         say(f'[analyze] wrote {len(result.files)} files to {out}')
     check = result.verification
     if check is not None:
