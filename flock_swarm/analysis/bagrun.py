@@ -24,7 +24,7 @@ from flock_swarm import contract
 from flock_swarm.bag import BagError, BagMessage, BagReader
 from flock_swarm.bag.reader import UndecodableMessage
 from flock_swarm.core.errors import ScenarioError, one_line
-from flock_swarm.core.network import STATISTICS
+from flock_swarm.core.network_stats import STATISTICS
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.nodes.cloud import ID, TWIST_FIELDS, decode_cloud
 from flock_swarm.nodes.recording import END_RECORD

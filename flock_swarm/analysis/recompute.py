@@ -12,7 +12,7 @@ from flock_swarm.analysis.bagrun import Progress, RunData, Ticker
 from flock_swarm.core.graphs import disk_graph
 from flock_swarm.core.leaders.base import LeaderState
 from flock_swarm.core.metrics import RunMetrics
-from flock_swarm.core.network import STATISTICS, Tally
+from flock_swarm.core.network_stats import STATISTICS, Tally
 from flock_swarm.core.run import LinkObserver, RunLog, observed_pairs, run_facts, static_graph
 from flock_swarm.core.scenario import realize
 from flock_swarm.core.summary import RunFacts, SummaryInputs, summary_of

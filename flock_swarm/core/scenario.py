@@ -24,7 +24,7 @@ from flock_swarm.core.headline import HEADLINE_KEYS, Headline, parse_headline
 from flock_swarm.core.laws.base import AgentData, Law, LawContext, LawSetup, ObserverGroup
 from flock_swarm.core.laws.evaluation import antisymmetry_problem
 from flock_swarm.core.leaders.base import LeaderModel, parse_model
-from flock_swarm.core.network import NetworkSpec, parse_network
+from flock_swarm.core.network_spec import NetworkSpec, parse_network
 from flock_swarm.core.obstacles import ObstacleSpec, parse_obstacles
 from flock_swarm.core.plants.spec import PlantSpec, parse_plant
 from flock_swarm.core.pseudo_leaders import PseudoLeaderSelection, select_pseudo_leaders

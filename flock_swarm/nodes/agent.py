@@ -53,7 +53,7 @@ from flock_swarm.contract import (agent_name, LEADER_ACCEL, LEADER_ODOM, LOCKSTE
                                   state_topic)
 from flock_swarm.core.faults import RunFault, non_finite_fault
 from flock_swarm.core.latency import LATENCY_CHOICES, LATENCY_PREDICT
-from flock_swarm.core.network import USAGE_LABELS
+from flock_swarm.core.network_stats import USAGE_LABELS
 from flock_swarm.core.plants.base import COMMANDS
 from flock_swarm.core.plants.spec import command_interface
 from flock_swarm.nodes.clock import StepClock
