@@ -30,6 +30,11 @@ converted from the law's acceleration by the plant's own ``command`` and ``twist
 core's, as in ``sim``), as ``geometry_msgs/Twist`` on ``agent_<i>/cmd_vel``: once per step,
 never repeated (it carries no stamp: the world takes it as the open step's).
 
+With ``transport: batched`` (:mod:`flock_swarm.nodes.transport`) a node takes the world's
+one ``swarm/states`` message a step instead of the odometry topics, and publishes its agents'
+commands (adaptive states, velocity commands) as one ``swarm/commands`` message: the same
+controller on the same numbers (docs/ros.md, "Transports").
+
 In realtime the agents act on every state predicted to the world's tick their commands apply
 at (``latency:=predict``, the default; :meth:`AgentController.predicted
 <flock_swarm.nodes.controller.AgentController.predicted>`, docs/robots.md): the hosted agents'
