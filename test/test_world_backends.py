@@ -15,7 +15,8 @@ from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.scenario import realize
 from flock_swarm.engine.backends import (BACKENDS, DoubleIntegrator, MujocoBackend,
-                                         PlantModel, WorldBackend, make_backend)
+                                         PlantModel, WorldBackend, make_backend,
+                                         sim_integrator)
 from flock_swarm.presets import load
 
 UNICYCLE = 'plant={model: unicycle, ell: 0.1, max_speed: 0.22, max_yaw_rate: 2.84}'
@@ -96,14 +97,23 @@ def test_mujoco_steps_as_the_engine_and_counts_contacts():
 
 
 def test_the_backend_is_chosen_by_name_in_one_place():
-    """Every name the world's ``backend`` parameter takes makes a backend; the engine refuses
-    a plant it has no robot for (one line naming ``backend``), an unknown name is an
-    error naming the known ones."""
+    """Every name the world's ``backend`` parameter takes makes a backend (and ``sim``'s
+    integrator: none for ``plant``, the engine's for ``mujoco``); the engine refuses a plant
+    it has no robot for (one line naming ``backend``), an unknown name is an error naming
+    the known ones."""
     sc = scenario(UNICYCLE)
     assert BACKENDS == ('plant', 'mujoco')
     for name in BACKENDS:
         assert isinstance(make_backend(name, sc, realize(sc)), WorldBackend)
-    with pytest.raises(ScenarioError, match='backend: mujoco drives differential-drive'):
-        make_backend('mujoco', scenario(), realize(scenario()))
-    with pytest.raises(ValueError, match="unknown backend 'ode' \\(known: plant, mujoco\\)"):
-        make_backend('ode', sc, realize(sc))
+    assert sim_integrator('plant', sc) is None
+    real = realize(sc)
+    engine = sim_integrator('mujoco', sc)(sc.plant.model.initial_state(real.q0, real.p0))
+    assert engine.summary() == {'robot_contacts': 0}
+    for refused in (lambda: make_backend('mujoco', scenario(), realize(scenario())),
+                    lambda: sim_integrator('mujoco', scenario())):
+        with pytest.raises(ScenarioError, match='backend: mujoco drives differential-drive'):
+            refused()
+    for unknown in (lambda: make_backend('ode', sc, realize(sc)),
+                    lambda: sim_integrator('ode', sc)):
+        with pytest.raises(ValueError, match="unknown backend 'ode' \\(known: plant, mujoco"):
+            unknown()

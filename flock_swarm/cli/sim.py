@@ -9,7 +9,6 @@ A thin command over :mod:`flock_swarm.core.run` (the run) and :mod:`flock_swarm.
 import argparse
 import signal
 import sys
-from functools import partial
 from pathlib import Path
 
 from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
@@ -19,7 +18,7 @@ from flock_swarm.core import registry
 from flock_swarm.core.faults import RunFault
 from flock_swarm.core.headline import result_line
 from flock_swarm.core.run import simulate
-from flock_swarm.engine import BACKENDS
+from flock_swarm.engine.backends import BACKENDS, sim_integrator
 from flock_swarm.outputs import ensure_writable, write_error, write_outputs
 
 
@@ -113,16 +112,11 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
     except ScenarioError as exc:
         print(f'sim: error: {exc}', file=sys.stderr)
         return EXIT_USAGE
-    integrator = None
-    if args.backend == 'mujoco':
-        # Imported here: MuJoCo loads only for a run that uses it.
-        from flock_swarm.engine.backend import EngineBackend, check_plant
-        try:
-            check_plant(sc.plant.model.name)
-        except ScenarioError as exc:
-            print(f'sim: error: {exc}', file=sys.stderr)
-            return EXIT_USAGE
-        integrator = partial(EngineBackend, sc.plant.model.name)
+    try:
+        integrator = sim_integrator(args.backend, sc)
+    except ScenarioError as exc:
+        print(f'sim: error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
     out = args.out if args.out is not None else Path('out') / sc.name
     try:
         ensure_writable(out)

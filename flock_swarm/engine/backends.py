@@ -16,19 +16,18 @@ The backends: :class:`DoubleIntegrator` (the papers' ``q += p dt + u dt^2 / 2, p
 the exact path ``sim`` takes without a ``plant:`` section), :class:`PlantModel` (the
 scenario's plant model, as ``sim``) and :class:`MujocoBackend` (the physics engine,
 :mod:`flock_swarm.engine.backend`). :func:`make_backend` is the one place that picks one
-from the world's ``backend`` parameter (:data:`BACKENDS`) and the scenario; a new backend is
-one class here and its name in :data:`BACKENDS`.
+from the world's ``backend`` parameter and the scenario (:data:`FACTORIES`), and
+:func:`sim_integrator` what ``sim --backend`` integrates with; a new backend is one class
+here and its entry in :data:`FACTORIES`.
 """
+
+from functools import partial
+from typing import Callable
 
 import numpy as np
 
 from flock_swarm.core.dynamics import step_agents
 from flock_swarm.core.scenario import Realization, Scenario
-
-#: The world's ``backend`` parameter: ``plant`` (the scenario's plant model integrates, the
-#: double integrator without a ``plant:`` section, as ``sim``) or ``mujoco`` (the physics
-#: engine), in the order ``swarm --backend`` lists them.
-BACKENDS = ('plant', 'mujoco')
 
 NO_CONTACTS: frozenset = frozenset()
 
@@ -165,6 +164,28 @@ class MujocoBackend(PlantModel):
         return self.engine.contacts_run
 
 
+def _plant(sc: Scenario, real: Realization) -> WorldBackend:
+    """Return the double integrator without a ``plant:`` section (``sim``'s exact path), the
+    plant model with one."""
+    return DoubleIntegrator(sc, real) if sc.plant.default else PlantModel(sc, real)
+
+
+#: Every backend by its name (the world's ``backend`` parameter, ``swarm --backend``, ``sim
+#: --backend``): ``plant`` (the scenario's plant model integrates, as ``sim``) or ``mujoco``
+#: (the physics engine); its factory takes the scenario and its realisation.
+FACTORIES: dict[str, Callable[[Scenario, Realization], WorldBackend]] = {
+    'plant': _plant, 'mujoco': MujocoBackend}
+#: The names, in the order ``swarm --backend`` lists them.
+BACKENDS = tuple(FACTORIES)
+
+
+def _known(name: str) -> str:
+    """Return ``name`` if it is one of :data:`BACKENDS`, else raise ``ValueError``."""
+    if name not in BACKENDS:
+        raise ValueError(f'backend: unknown backend {name!r} (known: {", ".join(BACKENDS)})')
+    return name
+
+
 def make_backend(name: str, sc: Scenario, real: Realization) -> WorldBackend:
     """Return the backend ``name`` (one of :data:`BACKENDS`) for the scenario, at its initial
     state: ``plant`` is the double integrator without a ``plant:`` section (``sim``'s exact
@@ -176,8 +197,20 @@ def make_backend(name: str, sc: Scenario, real: Realization) -> WorldBackend:
     :raises ScenarioError: naming ``backend`` when the backend cannot take the scenario.
     :raises ValueError: for a name not in :data:`BACKENDS`.
     """
-    if name == 'mujoco':
-        return MujocoBackend(sc, real)
-    if name == 'plant':
-        return DoubleIntegrator(sc, real) if sc.plant.default else PlantModel(sc, real)
-    raise ValueError(f'backend: unknown backend {name!r} (known: {", ".join(BACKENDS)})')
+    return FACTORIES[_known(name)](sc, real)
+
+
+def sim_integrator(name: str, sc: Scenario) -> Callable | None:
+    """Return what integrates ``sim``'s agents for the backend ``name`` (``sim --backend``,
+    the world's names): ``None`` for ``plant`` (the plant model steps itself,
+    :func:`~flock_swarm.core.run.simulate`), the engine's factory for ``mujoco``.
+
+    :raises ScenarioError: naming ``backend`` when the engine has no robot of the plant.
+    :raises ValueError: for a name not in :data:`BACKENDS`.
+    """
+    if _known(name) == 'plant':
+        return None
+    # Imported here: MuJoCo loads only for a run that uses it.
+    from flock_swarm.engine.backend import EngineBackend, check_plant
+    check_plant(sc.plant.model.name)
+    return partial(EngineBackend, sc.plant.model.name)
