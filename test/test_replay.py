@@ -527,7 +527,11 @@ def test_clock_beside_a_run_started_by_hand_is_refused_in_one_line(tmp_path, ros
     """Issue 38: ``replay --clock`` beside a run started by hand (``ros2 run`` of each node,
     not ``swarm``, so no domain lock) played on, and the domain had two /clock publishers
     (a running world only logs the second one). The player now looks on the ROS graph
-    before its first tick and refuses with one line, status 2; the run goes on."""
+    before its first tick and refuses with one line, status 2; the run goes on.
+
+    No participant of this process on the domain: with discovery limited to this machine,
+    Fast DDS did not show the world to the replay when a participant of the test's own came
+    before the world (docs/replay.md)."""
     from test_node_stops import SMALL, reap, start_all
     from flock_swarm.testing import wait_for
     bag = write_bag(tmp_path / 'bag')
@@ -537,7 +541,8 @@ def test_clock_beside_a_run_started_by_hand_is_refused_in_one_line(tmp_path, ros
     procs = start_all(scenario, out, env, tmp_path, agents=2)
     log = tmp_path / 'node3.log'  # the world's
     try:
-        # Its first progress line comes after two seconds of stepping.
+        # The world steps (a world still waiting for its peers would refuse the replay's
+        # clock itself and exit): its first progress line comes after two seconds of it.
         wait_for(lambda: '[world]: t = ' in log.read_text(), 60.0, "the world's progress")
         proc = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.replay', str(bag),
                                '--clock'], capture_output=True, text=True, timeout=60, env=env)
