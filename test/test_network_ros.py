@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from flock_swarm.analysis.bagrun import load_run
-from flock_swarm.analysis.pipeline import analyze
+from flock_swarm.analysis.analyze_run import analyze
 from flock_swarm.analysis.recompute import recompute
 from flock_swarm.bag import BagReader
 from flock_swarm.core.graphs import disk_graph

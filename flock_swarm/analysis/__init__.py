@@ -7,7 +7,7 @@ The library under ``analyze`` (:mod:`flock_swarm.cli.analyze`), split by concern
   :func:`summarize` them into ``summary.json``;
 - :mod:`~flock_swarm.analysis.compare`: :func:`compare_runs`, the one comparison of a run
   with its reference (reference first), and :func:`verify_run` (``--verify``);
-- :mod:`~flock_swarm.analysis.pipeline`: :func:`analyze` writes every output of a run.
+- :mod:`~flock_swarm.analysis.analyze_run`: :func:`analyze` writes every output of a run.
 
 ::
 
@@ -20,7 +20,7 @@ The library under ``analyze`` (:mod:`flock_swarm.cli.analyze`), split by concern
 from flock_swarm.analysis.bagrun import AnalyzeError, load_run, RunData
 from flock_swarm.analysis.compare import (compare_runs, Comparison, VERIFY_TOLERANCE,
                                           Verification, verify_run)
-from flock_swarm.analysis.pipeline import Analysis, analyze, default_out, write_csv
+from flock_swarm.analysis.analyze_run import Analysis, analyze, default_out, write_csv
 from flock_swarm.analysis.recompute import recompute, summarize
 
 __all__ = ['Analysis', 'analyze', 'AnalyzeError', 'compare_runs', 'Comparison', 'default_out',

@@ -20,7 +20,7 @@ import numpy as np
 from flock_swarm.analysis.bagrun import (AnalyzeError, FALLBACK_COLLISION_DISTANCE,
                                          FALLBACK_ETA_TOLERANCE, load_run, Progress)
 from flock_swarm.analysis.compare import check_verifiable, VERIFY_TOLERANCE
-from flock_swarm.analysis.pipeline import analyze, default_out
+from flock_swarm.analysis.analyze_run import analyze, default_out
 from flock_swarm.bag import BagError
 from flock_swarm.console import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser,
                                  StopSignals, out_dir)
