@@ -165,6 +165,20 @@ def announced(proc: subprocess.Popen, pattern: str) -> re.Match:
     pytest.fail(f'no line matching {pattern!r} on stderr: {"".join(lines)!r}')
 
 
+def swarm_main(argv: list[str], capsys) -> tuple[int, str]:
+    """Run ``swarm``'s ``main(argv)`` in this process; return its status and standard error
+    (the one-line errors: a process each took 0.3-2 s, most of it imports)."""
+    from flock_swarm.cli.swarm import main
+    capsys.readouterr()
+    try:
+        status = main(argv)
+    except SystemExit as end:
+        status = end.code
+    captured = capsys.readouterr()
+    assert captured.out == ''
+    return status, captured.err
+
+
 def subscribed_client(url: str, topics=tuple(CONTRACT), **kwargs) -> FoxgloveClient:
     """Connect, wait for ``topics`` to be advertised, subscribe to all of them.
 
@@ -366,11 +380,12 @@ def test_a_stalled_client_does_not_stall_the_world(tmp_path, ros_domain):
     (['--foxglove', '0', '--foxglove-host', '256.0.0.1'], '--foxglove: cannot serve on '
      '256.0.0.1:0'),
 ])
-def test_swarm_refuses_a_bad_address_in_one_line(tmp_path, argv, message):
-    res = subprocess.run(executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), *argv],
-                         capture_output=True, text=True, timeout=TIMEOUT)
-    assert res.returncode == 2
-    assert res.stderr.startswith(f'swarm: error: {message}') and res.stderr.count('\n') == 1
+def test_swarm_refuses_a_bad_address_in_one_line(tmp_path, capsys, argv, message):
+    """In this process (``main(argv)``): test_a_port_in_use_is_one_line_and_status_2 runs the
+    commands as processes."""
+    status, err = swarm_main(['demo', '--out', str(tmp_path / 'o'), *argv], capsys)
+    assert status == 2
+    assert err.startswith(f'swarm: error: {message}') and err.count('\n') == 1
 
 
 def test_a_port_in_use_is_one_line_and_status_2(tmp_path):
@@ -510,11 +525,12 @@ def test_the_run_waits_for_every_subscription_of_the_viewer(tmp_path, ros_domain
      '--realtime-factor'),
     (['--wait-for-viewer'], '--wait-for-viewer: goes with --foxglove'),
 ])
-def test_swarm_refuses_a_bad_pace_or_wait_in_one_line(tmp_path, argv, message):
-    res = subprocess.run(executable('swarm') + ['demo', '--out', str(tmp_path / 'o'), *argv],
-                         capture_output=True, text=True, timeout=TIMEOUT)
-    assert res.returncode == 2
-    assert res.stderr == f'swarm: error: {message}\n'
+def test_swarm_refuses_a_bad_pace_or_wait_in_one_line(tmp_path, capsys, argv, message):
+    """In this process, as test_swarm_refuses_a_bad_address_in_one_line."""
+    status, err = swarm_main(['demo', '--out', str(tmp_path / 'o'), *argv], capsys)
+    assert status == 2
+    assert err == f'swarm: error: {message}\n'
+    assert not (tmp_path / 'o').exists()
 
 
 def test_swarm_ends_within_the_close_bound_after_a_client_closed(tmp_path, ros_domain):
