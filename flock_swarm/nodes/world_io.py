@@ -142,10 +142,15 @@ class CommandIntake:
         return command_claims(self.node, n_agents)
 
     def queue(self, i: int, data: bytes) -> None:
-        """Lockstep: queue agent ``i``'s command (serialised); take the queue once it can
-        complete the step."""
+        """Lockstep: queue agent ``i``'s command (serialised), and those waiting
+        (:meth:`take_waiting`); take the queue once it can complete the step."""
         if self.inbox.put(i, data):
             self.take()
+        self.take_waiting()
+
+    def take_waiting(self) -> None:
+        """Queue the commands waiting in the subscriptions (none here: each comes through
+        its own callback)."""
 
     def take(self) -> None:
         """Lockstep: handle the queued commands, at once when they are the open step's
@@ -204,9 +209,8 @@ class BatchCommandIntake(CommandIntake):
         subs = {sub.topic_name: sub for sub in node.subscriptions}
         self.take_all = BatchTake([subs[name] for name in self.topics])
 
-    def queue(self, i: int, data: bytes) -> None:
-        """Queue agent ``i``'s command and every other one waiting (taken at once)."""
-        super().queue(i, data)
+    def take_waiting(self) -> None:
+        """Queue every command waiting in the subscriptions, taken in one call."""
         for j, more in self.take_all.take():
             if self.inbox.put(j, more):
                 self.take()
