@@ -440,7 +440,7 @@ class CommandInbox(StepInbox):
     def take_step(self, queue: Sequence[tuple[int, bytes]]) -> int | None:
         """Hand the stepper the commands of ``queue`` at once when they are the open step's
         command of every agent, none held yet, and the guard passes them all
-        (:meth:`WorldStepper.commands_all`); return the step, or ``None``: then the caller
+        (``LockstepStepper.commands_all``); return the step, or ``None``: then the caller
         handles them one by one.
 
         :param queue: the commands taken (:meth:`take`).

@@ -190,7 +190,7 @@ class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
         elif due == 'timeout':
             self.finish_step(timed_out=True)
         elif due == 'resend':
-            # Offered again, not recorded again (see WorldStepper.resent).
+            # Offered again, not recorded again (see LockstepStepper.resent).
             self.state_out.resend()
 
     def begin_step(self) -> None:
@@ -205,7 +205,7 @@ class WorldNode(WorldInputs, WorldPeers, WorldEnd, RecordedNode):
 
     def finish_step(self, timed_out: bool) -> None:
         """Close the current step: zero commands for absentees, record, integrate, go on
-        (or fail, when agents have stopped answering: :meth:`WorldStepper.silent_agents`)."""
+        (or fail, when agents have stopped answering: ``LockstepStepper.silent_agents``)."""
         obs = self.stepper.close_step(timed_out, time.monotonic())
         self.go_on(obs)
         if not self.done:

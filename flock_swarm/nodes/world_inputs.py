@@ -63,7 +63,7 @@ class WorldInputs:
 
     def on_twist(self, i: int, data: bytes) -> None:
         """Record agent ``i``'s velocity command (serialised) at the open step; a finite one
-        goes to the stepper (:meth:`WorldStepper.twist`)."""
+        goes to the stepper (its mode's ``twist``, :mod:`flock_swarm.nodes.world_modes`)."""
         topic = self.twist_topics[i]
         self.record_message(topic, data, self.clock.ns(self.k))
         try:
