@@ -290,12 +290,13 @@ def test_swarm_serves_its_run(tmp_path, ros_domain, layout):
     """``swarm --foxglove 0``: one process (the world's recorded bytes), or three processes
     (a bridge node in the runner's process); a client that connects on the announcement,
     and sees the connection closed with status 1001 when the run is over (issue 38: 1005,
-    no status). 20 s of simulation paced at 10 (at least 2 s, time to connect): a viewer of
-    every channel would pace a one-process run to real time (20 s)."""
+    no status). 4 s of simulation paced at 2, at least 2 s (time to connect) in either
+    layout: unpaced, a viewer of every channel would pace the one process to real time (it
+    flew 20 s), and the processes took 20 s of simulation to give the client its time."""
     out = tmp_path / 'run'
-    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=20',
+    command = executable('swarm') + ['demo', *[f'--set={o}' for o in RUN], '--set=duration=4',
                                      '--out', str(out), '--no-plots', '--foxglove', '0',
-                                     '--pace', '10', '--domain-id', str(ros_domain), *layout]
+                                     '--pace', '2', '--domain-id', str(ros_domain), *layout]
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
