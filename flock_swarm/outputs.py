@@ -242,13 +242,15 @@ def ensure_writable(out: Path) -> None:
 
 
 def plain_json(value):
-    """Return ``value`` with NumPy values as Python ones and non-finite floats as ``None``.
+    """Return ``value`` as JSON reads it back: NumPy values as Python ones, tuples and arrays
+    as lists, mapping keys as strings, non-finite floats as ``None``.
 
     ``json.dumps`` writes ``inf`` and ``nan`` as ``Infinity`` and ``NaN``, which are not JSON
-    (and it never asks a ``default`` hook about floats), so values are cleaned first.
+    (and it never asks a ``default`` hook about floats), so values are cleaned first. The one
+    such routine: outputs, a sweep's cache and digests, the reproduction's results.
     """
     if isinstance(value, dict):
-        return {key: plain_json(item) for key, item in value.items()}
+        return {str(key): plain_json(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
         return [plain_json(item) for item in value]
     if isinstance(value, np.ndarray):

@@ -118,7 +118,7 @@ def read_table(table: Iterable[Param], given: Mapping[str, Any]) -> dict[str, An
     return {param.name: param.read(given) for param in table}
 
 
-def plain(value: Any) -> Any:
+def as_list(value: Any) -> Any:
     """Return a parameter value with its arrays as lists (rclpy gives ``array.array``)."""
     return list(value) if isinstance(value, (list, tuple, array.array, np.ndarray)) else value
 
@@ -288,7 +288,7 @@ class NodeParameters:
         self.node = node
         self.table = {param.name: param for param in table}
         names = node.list_parameters([], 0).names
-        self.given = {param.name: plain(param.value)
+        self.given = {param.name: as_list(param.value)
                       for param in node.get_parameters(list(names))
                       if param.name not in ROS_PARAMS}
         # rclpy declared it before us (and only logs a value of the wrong type).

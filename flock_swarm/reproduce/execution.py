@@ -15,14 +15,13 @@ from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.summary import compared_metrics
 from flock_swarm.core.run import simulate
 from flock_swarm.core.scenario import Scenario
-from flock_swarm.outputs import write_outputs
+from flock_swarm.outputs import plain_json, write_outputs
 from flock_swarm.presets import load, prepare
 from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import fmt, set_args
 from flock_swarm.reproduce.experiment import Experiment
 from flock_swarm.reproduce.plan import Plan
 from flock_swarm.study.execute import LocalPool, Progress, SerialBackend, execute
-from flock_swarm.study.spec import plain
 
 
 #: ROS domain ids of the node runs: ROS_DOMAIN_BASE + index, one per run.
@@ -48,7 +47,7 @@ def cached_preset(out: Path, sc: Scenario) -> dict | None:
         return None
     # The headline changes what is printed, not the run: a run from before it was chosen counts.
     same = isinstance(ran, dict) \
-        and run_mapping(ran) == json.loads(json.dumps(plain(run_mapping(sc.raw))))
+        and run_mapping(ran) == json.loads(json.dumps(plain_json(run_mapping(sc.raw))))
     if same and summary.get('flock_swarm_version') == __version__ \
             and summary.get('status') == 'completed':
         return summary
@@ -208,10 +207,10 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
                 'ros_steps_per_s': round(sc.steps / wall, 1),
                 'ros_missed_commands': int(ros.get('missed_commands', 0)),
                 'ros_status': ros.get('status')})
-    result_path.write_text(json.dumps(plain(res), indent=2) + '\n')
+    result_path.write_text(json.dumps(plain_json(res), indent=2) + '\n')
     say(f'[reproduce] ROS {exp.key}: {res["ros_status"]} in {wall:.1f} s, max |q_ros - q_sim| '
         f'= {fmt(res["max_dev_q"])} m')
-    return plain(res)
+    return plain_json(res)
 
 
 #: The summary metrics compared between the ROS run and sim.

@@ -23,12 +23,12 @@ import numpy as np
 
 from flock_swarm.core.run import check_step
 from flock_swarm.core.scenario import Scenario
+from flock_swarm.outputs import plain_json
 from flock_swarm.presets import prepare
 from flock_swarm.reproduce import seeds, stats
 from flock_swarm.reproduce.common import (FIG_SIZE, cell, fmt, preset_notes, pyplot, save_figure,
                                           set_args)
 from flock_swarm.reproduce.plan import Plan
-from flock_swarm.study.spec import plain
 
 #: A claim the paper makes of its protocol (a theorem, "the flock forms") holds for almost
 #: every draw, not for one: we ask it of at least this fraction of the seeds.
@@ -333,7 +333,7 @@ class Experiment:
                 'command': f'sim {self.scenario}{set_args(overrides)}', 'seed': sc.seed,
                 'n_agents': sc.n_agents, 'dt': sc.dt, 'duration': sc.duration,
                 'stability_violations': len(check_step(sc, real)),
-                'summary': plain(summary), 'metrics': plain(metrics), 'figure': fig.name}
+                'summary': plain_json(summary), 'metrics': plain_json(metrics), 'figure': fig.name}
 
     # -- the report ------------------------------------------------------------------------
 

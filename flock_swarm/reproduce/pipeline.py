@@ -12,6 +12,7 @@ from datetime import datetime, timezone
 from typing import Any, Callable
 
 from flock_swarm.console import EXIT_USAGE
+from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import FIG_MAX_BYTES
 from flock_swarm.reproduce.execution import (ROS_DOMAIN_BASE, ros_experiments, run_ros,
@@ -22,7 +23,6 @@ from flock_swarm.reproduce.report import (git_revision, machine, record_invocati
 from flock_swarm.reproduce.seeds import SEEDS_CACHE, run_studies
 from flock_swarm.study.execute import (DaskBackend, LocalPool, SerialBackend, SweepError,
                                        terminal_line)
-from flock_swarm.study.spec import plain
 
 #: The committed results of the presets' and ROS runs (one JSON per experiment, without its
 #: study over seeds, which its own cache holds; ``meta.json``: the run that wrote them): what
@@ -99,13 +99,13 @@ def run(args: argparse.Namespace, argv_used: list[str]) -> int:
         if exp.key in studies:
             res['seeds'] = studies[exp.key]
         results[exp.key] = res
-        (results_dir / f'{exp.key}.json').write_text(json.dumps(plain(res), indent=2) + '\n')
+        (results_dir / f'{exp.key}.json').write_text(json.dumps(plain_json(res), indent=2) + '\n')
     meta['wall_min'] = (time.monotonic() - started) / 60.0
     meta['ros_executed'] = sum(1 for r in ros.values() if not r.get('reused'))
     meta['ros_total'] = len(ros)
     meta['history'] = record_invocation(args.out, meta, plan)
     write_report(results, ros, plan, meta, args.report, args.figures)
-    (results_dir / 'meta.json').write_text(json.dumps(plain(meta), indent=2) + '\n')
+    (results_dir / 'meta.json').write_text(json.dumps(plain_json(meta), indent=2) + '\n')
     if args.results is not None:
         write_committed(args.results, results, meta)
     sizes = {p.name: p.stat().st_size for p in args.figures.glob('*.png')}
@@ -146,8 +146,8 @@ def write_committed(where: Path, results: dict[str, dict], meta: dict) -> None:
     where.mkdir(parents=True, exist_ok=True)
     for key, res in results.items():
         kept = {k: v for k, v in res.items() if k != 'seeds'}
-        (where / f'{key}.json').write_text(json.dumps(plain(kept), indent=1) + '\n')
-    (where / 'meta.json').write_text(json.dumps(plain(meta), indent=1) + '\n')
+        (where / f'{key}.json').write_text(json.dumps(plain_json(kept), indent=1) + '\n')
+    (where / 'meta.json').write_text(json.dumps(plain_json(meta), indent=1) + '\n')
 
 
 def committed(args: argparse.Namespace) -> bool:

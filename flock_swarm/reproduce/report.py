@@ -10,13 +10,13 @@ import subprocess
 from pathlib import Path
 
 from flock_swarm import __version__
+from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce import stats
 from flock_swarm.reproduce.catalogue import all_experiments
 from flock_swarm.reproduce.common import cell, fmt
 from flock_swarm.reproduce.execution import COMPARED
 from flock_swarm.reproduce.plan import Plan
 from flock_swarm.reproduce.seeds import SEEDS_CHEAP, SEEDS_COSTLY, questions_cell
-from flock_swarm.study.spec import plain
 
 
 def machine() -> dict:
@@ -149,7 +149,7 @@ def append_invocation(out: Path, entry: dict) -> None:
     """Append one invocation's record to ``out/invocations.jsonl`` (also ``bench_sweep``'s,
     whose runs the report then uses)."""
     with open(out / 'invocations.jsonl', 'a') as log:
-        log.write(json.dumps(plain(entry)) + '\n')
+        log.write(json.dumps(plain_json(entry)) + '\n')
 
 
 def write_report(results: dict[str, dict], ros: dict[str, dict], plan: Plan, meta: dict,

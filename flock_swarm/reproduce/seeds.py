@@ -21,12 +21,13 @@ import numpy as np
 from flock_swarm import __version__
 from flock_swarm.core.run import SimResult
 from flock_swarm.core.scenario import Scenario
+from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce.common import FIG_SIZE, cell, fmt, pyplot, save_figure
 from flock_swarm.reproduce.questions import (LEADER_KEY, TIMES, TOLERANCES, question_keys,
                                              three_questions, time_key, tolerance_key)
 from flock_swarm.reproduce.stats import mean_interval
 from flock_swarm.study.cache import read_cache
-from flock_swarm.study.spec import Run, plain
+from flock_swarm.study.spec import Run
 
 #: Where the committed caches of the studies live (relative to the repository root).
 SEEDS_CACHE = Path('docs/reproduction/runs')
@@ -82,7 +83,7 @@ class SeedRecorder:
         if gains:
             metrics['adaptive_gain_mean'] = float(np.mean(gains))
         metrics['n_agents'] = sc.n_agents
-        return {'point': plain(run.point), 'seed': run.seed, 'metrics': plain(metrics),
+        return {'point': plain_json(run.point), 'seed': run.seed, 'metrics': plain_json(metrics),
                 'status': s['status'], 'wall_time_s': s['wall_time_s'],
                 'flock_swarm_version': __version__}
 
@@ -234,7 +235,7 @@ def _setup_groups(exp, setup, cache_dir: Path, backend, say, quick: bool, cached
     for run in runs:
         if run.point not in points:
             points.append(run.point)
-    return [(point_label(setup, point), [r for r in records if r['point'] == plain(point)],
+    return [(point_label(setup, point), [r for r in records if r['point'] == plain_json(point)],
              len(spec.seeds)) for point in points]
 
 

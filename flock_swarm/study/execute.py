@@ -26,8 +26,9 @@ from flock_swarm import __version__
 from flock_swarm.core import summary
 from flock_swarm.core.run import SimResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
+from flock_swarm.outputs import plain_json
 from flock_swarm.study.cache import CacheWriter, read_cache
-from flock_swarm.study.spec import Run, metric_value, plain, timed_column
+from flock_swarm.study.spec import Run, metric_value, timed_column
 
 #: Without a terminal, progress lines come at most this often [s] (on one, a live line).
 PROGRESS_EVERY = 30.0
@@ -116,9 +117,9 @@ class MetricRecorder:
     def __call__(self, run: Run, sc: Scenario, result: SimResult) -> dict:
         """Return the record (non-finite values as ``None``)."""
         s, series = result.summary, result.series
-        record: dict[str, Any] = {'point': plain(run.point), 'seed': run.seed}
+        record: dict[str, Any] = {'point': plain_json(run.point), 'seed': run.seed}
         for name in self.metrics:
-            record[name] = plain(metric_value(s, name))
+            record[name] = plain_json(metric_value(s, name))
         if self.times:
             t, timed = series['t'], summary.timed_series()
             for when in self.times:
@@ -126,7 +127,7 @@ class MetricRecorder:
                 k = min(int(np.searchsorted(t, when - 0.5 * sc.dt)), len(t) - 1)
                 for name in self.metrics:
                     if name in timed:
-                        record[timed_column(name, when)] = plain(series[timed[name]][k])
+                        record[timed_column(name, when)] = plain_json(series[timed[name]][k])
         record.update(status=s['status'], wall_time_s=s['wall_time_s'],
                       flock_swarm_version=__version__)
         return record
@@ -448,7 +449,7 @@ def execute(runs: list[Run], cache_path: Path, recorder: Recorder, backend,
             closing(backend.results(run_job, jobs, recorder)) as results:
         for job, recs in results:
             # JSON types, non-finite values as None: the record as the cache gives it back.
-            done = [plain(r) for r in recs if r['status'] != 'interrupted']
+            done = [plain_json(r) for r in recs if r['status'] != 'interrupted']
             interrupted |= len(done) < len(recs)
             cache.add(done)
             for rec in done:

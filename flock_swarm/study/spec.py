@@ -23,6 +23,7 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import run_mapping
 from flock_swarm.core.run import stack_mismatch
 from flock_swarm.core.scenario import MAX_SEED, Scenario
+from flock_swarm.outputs import plain_json
 from flock_swarm.scenario_yaml import read_yaml_file
 from flock_swarm.study.expr import Expression, ExpressionError
 
@@ -141,29 +142,13 @@ def timed_column(metric: str, t: float) -> str:
     return f'{metric}@{t:g}'
 
 
-def plain(value: Any) -> Any:
-    """Return ``value`` with NumPy scalars and arrays turned into JSON types (inf: None)."""
-    import numpy as np
-    if isinstance(value, dict):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [plain(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    return value
-
-
 def scenario_digest(sc: Scenario) -> str:
     """Return the cache key of a run: a hash of its scenario as run and the package version.
 
     The scenario's headline (``metrics.headline``, ``metrics.claim``) is left out: it changes
     what is printed, not the run.
     """
-    text = json.dumps(plain(run_mapping(sc.raw)), sort_keys=True)
+    text = json.dumps(plain_json(run_mapping(sc.raw)), sort_keys=True)
     return hashlib.sha1(f'{text}|{__version__}'.encode()).hexdigest()[:16]
 
 
@@ -361,7 +346,7 @@ def _axes(section: Any, key: str) -> tuple[Axis, ...]:
         if not isinstance(values, list) or not values:
             raise ScenarioError(f'{key}.{path}', f'expected a non-empty list of values, '
                                 f'got {values!r}')
-        if len({json.dumps(plain(v), sort_keys=True) for v in values}) < len(values):
+        if len({json.dumps(plain_json(v), sort_keys=True) for v in values}) < len(values):
             raise ScenarioError(f'{key}.{path}', 'a value is listed twice')
         axes.append(Axis(path, tuple(values)))
     return tuple(axes)
@@ -627,4 +612,4 @@ def stack_key(sc: Scenario) -> str | None:
     if stack_mismatch([sc, sc]) is not None:
         return None
     rest = {k: v for k, v in sc.raw.items() if k not in ('informed', 'initial', 'name')}
-    return json.dumps(plain(rest), sort_keys=True)
+    return json.dumps(plain_json(rest), sort_keys=True)

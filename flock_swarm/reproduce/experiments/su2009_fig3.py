@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce.common import fmt, preset_notes, set_args
 from flock_swarm.reproduce.experiment import Experiment, Sweep
 from flock_swarm.reproduce.experiments import su2009_fig3_sweep as sweep
@@ -23,7 +24,6 @@ from flock_swarm.reproduce.experiments.su2009_fig3_sweep import (FIG3_DENSITY, F
                                                                  eta_at, figure_fig3)
 from flock_swarm.reproduce.plan import Plan
 from flock_swarm.reproduce.stats import NOT_RUN
-from flock_swarm.study.spec import plain
 
 
 def fig3_result(plan: Plan, records: list[dict], figures: Path) -> dict:
@@ -62,8 +62,8 @@ def fig3_result(plan: Plan, records: list[dict], figures: Path) -> dict:
         metrics['eta_mean_final'] = float(np.mean([r['eta'] for r in records]))
     return {'key': 'su2009_fig3', 'title': Fig3.title, 'preset': 'su2009_fig3',
             'overrides': list(plan.fig3_overrides), 'sizes': list(plan.sizes),
-            'fractions': list(plan.fractions), 'rows': plain(rows), 'metrics': plain(metrics),
-            'figure': fig.name}
+            'fractions': list(plan.fractions), 'rows': plain_json(rows),
+            'metrics': plain_json(metrics), 'figure': fig.name}
 
 
 def fig3_section(res: dict, plan: Plan) -> list[str]:

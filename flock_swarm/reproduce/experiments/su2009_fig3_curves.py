@@ -5,6 +5,7 @@ judged on its own at the paper's anchors."""
 from pathlib import Path
 from typing import Any, Callable
 
+from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce.common import fmt, pyplot, save_figure
 from flock_swarm.reproduce.experiments import su2009_fig3_sweep as sweep
 from flock_swarm.reproduce.experiments.su2009_fig3_sweep import (FIG3_PAPER_DELTA,
@@ -13,7 +14,7 @@ from flock_swarm.reproduce.experiments.su2009_fig3_sweep import (FIG3_PAPER_DELT
                                                                  delta_for_eta)
 from flock_swarm.reproduce.plan import FIG3_SIZES
 from flock_swarm.reproduce.seeds import SEEDS_CHEAP
-from flock_swarm.study.spec import plain, plan_runs
+from flock_swarm.study.spec import plan_runs
 
 #: Issue 15, section 3: the four Fig. 3 curves, ``(spec, label)`` (config/sweeps/).
 FIG3_CURVES = (('reproduce_su2009_fig3_linear_100s', 'linear navigation, 100 s'),
@@ -70,7 +71,7 @@ def fig3_curves(cache_dir: Path, backend, say: Callable[[str], None], run: bool,
     fig = None
     if any(c['runs_cached'] for c in curves):
         fig = figure_fig3_curves(curves, figures / 'su2009_fig3_curves.png').name
-    return {'curves': plain(curves), 'figure': fig}
+    return {'curves': plain_json(curves), 'figure': fig}
 
 
 def figure_fig3_curves(curves: list[dict], path: Path) -> Path:
