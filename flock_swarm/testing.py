@@ -316,7 +316,7 @@ def _law_scenario(law) -> dict:
     for f in dataclasses.fields(law):
         if f.init:
             value = getattr(law, f.name)
-            protocol[f.name] = _plain(value)
+            protocol[f.name] = _as_yaml(value)
     size = law.radius if math.isfinite(law.radius) and law.radius > 0 else 1.0
     return {'name': f'check_{law.name}', 'dim': 2, 'n_agents': 8, 'dt': 0.01,
             'duration': CHECK_STEPS * 0.01, 'seed': 0, 'protocol': protocol,
@@ -327,10 +327,10 @@ def _law_scenario(law) -> dict:
                        'velocity': [1.0, 0.0]}}
 
 
-def _plain(value: Any) -> Any:
+def _as_yaml(value: Any) -> Any:
     """Return a law field as YAML would give it (tuples as lists)."""
     if isinstance(value, tuple):
-        return [_plain(v) for v in value]
+        return [_as_yaml(v) for v in value]
     return value
 
 
