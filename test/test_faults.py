@@ -417,7 +417,9 @@ def test_killed_agent_process_is_zeroed_then_rejoins(tmp_path, ros_domain):
 
 
 def test_realtime_lost_agent_is_held_then_zeroed(tmp_path, ros_domain):
-    path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=6',
+    """Realtime: agents gone at step 60 (1.2 s): their last commands held for about the
+    staleness, then zero to the end (4 s: 125 zero steps or so; it was 6 s of real time)."""
+    path, sc, out = scenario_of(tmp_path, ['n_agents=3', 'informed.count=1', 'duration=4',
                                            'record_every=1', 'dt=0.02'])
     with InProcessSwarm(path, out, mode='realtime', domain_id=ros_domain,
                         world_params={'staleness': 0.3}) as swarm:
