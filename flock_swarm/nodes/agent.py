@@ -67,7 +67,7 @@ from flock_swarm.nodes.controller import (NON_FINITE_FAIL, NON_FINITE_ZERO, Agen
 from flock_swarm.nodes.batch import (MESSAGE_PATH, BatchPublish, BatchTake, release,
                                      use_c_path)
 from flock_swarm.nodes.fault_report import FaultReporter
-from flock_swarm.nodes.graph import check_claims, follow_world
+from flock_swarm.nodes.ros_graph import check_claims, follow_world
 from flock_swarm.nodes.guard import LIMIT_PARAMS, InputGuard, Limits
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)

@@ -25,7 +25,7 @@ from flock_swarm.core.faults import RunFault, advance_leader, leader_state
 from flock_swarm.core.leaders.base import VirtualLeader
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.fault_report import FaultReporter
-from flock_swarm.nodes.graph import agent_hosts, follow_world
+from flock_swarm.nodes.ros_graph import agent_hosts, follow_world
 from flock_swarm.nodes.parameters import (COMMON_PARAMS, KEEP_RUNNING, NodeParameters, Param,
                                           init_node)
 from flock_swarm.nodes.spin import run_node, wall_timer

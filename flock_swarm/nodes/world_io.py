@@ -22,7 +22,7 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm.contract import (agent_name, CLOCK, CLOCK_QOS, LOCKSTEP_QOS, cmd_topic,
                                   odom_topic, qos_profile)
 from flock_swarm.nodes.batch import BatchPublish, BatchTake, release
-from flock_swarm.nodes.graph import command_claims
+from flock_swarm.nodes.ros_graph import command_claims
 from flock_swarm.nodes.stepper import CommandInbox, WorldStepper
 from flock_swarm.nodes.wire import (OdometryBatchEncoder, decode_accel, encode_clock,
                                     odometry_rows)
@@ -138,7 +138,7 @@ class CommandIntake:
 
     def claims(self, n_agents: int) -> dict[int, list[tuple[str, str]]]:
         """Return the nodes publishing each agent's commands, as the ROS graph tells
-        (:func:`~flock_swarm.nodes.graph.command_claims`)."""
+        (:func:`~flock_swarm.nodes.ros_graph.command_claims`)."""
         return command_claims(self.node, n_agents)
 
     def queue(self, i: int, data: bytes) -> None:

@@ -13,7 +13,7 @@ pace are read here too (:meth:`WorldPeers.init_waiting`).
 import time
 
 from flock_swarm.core.errors import ScenarioError
-from flock_swarm.nodes.graph import check_claims
+from flock_swarm.nodes.ros_graph import check_claims
 
 #: Seconds between the waiting world's lines naming who it waits for.
 WAIT_LOG_EVERY = 5.0
