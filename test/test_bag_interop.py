@@ -105,9 +105,21 @@ def world_outputs(run: Path) -> tuple[dict, dict]:
     return json.loads((run / 'summary.json').read_text()), series
 
 
-def run_analyze(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze', *args],
-                          capture_output=True, text=True, timeout=RUN_TIMEOUT, check=False)
+def run_analyze(capfd, *args: str, real: bool = False) -> subprocess.CompletedProcess:
+    """Run ``analyze`` on ``args``: its ``main(argv)`` in this process, its file descriptors
+    captured (a process took about a second of imports each time), or with ``real`` as a
+    process (test_analyze_names_a_missing_required_topic keeps one)."""
+    if real:
+        return subprocess.run([sys.executable, '-m', 'flock_swarm.cli.analyze', *args],
+                              capture_output=True, text=True, timeout=RUN_TIMEOUT, check=False)
+    from flock_swarm.cli.analyze import main
+    capfd.readouterr()
+    try:
+        status = main(list(args))
+    except SystemExit as end:
+        status = end.code
+    out = capfd.readouterr()
+    return subprocess.CompletedProcess(['analyze', *args], status, out.out, out.err)
 
 
 # -- split bags ----------------------------------------------------------------------------
@@ -274,11 +286,11 @@ def test_rosbags_bag_is_an_mcap_rosbag2_bag_of_another_writer(foreign, split_run
     assert reader.message_counts() == BagReader(split_run / 'bag').message_counts()
 
 
-def test_analyze_reads_a_bag_written_by_rosbags(foreign, split_run, tmp_path):
+def test_analyze_reads_a_bag_written_by_rosbags(foreign, split_run, tmp_path, capfd):
     """Without our metadata, --radius and the tolerances give what the world's scenario did."""
     world, series = world_outputs(split_run)
     out = tmp_path / 'analysis'
-    result = run_analyze(str(foreign), '--out', str(out), '--radius', DEMO_RADIUS,
+    result = run_analyze(capfd, str(foreign), '--out', str(out), '--radius', DEMO_RADIUS,
                          '--eta-tolerance', str(world['eta_tolerance']),
                          '--collision-distance', str(world['collision_distance']),
                          '--no-anim', '--quiet')
@@ -300,11 +312,11 @@ def test_analyze_reads_a_bag_written_by_rosbags(foreign, split_run, tmp_path):
     (('/agent_1/odom',), '/agent_1/odom'),
     (tuple(f'/agent_{i}/odom' for i in range(4)), '/agent_<i>/odom'),
 ])
-def test_analyze_names_a_missing_required_topic(split_run, tmp_path, drop, missing):
+def test_analyze_names_a_missing_required_topic(split_run, tmp_path, capfd, drop, missing):
     """One line naming the missing topic and what analyze needs; exit status 2."""
     bag = write_with_rosbags(split_run / 'bag', tmp_path / 'bag', drop=drop)
-    result = run_analyze(str(bag), '--out', str(tmp_path / 'out'), '--radius', DEMO_RADIUS,
-                         '--quiet')
+    result = run_analyze(capfd, str(bag), '--out', str(tmp_path / 'out'), '--radius',
+                         DEMO_RADIUS, '--quiet', real=drop == ('/agent_1/odom',))
     assert result.returncode == 2
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith('analyze: error: '), result.stderr
@@ -312,11 +324,11 @@ def test_analyze_names_a_missing_required_topic(split_run, tmp_path, drop, missi
     assert not (tmp_path / 'out').exists()
 
 
-def test_analyze_notes_missing_optional_topics(split_run, tmp_path):
+def test_analyze_notes_missing_optional_topics(split_run, tmp_path, capfd):
     """Without the leader's acceleration the run is analysed, and the note says so."""
     bag = write_with_rosbags(split_run / 'bag', tmp_path / 'bag', drop=('/leader/accel',))
-    result = run_analyze(str(bag), '--out', str(tmp_path / 'out'), '--radius', DEMO_RADIUS,
-                         '--no-anim', '--quiet')
+    result = run_analyze(capfd, str(bag), '--out', str(tmp_path / 'out'), '--radius',
+                         DEMO_RADIUS, '--no-anim', '--quiet')
     assert result.returncode == 0, result.stderr
     assert 'optional topic(s) not in the bag: /leader/accel' in result.stderr
 
@@ -335,7 +347,7 @@ def rosbags_convert(source: Path, target: Path, storage: str, *exclude: str) -> 
     return target
 
 
-def test_the_scenario_survives_a_rosbags_convert_round_trip(split_run, tmp_path):
+def test_the_scenario_survives_a_rosbags_convert_round_trip(split_run, tmp_path, capfd):
     """MCAP -> sqlite3 -> MCAP drops the MCAP metadata records and metadata.yaml's custom
     data; the scenario, seed and informed set stay on /swarm/scenario, and analyze reads them
     there: its summary is the world's."""
@@ -349,7 +361,8 @@ def test_the_scenario_survives_a_rosbags_convert_round_trip(split_run, tmp_path)
     assert run.scenario is not None and run.scenario.name == world['scenario']
     assert run.informed_known and np.flatnonzero(run.informed).tolist() == world['informed']
     assert any('from /swarm/scenario' in note for note in run.notes)
-    result = run_analyze(str(back), '--out', str(tmp_path / 'out'), '--quiet', '--no-anim')
+    result = run_analyze(capfd, str(back), '--out', str(tmp_path / 'out'), '--quiet',
+                         '--no-anim')
     assert result.returncode == 0, result.stderr
     ours = json.loads((tmp_path / 'out' / 'summary.json').read_text())
     for key in ('scenario', 'seed', 'informed', 'protocol', 'n_agents', 'eta',
@@ -357,14 +370,15 @@ def test_the_scenario_survives_a_rosbags_convert_round_trip(split_run, tmp_path)
         assert ours[key] == world[key], key
 
 
-def test_a_converted_bag_without_the_scenario_topic_says_informed_unknown(split_run, tmp_path):
+def test_a_converted_bag_without_the_scenario_topic_says_informed_unknown(
+        split_run, tmp_path, capfd):
     sqlite = rosbags_convert(split_run / 'bag', tmp_path / 'sqlite', 'sqlite3',
                              '/swarm/scenario')
     back = rosbags_convert(sqlite, tmp_path / 'mcap', 'mcap')
-    result = run_analyze(str(back), '--out', str(tmp_path / 'x'), '--quiet', '--no-anim')
+    result = run_analyze(capfd, str(back), '--out', str(tmp_path / 'x'), '--quiet', '--no-anim')
     assert result.returncode == 2 and 'give --radius' in result.stderr
-    result = run_analyze(str(back), '--out', str(tmp_path / 'out'), '--radius', DEMO_RADIUS,
-                         '--quiet', '--no-anim')
+    result = run_analyze(capfd, str(back), '--out', str(tmp_path / 'out'), '--radius',
+                         DEMO_RADIUS, '--quiet', '--no-anim')
     assert result.returncode == 0, result.stderr
     ours = json.loads((tmp_path / 'out' / 'summary.json').read_text())
     assert ours['scenario'] is None and ours['informed'] == 'unknown'
