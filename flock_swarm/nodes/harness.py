@@ -531,6 +531,42 @@ def process_environment(n_agents: int, domain_id: int, base: dict | None = None)
     return env
 
 
+def _ros_args(values: dict) -> list[str]:
+    """Return ``--ros-args -p key:=value ...`` of a node's parameters."""
+    out_args = ['--ros-args']
+    for k, v in values.items():
+        out_args += ['-p', f'{k}:={v}']
+    return out_args
+
+
+def _matched_bridge(live: LiveServer, domain_id: int, base: dict, sc: Scenario):
+    """Return the live view's bridge node, spun by a thread of this process, once it has
+    matched the leader's and the agents' publishers.
+
+    The bridge's subscriptions are best effort: it must have matched the leader's and the
+    agents' publishers (their adaptive state's too, for a law with one) before the first
+    step, and the world waits for it as one more subscriber of every odometry topic and for
+    its markers' and metrics' one.
+    """
+    from flock_swarm.nodes.foxglove_server import BackgroundBridge
+    bridge = BackgroundBridge(live, domain_id, base)
+    adaptive = range(sc.n_agents) if sc.law.initial_state(1) else ()
+    bridge.wait_matched([contract.absolute(name) for name in (
+        contract.LEADER_ODOM, contract.LEADER_ACCEL,
+        *(contract.cmd_topic(i) for i in range(sc.n_agents)),
+        *(contract.state_topic(i) for i in adaptive))], 30.0)
+    return bridge
+
+
+def _close_bridge(bridge) -> None:
+    """Close the live view's bridge, warning of the topics it got no message on."""
+    silent = bridge.node.silent()
+    if silent:
+        print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
+              file=sys.stderr, flush=True)
+    bridge.close()
+
+
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   realtime_factor: float = 1.0, container: bool = False,
@@ -566,51 +602,30 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :raises TimeoutError: after ``timeout`` seconds (the world is stopped first).
     """
     sc = read_scenario(scenario)
-
-    def ros_args(values: dict) -> list[str]:
-        out_args = ['--ros-args']
-        for k, v in values.items():
-            out_args += ['-p', f'{k}:={v}']
-        return out_args
-
     base = node_parameters(scenario, mode, realtime_factor, allow_unstable)
     children = Supervisor(out / LOG_DIR, process_environment(sc.n_agents, domain_id))
     bridge = None
     try:
-        children.start('leader', executable('leader') + ros_args(base))
+        children.start('leader', executable('leader') + _ros_args(base))
         if container:
-            children.start('agents', executable('agents') + ros_args(base))
+            children.start('agents', executable('agents') + _ros_args(base))
         else:
             for i in range(sc.n_agents):
                 children.start(contract.agent_name(i),
-                               executable('agent') + ros_args(dict(base, agent_id=i)))
+                               executable('agent') + _ros_args(dict(base, agent_id=i)))
         if live is not None:
-            from flock_swarm.nodes.foxglove_server import BackgroundBridge
-            bridge = BackgroundBridge(live, domain_id, base)
-            # The bridge's subscriptions are best effort: it must have matched the leader's
-            # and the agents' publishers (their adaptive state's too, for a law with one)
-            # before the first step, and the world waits for it as one more subscriber of
-            # every odometry topic and for its markers' and metrics' one.
-            adaptive = range(sc.n_agents) if sc.law.initial_state(1) else ()
-            bridge.wait_matched([contract.absolute(name) for name in (
-                contract.LEADER_ODOM, contract.LEADER_ACCEL,
-                *(contract.cmd_topic(i) for i in range(sc.n_agents)),
-                *(contract.state_topic(i) for i in adaptive))], 30.0)
+            bridge = _matched_bridge(live, domain_id, base, sc)
             # One subscriber per agent host (every child so far but the leader), and the bridge.
             world_params = dict(world_params or {}, expect_subscribers=len(children.children),
                                 expect_telemetry_subscribers=1)
-        world = children.start('world', executable('world') + ros_args(
+        world = children.start('world', executable('world') + _ros_args(
             dict(base, out_dir=str(out), step_timeout=step_timeout, **(world_params or {}))),
             echo=sys.stderr)
         outcome = children.watch(world, stop or (lambda: None), timeout)
     finally:
         children.stop_all()
         if bridge is not None:
-            silent = bridge.node.silent()
-            if silent:
-                print('[swarm] warning: the live view got no message on ' + ', '.join(silent),
-                      file=sys.stderr, flush=True)
-            bridge.close()
+            _close_bridge(bridge)
     path = out / 'summary.json'
     summary = json.loads(path.read_text()) if path.is_file() else {}
     if outcome.dead is not None:
