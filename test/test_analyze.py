@@ -293,7 +293,9 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.parametrize('case', ['not_a_bag', 'missing', 'unwritable_out'])
-def test_bad_input_is_one_line_and_status_2(flat, tmp_path, case):
+def test_bad_input_is_one_line_and_status_2(flat, tmp_path, capfd, case):
+    """One line, status 2: ``not_a_bag`` through a real process, the others by ``main(argv)``
+    in this process with its file descriptors captured (a process took about a second)."""
     run, _, _ = flat
     if case == 'not_a_bag':
         bag = tmp_path / 'notes.mcap'
@@ -305,7 +307,13 @@ def test_bad_input_is_one_line_and_status_2(flat, tmp_path, case):
         blocker = tmp_path / 'file'
         blocker.write_text('')
         args = [str(run / 'bag'), '--out', str(blocker / 'out'), '--no-anim']
-    result = run_cli(*args, '--quiet')
+    if case == 'not_a_bag':
+        result = run_cli(*args, '--quiet')
+    else:
+        capfd.readouterr()
+        status = main([*args, '--quiet'])
+        out = capfd.readouterr()
+        result = subprocess.CompletedProcess(['analyze', *args], status, out.out, out.err)
     assert result.returncode == 2
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith('analyze: error: '), result.stderr
