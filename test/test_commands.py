@@ -76,6 +76,15 @@ def test_the_package_reads_its_commands_from_setup_py():
     assert executable('no_such_command')[-1] == 'flock_swarm.nodes.no_such_command'
 
 
+def test_every_exit_status_is_named_once_in_the_console():
+    """The exit statuses are console.py's table alone (status 1 had four names: sim's
+    EXIT_DIVERGED and EXIT_FAILED, analyze's EXIT_VERIFY_FAILED beside EXIT_FAILURE)."""
+    named = sorted(f'{path.relative_to(PACKAGE)}: {line.strip()}'
+                   for path in PACKAGE.rglob('*.py') if path.name != 'console.py'
+                   for line in path.read_text().splitlines() if line.startswith('EXIT_'))
+    assert named == []
+
+
 def test_the_commands_share_the_console_plumbing():
     """Exit statuses and argument errors come from flock_swarm.console, not from each other."""
     for path in sorted((PACKAGE / 'cli').glob('*.py')):
