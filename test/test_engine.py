@@ -129,51 +129,54 @@ def test_the_backend_needs_differential_drive_robots():
         EngineBackend('velocity_lag', np.zeros((2, 4)))
 
 
-def test_sim_flies_the_fleet_against_the_engine(tmp_path):
+def sim_main(argv: list[str], capfd):
+    """Run ``sim``'s ``main(argv)`` in this process, its file descriptors captured (a process
+    took about a second of imports); return ``(status, stderr)``."""
+    from flock_swarm.cli.sim import main
+    capfd.readouterr()
+    try:
+        status = main([str(arg) for arg in argv])
+    except SystemExit as end:
+        status = end.code
+    return status, capfd.readouterr().err
+
+
+def test_sim_flies_the_fleet_against_the_engine(tmp_path, capfd):
     """``sim FILE --backend mujoco``: the engine integrates; a plant it has no robot for is
     one line with exit status 2."""
     import json
-    import subprocess
-    import sys
     from pathlib import Path
     fleet = Path(__file__).resolve().parents[1] / 'examples' / 'robots' / 'tb3_fleet.yaml'
-    sim = [sys.executable, '-m', 'flock_swarm.cli.sim']
-    res = subprocess.run(sim + [str(fleet), '--backend', 'mujoco', '--set', 'duration=2',
-                                '--out', str(tmp_path / 'mj'), '--quiet'],
-                         capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr
+    status, err = sim_main([fleet, '--backend', 'mujoco', '--set', 'duration=2',
+                            '--out', tmp_path / 'mj', '--quiet'], capfd)
+    assert status == 0, err
     summary = json.loads((tmp_path / 'mj' / 'summary.json').read_text())
     assert summary['status'] == 'completed' and summary['collisions'] == 0
     assert summary['robot_contacts'] == 0
-    res = subprocess.run(sim + ['demo', '--backend', 'mujoco', '--out', str(tmp_path / 'di')],
-                         capture_output=True, text=True, timeout=120)
-    assert res.returncode == 2
-    assert res.stderr.splitlines() == [
+    status, err = sim_main(['demo', '--backend', 'mujoco', '--out', tmp_path / 'di'], capfd)
+    assert status == 2
+    assert err.splitlines() == [
         "sim: error: backend: mujoco drives differential-drive robots: it needs plant.model "
         "unicycle, got 'double_integrator'"]
 
 
-def test_sim_counts_the_robots_that_touch_as_the_world_does(tmp_path):
+def test_sim_counts_the_robots_that_touch_as_the_world_does(tmp_path, capfd):
     """``sim --backend mujoco`` writes ``robot_contacts`` (the world's summary key): two
     robots placed 0.15 m apart, less than a Burger's 0.178 m width, touch at once (the
     world's count of the same set-up: test_engine_world.py)."""
     import json
-    import subprocess
-    import sys
     from pathlib import Path
     fleet = Path(__file__).resolve().parents[1] / 'examples' / 'robots' / 'tb3_fleet.yaml'
-    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', str(fleet), '--backend',
-                          'mujoco', '--set', 'duration=1.0', '--set', 'n_agents=2', '--set',
-                          'informed.count=2', '--set', 'initial.positions=[[0.0, 0.0], [0.0, '
-                          '0.15]]', '--set', 'initial.velocities=[[0.1, 0.0], [0.1, 0.0]]',
-                          '--out', str(tmp_path / 'touch'), '--quiet'],
-                         capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr
+    status, err = sim_main([fleet, '--backend', 'mujoco', '--set', 'duration=1.0', '--set',
+                            'n_agents=2', '--set', 'informed.count=2', '--set',
+                            'initial.positions=[[0.0, 0.0], [0.0, 0.15]]', '--set',
+                            'initial.velocities=[[0.1, 0.0], [0.1, 0.0]]',
+                            '--out', tmp_path / 'touch', '--quiet'], capfd)
+    assert status == 0, err
     summary = json.loads((tmp_path / 'touch' / 'summary.json').read_text())
     assert summary['robot_contacts'] == 1
     # Without the engine there is nothing to count: the key is absent.
-    res = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', str(fleet), '--set',
-                          'duration=0.5', '--out', str(tmp_path / 'plant'), '--quiet'],
-                         capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr
+    status, err = sim_main([fleet, '--set', 'duration=0.5', '--out', tmp_path / 'plant',
+                            '--quiet'], capfd)
+    assert status == 0, err
     assert 'robot_contacts' not in json.loads((tmp_path / 'plant' / 'summary.json').read_text())

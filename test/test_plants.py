@@ -5,7 +5,6 @@ steps, the near-identity map's inverse, and the double integrator's zero-order h
 """
 
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -34,9 +33,24 @@ def test_the_built_in_plants_are_registered_like_plugins():
         registry.plant_class('bicycle')
 
 
-def test_sim_list_shows_the_plants():
-    out = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', '--list'],
-                         capture_output=True, text=True, timeout=60, check=True).stdout
+def sim_main(argv: list[str], capfd) -> subprocess.CompletedProcess:
+    """Run ``sim``'s ``main(argv)`` in this process, its file descriptors captured (a process
+    took about a second of imports; ``sim``'s real processes are test_scenario_validation's).
+    """
+    from flock_swarm.cli.sim import main
+    capfd.readouterr()
+    try:
+        status = main(argv)
+    except SystemExit as end:
+        status = end.code
+    out = capfd.readouterr()
+    return subprocess.CompletedProcess(['sim', *argv], status, out.out, out.err)
+
+
+def test_sim_list_shows_the_plants(capfd):
+    result = sim_main(['--list'], capfd)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
     section = out.split('plant models (plant.model):')[1]
     for name in ('double_integrator', 'velocity_lag', 'unicycle'):
         assert name in section
@@ -499,10 +513,8 @@ def test_the_exact_unicycle_turn_solves_its_equation_batch_or_alone():
         assert abs(d - ratio * b) <= nearest + 1.0 / models.TURN_GRID
 
 
-def test_a_bad_conversion_is_one_line_and_status_2():
-    out = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.sim', 'demo', '--set',
-                          'plant={model: velocity_lag, conversion: foo}'],
-                         capture_output=True, text=True, timeout=60)
+def test_a_bad_conversion_is_one_line_and_status_2(capfd):
+    out = sim_main(['demo', '--set', 'plant={model: velocity_lag, conversion: foo}'], capfd)
     assert out.returncode == 2 and out.stdout == ''
     assert out.stderr == ("sim: error: plant.conversion: unknown value 'foo' (expected one of: "
                           "exact, naive)\n")
