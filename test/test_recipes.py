@@ -223,6 +223,38 @@ def test_a_metric_is_two_or_three_files(tmp_path):
          tmp_path / 'out' / 'timeseries.npz'], copy)
 
 
+BACKEND = '''
+
+class Frozen(DoubleIntegrator):
+    """Agents that stay where they are (a recipe's backend)."""
+
+    name = 'frozen'
+
+    def step(self, u, twists, dt):
+        """Leave every agent where it is."""
+
+
+'''
+
+
+@pytest.mark.ros
+def test_a_world_backend_is_one_file(tmp_path, ros_domain):
+    """A backend class and its FACTORIES entry in engine/backends.py: ``swarm --backend``
+    and the world take it, and the world integrates with it."""
+    import numpy as np
+    assert recipe_files('world backend') == '1'
+    copy = package_copy(tmp_path)
+    backends = copy / 'flock_swarm' / 'engine' / 'backends.py'
+    edit(backends, '\n#: Every backend by its name', BACKEND + '#: Every backend by its name')
+    edit(backends, 'WorldBackend]] = {\n', "WorldBackend]] = {\n    'frozen': Frozen,\n")
+    run(['-m', 'flock_swarm.cli.swarm', 'demo', '--backend', 'frozen', '--set', 'duration=0.2',
+         '--no-plots', '--domain-id', ros_domain, '--out', tmp_path / 'out'], copy, copy)
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    with np.load(tmp_path / 'out' / 'timeseries.npz') as series:
+        assert np.array_equal(series['q'][-1], series['q'][0])
+
+
 COMMAND = '''
 """``hello``: says how many agents a scenario has."""
 
