@@ -2,10 +2,10 @@
 
 A law, a leader model and a plant are two files: the module and one entry-point line, here
 written as a plugin distribution on ``PYTHONPATH`` (the module and the ``entry_points.txt``
-that ``pip install`` leaves of the package's ``setup.py``). A metric and a command change
-flock_swarm itself: the test copies the package into a temporary directory, edits exactly the
-files the recipe names there, and runs the copy. Each test reads the recipe's file count from
-the page, so the page and the test cannot drift apart.
+that ``pip install`` leaves of the package's ``setup.py``). A world backend, a metric and a
+command change flock_swarm itself: the test copies the package into a temporary directory,
+edits exactly the files the recipe names there, and runs the copy. Each test reads the
+recipe's file count from the page, so the page and the test cannot drift apart.
 """
 
 import json
