@@ -261,3 +261,38 @@ def test_the_live_view_serves_the_state_cloud(tmp_path, ros_domain):
     recorded = [bytes(msg.data) for _, _, msg in read_bag(out)['/swarm/states']]
     assert len(served) == steps + 1
     assert [decode_cloud(data).points.tobytes() for data in served] == recorded
+
+
+def test_the_launch_files_processes_run_the_batched_transport(tmp_path, ros_domain):
+    # ros2 launch flock_swarm swarm_launch.py overrides:='transport=batched': the plan's
+    # processes, started with their parameters as the launch file passes them (the world
+    # and the agents take it as their transport parameter, the leader and the live-view
+    # bridge as the scenario key), fly the batched transport to the end.
+    import os
+
+    from flock_swarm.launch_plan import swarm_processes
+    from flock_swarm.nodes.harness import executable
+    out = tmp_path / 'run'
+    specs = swarm_processes(overrides='transport=batched; n_agents=4; informed.count=2; '
+                            'duration=0.5', out_dir=str(out))
+    assert [spec.executable for spec in specs] == ['world', 'leader', 'agents']
+    assert all(spec.parameters['transport'] == 'batched' for spec in specs)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    procs = [subprocess.Popen(executable(spec.executable) + [
+        '--ros-args', '-r', f'__node:={spec.name}',
+        *[arg for k, v in spec.parameters.items() for arg in ('-p', f'{k}:={v}')]],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        for spec in specs]
+    try:
+        assert procs[0].wait(timeout=RUN_TIMEOUT) == 0, procs[0].stderr.read()
+        for proc in procs[1:]:
+            assert proc.wait(timeout=60) == 0
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['status'] == 'completed' and summary['missed_commands'] == 0
+    topics = read_bag(out)
+    assert '/swarm/states' in topics and '/agent_0/odom' not in topics
