@@ -296,3 +296,28 @@ def test_the_launch_files_processes_run_the_batched_transport(tmp_path, ros_doma
     assert summary['status'] == 'completed' and summary['missed_commands'] == 0
     topics = read_bag(out)
     assert '/swarm/states' in topics and '/agent_0/odom' not in topics
+
+
+def test_a_host_that_stops_answering_costs_its_agents_missed_commands(tmp_path, ros_domain):
+    # Two hosts by id ranges; the second goes at step 5: the world zeroes its agents'
+    # commands (counted per agent, as for silent per-agent nodes) and fails the run once
+    # they have missed max_missed_steps steps in a row, naming them; the first host's agents
+    # miss nothing.
+    out = tmp_path / 'run'
+    path = resolve_scenario('demo', DEMO[:2] + ['duration=10', 'record_every=1'] + BATCHED,
+                            None, out)
+    with InProcessSwarm(path, out, domain_id=ros_domain, agents=[],
+                        step_timeout=0.3) as swarm:
+        swarm.add_agents([0, 1, 2], 'agents_a')
+        gone = swarm.add_agents([3, 4, 5], 'agents_b')
+        world = swarm.world
+        swarm.spin_until(lambda: world.k >= 5, RUN_TIMEOUT)
+        swarm.remove(gone)
+        swarm.spin_until(lambda: world.done, RUN_TIMEOUT)
+        summary = swarm.summary()
+    assert summary['status'] == 'failed'
+    # The graph does not tell which host publishes which agent's rows: both hosts are named.
+    assert summary['failure'].startswith('agents 3, 4, 5 (node /agents_a, /agents_b) sent no '
+                                         'command for 3 steps in a row')
+    missed = summary['missed_commands_per_agent']
+    assert missed[:3] == [0, 0, 0] and min(missed[3:]) >= 3
