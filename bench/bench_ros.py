@@ -653,7 +653,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-process-agents', type=int, default=100,
                         help='largest N run in the one-process-per-agent layout')
     parser.add_argument('--memory', action='store_true',
-                        help='also compare peak RSS of S and 10 S steps (one process)')
+                        help='also compare peak RSS of S and 10 S steps (one process, the '
+                        'first of --transports)')
     parser.add_argument('--memory-n', type=int, default=30,
                         help='agents of the memory runs (default: 30)')
     parser.add_argument('--json', type=Path, help='write the results here')
@@ -778,16 +779,20 @@ def main(argv: list[str] | None = None) -> int:
     checks += [(f'{r["layout"]} N={r["n"]}: measured ({r["error"]})', False) for r in failed]
     memory = None
     if args.memory:
-        short = pipeline('one', args.memory_n, args.steps, record=True)
-        long = pipeline('one', args.memory_n, 10 * args.steps, record=True)
+        # The first transport asked for (per_agent unless only batched is measured).
+        transport = args.transports[0]
+        short = pipeline('one', args.memory_n, args.steps, record=True, transport=transport)
+        long = pipeline('one', args.memory_n, 10 * args.steps, record=True,
+                        transport=transport)
         memory = {'n': args.memory_n, 'steps': args.steps, 'short_mib': short['peak_rss_mib'],
-                  'long_mib': long['peak_rss_mib'],
+                  'long_mib': long['peak_rss_mib'], 'transport': transport,
                   'ratio': long['peak_rss_mib'] / short['peak_rss_mib']}
-        print(f'memory (one process, N = {args.memory_n}): {args.steps} steps '
+        print(f'memory (one process, {transport}, N = {args.memory_n}): {args.steps} steps '
               f'{short["peak_rss_mib"]:.0f} '
               f'MiB, {10 * args.steps} steps {long["peak_rss_mib"]:.0f} MiB peak RSS: '
               f'{memory["ratio"]:.3f}x', flush=True)
-        checks.append(('10x longer run peaks < 1.2x memory', memory['ratio'] < 1.2))
+        checks.append((f'{transport}: 10x longer run peaks < 1.2x memory',
+                       memory['ratio'] < 1.2))
     for name, ok in checks:
         print(f'{"PASS" if ok else "FAIL"}  {name}', flush=True)
     if args.json is not None:
