@@ -44,11 +44,13 @@ from flock_swarm.nodes.markers import Telemetry
 from flock_swarm.nodes.parameters import COMMON_PARAMS, NodeParameters, Param, init_node
 from flock_swarm.nodes.recording import RecordedNode
 from flock_swarm.nodes.spin import run_node, wall_timer
-from flock_swarm.nodes.stepper import SETTING_PARAMS, Observation, WorldSettings, WorldStepper
+from flock_swarm.nodes.stepper import Observation, WorldStepper
 from flock_swarm.nodes.world_end import WorldEnd
-from flock_swarm.nodes.world_inputs import STATE_LIMIT, WorldInputs  # noqa: F401
+from flock_swarm.nodes.world_inputs import WorldInputs
 from flock_swarm.nodes.world_io import command_intake, state_publisher
+# WAIT_LOG_EVERY and id_list: the start's wait, importable from here as before.
 from flock_swarm.nodes.world_peers import WAIT_LOG_EVERY, WorldPeers, id_list  # noqa: F401
+from flock_swarm.nodes.world_settings import SETTING_PARAMS, WorldSettings
 
 #: Why the world refuses ``use_sim_time:=true`` (and how the parameter reads back).
 SIM_TIME_REFUSED = ('must be false: the world publishes /clock itself (it is the simulation '
