@@ -82,11 +82,13 @@ class WorldPeers:
     def waiting_for(self) -> list[str]:
         """Return what the start still waits for, one phrase each (empty: nothing)."""
         n, missing = self.scenario.n_agents, []
+        # The batched transport's hosts publish one topic for all their agents.
+        source = getattr(self.intake, 'commands_topic', 'their cmd_accel')
         if self.expect_subscribers < 0:
             claims = self.intake.claims(n)
             absent = [i for i in range(n) if i not in claims]
             if absent:
-                missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
+                missing.append(f'{id_list(absent)} (nobody publishes {source})')
             need = len(set().union(*claims.values())) if claims else 1
         else:
             need = self.expect_subscribers
@@ -95,7 +97,9 @@ class WorldPeers:
                 missing.append(f'{id_list(absent)} (nobody publishes their cmd_accel)')
         self.subscribers_needed = need
         short = [i for i, pub in enumerate(self.odom_pubs) if pub.get_subscription_count() < need]
-        if short:
+        if short and not self.intake.topics:
+            missing.append(f'{need} subscriber(s) of {self.odom_pubs[0].topic_name}')
+        elif short:
             missing.append(f'{need} subscriber(s) of the odometry of {id_list(short)}')
         for pub in (self.telemetry.marker_pub, self.telemetry.metrics_pub):
             if pub.get_subscription_count() < self.expect_telemetry:
