@@ -121,6 +121,26 @@ def test_batched_in_processes_equals_sim(tmp_path, ros_domain, feature, containe
                        container=container)
 
 
+@pytest.mark.parametrize('transport', [BATCHED, []], ids=['batched', 'per_agent'])
+def test_three_host_processes_by_id_ranges_equal_sim(tmp_path, ros_domain, transport):
+    # swarm --processes --container --hosts 3: three agents processes, agents 0-1, 2-3, 4-5;
+    # each takes the state (one cloud, or every odometry) and commands its own agents.
+    run = assert_matches_sim('demo', tmp_path / 'run', DEMO + FEATURES['network'] + transport,
+                             domain_id=ros_domain, atol=0, timeout=RUN_TIMEOUT,
+                             processes=True, container=True, hosts=3)
+    logs = sorted(path.name for path in (run.out / 'logs').glob('agents_*.log'))
+    assert logs == ['agents_0.log', 'agents_1.log', 'agents_2.log']
+
+
+def test_hosts_goes_with_a_container(tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'flock_swarm.cli.swarm', 'demo', '--hosts',
+                             '2', '--out', str(tmp_path / 'out')],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        'swarm: error: --hosts: goes with --processes --container']
+
+
 def test_batched_over_two_hosts_by_id_ranges_equals_sim(tmp_path, ros_domain):
     # Two agents hosts in one process, agents 0-2 and 3-5: each takes the one state cloud and
     # publishes one command cloud a step; the world completes a step from both.

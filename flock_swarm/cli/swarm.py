@@ -39,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='run every node as its own OS process (default: one process)')
     parser.add_argument('--container', action='store_true',
                         help='with --processes: host all agents in one process (`agents`)')
+    parser.add_argument('--hosts', type=int, default=1, metavar='K',
+                        help='with --processes --container: split the agents over K `agents` '
+                        'processes by id ranges (default 1)')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep')
     parser.add_argument('--domain-id', type=int,
                         help='ROS domain id (default: $ROS_DOMAIN_ID or 0); one run per '
@@ -122,6 +125,10 @@ def _main(argv: list[str] | None, stop: StopSignals) -> int:
         if args.container and not args.processes:
             raise ScenarioError('--container', 'goes with --processes (a one-process run '
                                 'always hosts the agents in one container node)')
+        if args.hosts != 1 and not args.container:
+            raise ScenarioError('--hosts', 'goes with --processes --container')
+        if args.hosts < 1:
+            raise ScenarioError('--hosts', f'must be >= 1, got {args.hosts}')
         name = Path(args.scenario).stem
         out = args.out if args.out is not None else Path('out') / f'{name}_ros'
         # --no-record writes no bag: one already there is not in its way.
@@ -184,6 +191,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
     sc = read_scenario(scenario)
     if not args.processes:
         layout = 'one process (agents in one container node)'
+    elif args.container and args.hosts > 1:
+        layout = f'{args.hosts + 2} processes (agents in {args.hosts} container processes)'
     elif args.container:
         layout = 'three processes (agents in one container process)'
     else:
@@ -219,7 +228,8 @@ def _run(args: argparse.Namespace, scenario: Path, out: Path, live, say,
     if args.processes:
         summary = run_processes(scenario, out, args.mode, args.domain_id, args.step_timeout,
                                 realtime_factor=args.realtime_factor,
-                                container=args.container, world_params=world_params,
+                                container=args.container, hosts=args.hosts,
+                                world_params=world_params,
                                 live=live, allow_unstable=args.allow_unstable,
                                 stop=lambda: stop.first, say=say)
     else:

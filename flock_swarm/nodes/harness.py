@@ -531,6 +531,13 @@ def process_environment(n_agents: int, domain_id: int, base: dict | None = None)
     return env
 
 
+def id_ranges(n_agents: int, hosts: int) -> list[str]:
+    """Return ``hosts`` contiguous ``agent_ids`` ranges (``'0-499'``) covering ``n_agents``
+    agents, as even as they divide."""
+    bounds = [round(k * n_agents / hosts) for k in range(hosts + 1)]
+    return [f'{lo}-{hi - 1}' for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
 def _ros_args(values: dict) -> list[str]:
     """Return ``--ros-args -p key:=value ...`` of a node's parameters."""
     out_args = ['--ros-args']
@@ -572,7 +579,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
                   realtime_factor: float = 1.0, container: bool = False,
                   world_params: dict | None = None, live: LiveServer | None = None,
                   allow_unstable: bool = False, stop: Callable[[], int | None] | None = None,
-                  say: Callable[[str], None] | None = None) -> dict:
+                  say: Callable[[str], None] | None = None, hosts: int = 1) -> dict:
     """Run world, leader and the agents as separate OS processes (the ``ros2 run`` executables).
 
     Every agent gets its own process (``agent``, as on real robots), or with ``container``
@@ -589,7 +596,9 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     :param step_timeout: the world's per-step timeout [s].
     :param timeout: wall-clock limit [s] of the whole run.
     :param realtime_factor: realtime mode: simulated seconds per wall second.
-    :param container: host every agent in one ``agents`` process.
+    :param container: host every agent in one ``agents`` process (``hosts`` of them).
+    :param hosts: with ``container``, split the agents over this many ``agents`` processes
+        by id ranges (``agent_ids``; named ``agents_0``, ``agents_1``, ...).
     :param world_params: further parameters of the world node.
     :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` to serve the run on, through a
         bridge node spun by a thread of this process
@@ -607,7 +616,12 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     bridge = None
     try:
         children.start('leader', executable('leader') + _ros_args(base))
-        if container:
+        if container and hosts > 1:
+            for k, ids in enumerate(id_ranges(sc.n_agents, min(hosts, sc.n_agents))):
+                name = f'agents_{k}'
+                children.start(name, executable('agents') + _ros_args(
+                    dict(base, agent_ids=ids)) + ['-r', f'__node:={name}'])
+        elif container:
             children.start('agents', executable('agents') + _ros_args(base))
         else:
             for i in range(sc.n_agents):
