@@ -34,7 +34,12 @@ def test_the_ideal_network_point_is_the_fig2_study_seed_for_seed(key, axis):
     ideal = [r for r in records if r['point'][axis] == 0]
     assert ideal, spec
     for rec in ideal:
-        assert rec['metrics'] == fig2[rec['seed']], (spec, rec['seed'])
+        # Every metric both record is the same (the Fig. 2 study's records may be newer, with
+        # more metrics: the three questions).
+        shared = rec['metrics'].keys() & fig2[rec['seed']].keys()
+        assert len(shared) >= 10, (spec, rec['seed'])
+        assert {k: fig2[rec['seed']][k] for k in rec['metrics']} == rec['metrics'], \
+            (spec, rec['seed'])
     # And the network changes the runs: no other point repeats the ideal one's eta on all
     # of its seeds.
     others = {r['point'][axis] for r in records} - {0}

@@ -33,13 +33,15 @@ open(sys.argv[1], 'w').write(f'{got[0][0]} {got[0][1]}')
 print(f'world told {got[0][0]}', flush=True)
 '''
 #: A leader or an agent: prints ARGV[2] lines, then runs until SIGINT, whose time it writes
-#: to ARGV[1] (exit status 130); with ARGV[3] it exits with that status after the lines.
+#: to ARGV[1] (exit status 130; ARGV[1].ready once it catches it); with ARGV[3] it exits with
+#: that status after the lines.
 PEER = '''
 import signal, sys, time
 def stopped(number, frame):
     open(sys.argv[1], 'w').write(str(time.monotonic()))
     sys.exit(130)
 signal.signal(signal.SIGINT, stopped)
+open(sys.argv[1] + '.ready', 'w').close()
 for i in range(int(sys.argv[2])):
     print(f'peer line {i}', flush=True)
 if len(sys.argv) > 3:
@@ -67,6 +69,10 @@ def test_a_stop_signal_goes_to_the_world_first_then_to_the_others(tmp_path):
              for name in ('leader', 'agents')]
     world = sup.start('world', python(WORLD, tmp_path / 'world.told', 0))
     wait_for(lambda: catches(world.proc.pid, FAIL_SIGNAL), TIMEOUT, 'the world handlers')
+    # And the peers' (on a loaded machine a SIGINT may come before their handler, while
+    # Python still starts: a KeyboardInterrupt, status 1).
+    wait_for(lambda: all(Path(f'{tmp_path / p.name}.stopped.ready').exists() for p in peers),
+             TIMEOUT, 'the peers\' handlers')
     try:
         outcome = sup.watch(world, lambda: signal.SIGTERM)
         world_exit = time.monotonic()
