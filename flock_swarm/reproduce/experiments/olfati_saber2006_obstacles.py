@@ -38,7 +38,7 @@ ROWS = (
 SOURCES = (
     ' Sources: the report\'s text past its abstract was not retrievable with our search '
     'tool; Section VIII\'s parameters are those of our notes '
-    '(`shared/papers/olfati_saber_2006_obstacles_notes.md`, marked there "to verify in the '
+    '(`docs/papers/olfati_saber_2006_obstacles_notes.md`, marked there "to verify in the '
     'report") and the obstacle matrices and snapshot times those of an independent '
     'reproduction of the paper\'s figures (GitHub AIMSLab-IIITAllahabad/alpha-lattice-'
     'flocking, `demo_squeezing.py`, `demo_algorithm3_obstacles.py`). The paper gives no '
