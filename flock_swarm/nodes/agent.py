@@ -155,7 +155,30 @@ class AgentNode(Node):
         self.c_path = use_c_path(params['message_path']) and self.lockstep
         self.guard = InputGuard(self.clock, Limits.from_parameters(params.values),
                                 self.get_logger().warning)
+        # The hosted agents' odometry carries a heading (an oriented plant's).
+        plant = self.controller.plant
+        self.oriented = plant is not None and plant.oriented
         qos = qos_profile(LOCKSTEP_QOS)
+        self._create_publishers(qos)
+        self._create_subscriptions(qos)
+        self.encoder = AccelBatchEncoder(len(self.cmd_pubs))
+        self.outbox: list[tuple[int, bytes]] = []
+        self.matched = [False] * len(self.pubs)
+        # Every topic matched once: flush sends the outbox as it is.
+        self.all_matched = False
+        self.sent: list[tuple[int, bytes]] = []
+        self.duplicates: set[int] = set()
+        wall_timer(self, 1.0, self.check_claims)
+        self.world_finished = follow_world(self, params['keep_running'])
+        if self.lockstep:
+            wall_timer(self, 0.01, self.on_lockstep_timer)
+        else:
+            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
+
+    def _create_publishers(self, qos) -> None:
+        """Create the publishers :meth:`publish_commands` sends on (``self.pubs``): per hosted
+        agent its command, adaptive state, network usage and velocity command, or the batched
+        transport's one command cloud."""
         # The hosted agents' own topics (none with the batched transport).
         hosted = [] if self.batched else self.controller.ids
         self.cmd_pubs = [self.create_publisher(AccelStamped, cmd_topic(int(i)), qos)
@@ -171,16 +194,20 @@ class AgentNode(Node):
         self.usage_encoder = StateEncoder(USAGE_LABELS)
         self.twist_pubs = [self.create_publisher(Twist, cmd_vel_topic(int(i)), qos)
                            for i in hosted] if self.velocity else []
-        # The hosted agents' odometry carries a heading (an oriented plant's).
-        plant = self.controller.plant
-        self.oriented = plant is not None and plant.oriented
         # What publish_commands sends on: the commands (row i: hosted agent i), states, usage,
         # velocity commands.
         self.pubs = self.cmd_pubs + self.state_pubs + self.usage_pubs + self.twist_pubs
         if self.batched:
             self.pubs = [self.create_publisher(PointCloud2, COMMAND_CLOUDS, qos)]
-            self.cloud_out = CloudEncoder(command_fields(sc.dim, self.controller.state_labels,
+            self.cloud_out = CloudEncoder(command_fields(self.scenario.dim,
+                                                         self.controller.state_labels,
                                                          self.velocity))
+
+    def _create_subscriptions(self, qos) -> None:
+        """Subscribe to the swarm's state (every agent's odometry, or the batched transport's
+        state cloud) and the leader's, raw; hold the compiled path's take and publish."""
+        sc = self.scenario
+        if self.batched:
             self.states_in = StateCloud(sc.n_agents, sc.dim, self.oriented, self.guard)
             self.states_topic = self.create_subscription(PointCloud2, STATES, self.on_states,
                                                          qos, raw=True).topic_name
@@ -200,19 +227,6 @@ class AgentNode(Node):
         self.create_subscription(Odometry, LEADER_ODOM, self.on_leader_odom, qos, raw=True)
         self.create_subscription(AccelStamped, LEADER_ACCEL, self.on_leader_accel, qos,
                                  raw=True)
-        self.encoder = AccelBatchEncoder(len(self.cmd_pubs))
-        self.outbox: list[tuple[int, bytes]] = []
-        self.matched = [False] * len(self.pubs)
-        # Every topic matched once: flush sends the outbox as it is.
-        self.all_matched = False
-        self.sent: list[tuple[int, bytes]] = []
-        self.duplicates: set[int] = set()
-        wall_timer(self, 1.0, self.check_claims)
-        self.world_finished = follow_world(self, params['keep_running'])
-        if self.lockstep:
-            wall_timer(self, 0.01, self.on_lockstep_timer)
-        else:
-            wall_timer(self, params.timer_period(sc.dt), self.on_timer)
 
     leader_lost = property(lambda self: self.controller.leader.lost,
                            doc='Whether the agents apply the uninformed law (leader lost).')
