@@ -25,6 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from flock_swarm.bag import BagReader, BagWriter
@@ -390,6 +391,34 @@ def test_replays_a_bag_of_a_ros_run(tmp_path, ros_context, ros_domain):
         listener.destroy_node()
 
 
+def test_republish_per_agent_plays_a_batched_bag_as_the_per_agent_run_recorded_it(
+        tmp_path, ros_context, ros_domain):
+    """``republish='per_agent'``: a batched run's clouds arrive on the per-agent topics as
+    the bytes a per-agent run of the same scenario recorded (odometry, commands and Zhou's
+    adaptive gains ``h``, whose JointState carries the same stamp and numbers)."""
+    runs = {}
+    for name, extra in (('batched', ['transport=batched']), ('per_agent', [])):
+        out = runs[name] = tmp_path / name
+        run_in_process(resolve_scenario('zhou2012_sec51', ['duration=0.1', *extra], None, out),
+                       out, domain_id=ros_domain, timeout=60)
+    expected = [m for m in BagReader(runs['per_agent'] / 'bag').messages()
+                if m.topic.startswith('/agent_')]
+    types = {'odom': Odometry, 'cmd_accel': AccelStamped, 'state': JointState}
+    topics = {m.topic: types[m.topic.rsplit('/', 1)[1]] for m in expected}
+    listener = Listener(topics, context=ros_context)
+    player = Player(runs['batched'] / 'bag', rate=4.0, regex='^/agent_', republish='per_agent',
+                    wait_subscribers=1, context=ros_context)
+    try:
+        assert sorted(player.topics) == sorted(topics)
+        result = play(ros_context, player, listener, len(expected))
+        assert result.total == len(expected)
+        received = by_topic(listener.received)
+        assert received == by_topic((m.topic, m.data, 0) for m in expected)
+    finally:
+        player.destroy_node()
+        listener.destroy_node()
+
+
 def test_replay_qos():
     default = replay_qos([])
     assert (default.reliability, default.durability, default.history, default.depth) == (
@@ -510,6 +539,8 @@ def test_cli_plays_with_progress(tmp_path):
     (['{bag}', '--regex', '(a'], "--regex: invalid regular expression '(a'"),
     (['{bag}', '--topics', '/nope'], '--topics: not in the bag: /nope'),
     (['{bag}', '--start-offset', '-1'], '--start-offset: must be a finite number >= 0'),
+    (['{bag}', '--republish', 'per_agent'], '--republish: per_agent: the bag has no '
+     'swarm/states cloud'),
 ])
 def test_cli_bad_input_is_one_line_and_status_2(tmp_path, ros_domain, monkeypatch, capfd,
                                                 args, message):

@@ -5,7 +5,8 @@ Usage::
     replay BAG [--rate R] [--loop] [--topics T [T ...]] [--regex PATTERN]
                [--exclude PATTERN] [--start-offset S] [--clock] [--clock-rate HZ]
                [--wait-for-subscribers N] [--wait-timeout S] [--delay S] [--quiet]
-               [--foxglove [PORT]] [--foxglove-host HOST] [--ros-args ...]
+               [--republish {as_recorded,per_agent}] [--foxglove [PORT]]
+               [--foxglove-host HOST] [--ros-args ...]
 
 A thin command over the player node (:class:`flock_swarm.nodes.player.Player`). Unless
 ``--quiet``, a progress line on stderr gives the bag time and the time elapsed since the start
@@ -29,7 +30,7 @@ from flock_swarm.bag import BagError
 from flock_swarm.console import (claim_domain, DomainBusy, EXIT_FAILURE, EXIT_USAGE,
                                  OneLineParser, StopSignals)
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
-from flock_swarm.nodes.player import ClockTaken, Player, ReplayError
+from flock_swarm.nodes.player import ClockTaken, Player, REPUBLISH, ReplayError
 from flock_swarm.nodes.spin import middleware_defaults
 
 
@@ -74,6 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='wait S seconds before the first message (time for discovery)')
     parser.add_argument('-q', '--quiet', action='store_true',
                         help='no progress line and no summary')
+    parser.add_argument('--republish', choices=REPUBLISH, default=REPUBLISH[0],
+                        help='per_agent: a batched bag\'s /swarm/states and /swarm/commands '
+                        'clouds as the per-agent topics agent_<i>/odom, agent_<i>/cmd_accel '
+                        '(and /state, /cmd_vel), as a per-agent run records them (default '
+                        'as_recorded)')
     parser.add_argument('--foxglove', type=int, nargs='?', const=DEFAULT_PORT, metavar='PORT',
                         help='also serve the replayed messages to Foxglove / Lichtblick over '
                         f'the Foxglove WebSocket protocol (default port {DEFAULT_PORT}; 0: '
@@ -171,7 +177,7 @@ def _play(args: argparse.Namespace, argv: list[str]) -> int:
             exclude=args.exclude, start_offset=args.start_offset, clock=args.clock,
             clock_rate=args.clock_rate, wait_subscribers=args.wait_for_subscribers,
             wait_timeout=args.wait_timeout, delay=args.delay,
-            progress=None if args.quiet else sys.stderr, live=live)
+            progress=None if args.quiet else sys.stderr, live=live, republish=args.republish)
         if live is not None and not args.quiet:
             print(f'[replay] live view on {live.url} ({len(live.channels)} topics)',
                   file=sys.stderr, flush=True)

@@ -26,14 +26,18 @@ from typing import Sequence
 
 import numpy as np
 
-from flock_swarm.contract import CLOUD_TYPE, COMMANDS, FRAME, STATES
+from flock_swarm.contract import (ACCEL_TYPE, CLOUD_TYPE, COMMANDS, FRAME, ODOMETRY_TYPE,
+                                  STATE_TYPE, STATES, TWIST_TYPE, agent_name, cmd_topic,
+                                  cmd_vel_topic, odom_topic, state_topic)
 from flock_swarm.core.scenario import TRANSPORTS
-from flock_swarm.nodes.wire import (CDR_LE, NS_PER_S, MalformedMessage, _align, _header,
-                                    _layout, _put_string)
+from flock_swarm.nodes.wire import (CDR_LE, NS_PER_S, AccelEncoder, MalformedMessage,
+                                    OdometryBatchEncoder, StateEncoder, _align, _header,
+                                    _layout, _put_string, encode_twist)
 
 #: The topics and their type (:mod:`flock_swarm.contract`), here for the codec's users.
 __all__ = ['CLOUD_TYPE', 'COMMANDS', 'STATES', 'TRANSPORTS', 'PER_AGENT', 'BATCHED',
-           'CloudEncoder', 'Cloud', 'decode_cloud', 'state_fields', 'command_fields']
+           'CloudEncoder', 'Cloud', 'decode_cloud', 'state_fields', 'command_fields',
+           'PerAgentMessages']
 #: The transports (the scenario's ``transport`` key, the nodes' ``transport`` parameter).
 PER_AGENT, BATCHED = TRANSPORTS
 #: The field holding an agent's id.
@@ -208,3 +212,79 @@ def decode_cloud(data: bytes) -> Cloud:
         raise MalformedMessage(f'data of {size} bytes for {n} points of {point_step}')
     points = np.frombuffer(data, dtype=dtype, count=n, offset=at)
     return Cloud(ns, frame, points)
+
+
+class PerAgentMessages:
+    """The per-agent transport's messages of the batched transport's clouds (``replay
+    --republish per_agent``): a state cloud as every agent's ``agent_<i>/odom``, a command
+    cloud as its agents' ``agent_<i>/cmd_accel`` (and ``agent_<i>/state``, ``agent_<i>/cmd_vel``
+    when it carries them), byte for byte what the per-agent world and agents publish: the same
+    encoders (:mod:`flock_swarm.nodes.wire`), stamped with the cloud's stamp.
+
+    :ivar topics: the per-agent topics (relative), in the per-agent bag's order, and their
+        types.
+    """
+
+    def __init__(self, n_agents: int, state_names: Sequence[str],
+                 command_names: Sequence[str]) -> None:
+        """Prepare for ``n_agents`` agents, given the field names of a state cloud and of a
+        command cloud (``()``: the bag has none)."""
+        dim = sum(axis in state_names for axis in 'xyz')
+        self.n, self.oriented = n_agents, 'qz' in state_names
+        self.state = state_fields(dim, self.oriented)
+        self.accel = command_fields(dim)
+        self.velocity = bool(command_names) and all(f in command_names for f in TWIST_FIELDS)
+        skip = {*self.accel, ID, *(TWIST_FIELDS if self.velocity else ())}
+        self.labels = tuple(name for name in command_names if name not in skip)
+        self.odometry = OdometryBatchEncoder([agent_name(i) for i in range(n_agents)],
+                                             oriented=self.oriented)
+        self.accel_encoder = AccelEncoder()
+        self.state_encoder = StateEncoder(self.labels) if self.labels else None
+        self.topics: dict[str, str] = {}
+        for i in range(n_agents):
+            if state_names:
+                self.topics[odom_topic(i)] = ODOMETRY_TYPE
+            if command_names:
+                self.topics[cmd_topic(i)] = ACCEL_TYPE
+                if self.labels:
+                    self.topics[state_topic(i)] = STATE_TYPE
+                if self.velocity:
+                    self.topics[cmd_vel_topic(i)] = TWIST_TYPE
+
+    def states(self, cloud: Cloud) -> list[tuple[str, bytes]]:
+        """Return ``(topic, odometry)`` of every agent of a state cloud.
+
+        :raises MalformedMessage: when it lacks a field or is not one point per agent.
+        """
+        values, ids = cloud.columns(self.state), cloud.ids()
+        if len(ids) != self.n or not np.array_equal(np.sort(ids), np.arange(self.n)):
+            raise MalformedMessage(f'{len(ids)} points, not one of each of the {self.n} agents')
+        values = values[np.argsort(ids)]
+        dim = len(self.accel)
+        rows = [values[:, :dim], values[:, dim:2 * dim]]
+        if self.oriented:
+            rows += [values[:, 2 * dim:2 * dim + 2],
+                     np.column_stack([values[:, 2 * dim + 2], np.zeros(self.n)])]
+        messages = self.odometry.encode(cloud.stamp_ns, *rows)
+        return [(odom_topic(i), data) for i, data in enumerate(messages)]
+
+    def commands(self, cloud: Cloud) -> list[tuple[str, bytes]]:
+        """Return ``(topic, message)`` of each command, adaptive state and velocity command
+        of a host's command cloud, agent by agent.
+
+        :raises MalformedMessage: when it lacks a field or names an agent out of range.
+        """
+        ids = cloud.ids()
+        if len(ids) and (ids.min() < 0 or ids.max() >= self.n):
+            raise MalformedMessage(f'ids not agents of [0, {self.n - 1}]: {ids[:8].tolist()}')
+        ns, u = cloud.stamp_ns, cloud.columns(self.accel)
+        state = cloud.columns(self.labels) if self.labels else None
+        twist = cloud.columns(TWIST_FIELDS) if self.velocity else None
+        out = []
+        for j, i in enumerate(ids.tolist()):
+            out.append((cmd_topic(i), self.accel_encoder.encode(ns, u[j])))
+            if state is not None:
+                out.append((state_topic(i), self.state_encoder.encode(ns, state[j])))
+            if twist is not None:
+                out.append((cmd_vel_topic(i), encode_twist(twist[j, :3], twist[j, 3:])))
+        return out

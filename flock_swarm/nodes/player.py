@@ -38,7 +38,9 @@ from rosgraph_msgs.msg import Clock
 from flock_swarm import contract
 from flock_swarm.bag import BagError, BagReader, message_class, parse_qos_profiles
 from flock_swarm.bag.msgdefs import DefinitionNotFoundError
-from flock_swarm.contract import qos_profile
+from flock_swarm.contract import CLOUD_TYPE, COMMANDS, STATES, qos_profile
+from flock_swarm.nodes.cloud import PerAgentMessages, decode_cloud
+from flock_swarm.nodes.wire import MalformedMessage
 
 #: The simulation clock topic (REP-2008 ``/clock``).
 CLOCK_TOPIC = contract.CLOCK
@@ -266,6 +268,78 @@ def recorded_offers(reader: BagReader, topics: Iterable[str]) -> dict[str, str]:
     return offers
 
 
+#: ``republish``'s values: the topics as recorded, or a batched bag's clouds as the
+#: per-agent transport's topics.
+REPUBLISH = ('as_recorded', 'per_agent')
+#: A cloud topic of the batched transport, in any namespace.
+_CLOUD_TOPIC = re.compile(rf'^(?P<ns>(?:/[^/]+)*?)/(?P<kind>{STATES}|{COMMANDS})$')
+
+
+class PerAgentView:
+    """A batched bag seen as the per-agent transport's bag (``--republish per_agent``).
+
+    :ivar available: the topics to choose from and their types, in bag order, each cloud
+        topic in place of the per-agent topics it becomes.
+    :ivar source: each of those topics' recorded topic.
+    """
+
+    def __init__(self, reader: BagReader, recorded: dict[str, str]) -> None:
+        """Find the bag's clouds and, from their first messages, the per-agent topics.
+
+        :raises ReplayError: for a bag without a state cloud (a per-agent bag, say).
+        """
+        clouds = {name: _CLOUD_TOPIC.match(name) for name, kind in recorded.items()
+                  if kind == CLOUD_TYPE and _CLOUD_TOPIC.match(name)}
+        counts = reader.message_counts()
+        states = [n for n, m in clouds.items() if m['kind'] == STATES and counts.get(n)]
+        if not states:
+            raise ReplayError('--republish', f'per_agent: the bag has no {STATES} cloud with '
+                              'messages (a per-agent bag has the per-agent topics already: '
+                              'replay it without --republish)')
+        namespace = clouds[states[0]]['ns']
+        commands = [n for n, m in clouds.items() if m['ns'] == namespace and counts.get(n)
+                    and m['kind'] == COMMANDS]
+        first = {}
+        for message in reader.messages([states[0], *commands]):
+            first.setdefault(message.topic, message.data)
+            if len(first) == 1 + len(commands):
+                break
+        try:
+            state = decode_cloud(bytes(first[states[0]]))
+            command = decode_cloud(bytes(first[commands[0]])) if commands else None
+        except MalformedMessage as exc:
+            raise ReplayError('--republish', f'per_agent: {states[0]}: {exc}') from None
+        self.split = PerAgentMessages(len(state.points), state.names(),
+                                      command.names() if command else ())
+        self.clouds = {states[0]: self.split.states,
+                       **{name: self.split.commands for name in commands}}
+        self.prefix = namespace
+        self.available: dict[str, str] = {}
+        self.source: dict[str, str] = {}
+        for name, kind in recorded.items():
+            if name not in self.clouds:
+                self.available[name], self.source[name] = kind, name
+                continue
+            wanted = 'odom' if name == states[0] else None
+            for topic, type_name in self.split.topics.items():
+                if (topic.endswith('/odom')) == (wanted == 'odom'):
+                    self.available[f'{namespace}/{topic}'] = type_name
+                    self.source[f'{namespace}/{topic}'] = name
+
+    def messages(self, topic: str, data: bytes) -> list[tuple[str, bytes]]:
+        """Return the ``(topic, bytes)`` a recorded message is replayed as.
+
+        :raises ReplayError: for a cloud that does not decode.
+        """
+        split = self.clouds.get(topic)
+        if split is None:
+            return [(topic, data)]
+        try:
+            return [(f'{self.prefix}/{name}', out) for name, out in split(decode_cloud(data))]
+        except MalformedMessage as exc:
+            raise ReplayError('--republish', f'per_agent: a cloud of {topic}: {exc}') from None
+
+
 def format_ns(ns: int) -> str:
     """Format a time in ns as seconds with nine decimals, exactly (no float rounding)."""
     sign = '-' if ns < 0 else ''
@@ -311,6 +385,9 @@ class Player(Node):
     :param live: a :class:`~flock_swarm.foxglove_ws.LiveServer` that serves every replayed message
         too (its recorded bytes, logged at its recorded time), or None.
     :param node_name: name of the node.
+    :param republish: ``as_recorded`` (the recorded topics) or ``per_agent``: a batched bag's
+        clouds as the per-agent transport's topics (:class:`PerAgentView`); the topic filters
+        then choose among those.
     :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``namespace``...).
     :raises BagError: if the bag cannot be read.
     :raises ReplayError: for an invalid option or a selection without replayable topics.
@@ -322,7 +399,8 @@ class Player(Node):
                  clock_rate: float = 100.0, wait_subscribers: int = 0,
                  wait_timeout: float = 10.0, delay: float = 0.0,
                  progress: TextIO | None = None, say: Callable[[str], None] | None = None,
-                 live=None, node_name: str = 'replay', **kwargs) -> None:
+                 live=None, node_name: str = 'replay', republish: str = 'as_recorded',
+                 **kwargs) -> None:
         """Open the bag, check the options, create the node and its publishers."""
         self._say = say if say is not None else (
             lambda line: print(line, file=sys.stderr, flush=True))
@@ -346,6 +424,12 @@ class Player(Node):
             name = bag if not isinstance(bag, BagReader) else 'the bag'
             raise ReplayError('BAG', f'{name} holds no topics, so nothing to replay (a '
                               'recording stopped before its first message?)')
+        if republish not in REPUBLISH:
+            raise ReplayError('--republish', f"must be one of {', '.join(REPUBLISH)}, got "
+                              f'{republish!r}')
+        self._view = PerAgentView(self._reader, recorded) if republish == 'per_agent' else None
+        if self._view is not None:
+            recorded = self._view.available
         selected = select_topics(recorded, topics, regex, exclude, clock)
         if clock and CLOCK_TOPIC in recorded:
             self._say(f'[replay] --clock: the recorded {CLOCK_TOPIC} is not replayed; '
@@ -369,11 +453,13 @@ class Player(Node):
         if self._offset_ns > self._bag_end - self._bag_start:
             raise ReplayError('--start-offset', f'{offset:g} s is past the end of the bag '
                               f'(duration {format_ns(self._bag_end - self._bag_start)} s)')
-        offers = recorded_offers(self._reader, classes)
+        source = self._view.source if self._view is not None else {n: n for n in classes}
+        self._sources = sorted({source[name] for name in classes})
+        offers = recorded_offers(self._reader, self._sources)
         qos = {}
         for name in classes:
             try:
-                qos[name] = replay_qos(parse_qos_profiles(offers.get(name, '')))
+                qos[name] = replay_qos(parse_qos_profiles(offers.get(source[name], '')))
             except BagError as exc:
                 self._say(f'replay: warning: {name}: {exc}; offering the default QoS')
                 qos[name] = replay_qos([])
@@ -543,21 +629,26 @@ class Player(Node):
             result.clock_ticks += 1
             self._next_clock = self._wall_zero + self._clock_period
         published = 0
-        for message in self._reader.messages(self._topic_pubs):
+        for message in self._reader.messages(self._sources):
             if message.log_time_ns < start_ns:
                 continue
             due = self._wall_zero + (message.log_time_ns - start_ns) / _NS / self._rate
             if not self._wait_until(due, result):
                 break
             data = message.data if type(message.data) is bytes else bytes(message.data)
-            publisher = self._topic_pubs[message.topic]
-            publisher.publish(data)
-            if self._live is not None:
-                self._live.set_time(message.log_time_ns)
-                self._live.write(publisher.topic_name, data, message.log_time_ns)
+            out = ([(message.topic, data)] if self._view is None
+                   else self._view.messages(message.topic, data))
+            for topic, data in out:
+                publisher = self._topic_pubs.get(topic)
+                if publisher is None:
+                    continue
+                publisher.publish(data)
+                if self._live is not None:
+                    self._live.set_time(message.log_time_ns)
+                    self._live.write(publisher.topic_name, data, message.log_time_ns)
+                result.published[topic] += 1
+                published += 1
             result.max_lateness = max(result.max_lateness, time.monotonic() - due)
-            result.published[message.topic] += 1
-            published += 1
         return published
 
     def _wait_until(self, due: float, result: PlayResult) -> bool:
