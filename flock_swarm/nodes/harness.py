@@ -574,6 +574,23 @@ def _close_bridge(bridge) -> None:
     bridge.close()
 
 
+def _start_agents(children: Supervisor, base: dict, n: int, container: bool,
+                  hosts: int) -> None:
+    """Start the ``n`` agents' processes: one ``agent`` each, or with ``container`` one
+    ``agents`` process (``hosts`` of them by id ranges, named ``agents_<k>``)."""
+    if container and hosts > 1:
+        for k, ids in enumerate(id_ranges(n, min(hosts, n))):
+            name = f'agents_{k}'
+            children.start(name, executable('agents') + _ros_args(
+                dict(base, agent_ids=ids)) + ['-r', f'__node:={name}'])
+    elif container:
+        children.start('agents', executable('agents') + _ros_args(base))
+    else:
+        for i in range(n):
+            children.start(contract.agent_name(i),
+                           executable('agent') + _ros_args(dict(base, agent_id=i)))
+
+
 def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: int = 0,
                   step_timeout: float = 2.0, timeout: float | None = None,
                   realtime_factor: float = 1.0, container: bool = False,
@@ -616,17 +633,7 @@ def run_processes(scenario: Path, out: Path, mode: str = 'lockstep', domain_id: 
     bridge = None
     try:
         children.start('leader', executable('leader') + _ros_args(base))
-        if container and hosts > 1:
-            for k, ids in enumerate(id_ranges(sc.n_agents, min(hosts, sc.n_agents))):
-                name = f'agents_{k}'
-                children.start(name, executable('agents') + _ros_args(
-                    dict(base, agent_ids=ids)) + ['-r', f'__node:={name}'])
-        elif container:
-            children.start('agents', executable('agents') + _ros_args(base))
-        else:
-            for i in range(sc.n_agents):
-                children.start(contract.agent_name(i),
-                               executable('agent') + _ros_args(dict(base, agent_id=i)))
+        _start_agents(children, base, sc.n_agents, container, hosts)
         if live is not None:
             bridge = _matched_bridge(live, domain_id, base, sc)
             # One subscriber per agent host (every child so far but the leader), and the bridge.

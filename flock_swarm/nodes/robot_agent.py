@@ -211,6 +211,14 @@ class RobotAgentNode(Node):
         #: The last command sent, as the plant's command row (zero before the first).
         self.sent = np.zeros((1, len(plant.command_names(sc.dim))))
         self.differentiators = [PoseDifferentiator(params['pose_filter_tau']) for _ in range(n)]
+        self._subscribe(params)
+        self.cmd_topic = params['cmd_vel_topic'].replace('{robot}', self.names[i])
+        self.cmd_pub = self.create_publisher(Twist, self.cmd_topic, CMD_QOS)
+        wall_timer(self, self.period, self.on_timer)
+
+    def _subscribe(self, params: NodeParameters) -> None:
+        """Subscribe to every robot's state, the leader's and the e-stop (the topics and
+        message type the parameters name)."""
         sensor = qos_profile(SENSOR_QOS)
         pose = params['odom_type'] == 'pose'
         for j, robot in enumerate(self.names):
@@ -225,9 +233,6 @@ class RobotAgentNode(Node):
         for spec in ESTOP_QOS:   # latched and volatile publishers both reach it
             self.create_subscription(Bool, params['estop_topic'], self.on_estop,
                                      qos_profile(spec))
-        self.cmd_topic = params['cmd_vel_topic'].replace('{robot}', self.names[i])
-        self.cmd_pub = self.create_publisher(Twist, self.cmd_topic, CMD_QOS)
-        wall_timer(self, self.period, self.on_timer)
 
     # -- inputs -------------------------------------------------------------------------------
 
