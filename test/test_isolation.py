@@ -330,12 +330,13 @@ def received_bytes(ns: str, dev: str) -> int:
 
 
 def run_across(hosts: dict, scenario: Path, out: Path, domain: int, discovery: str,
-               world_params: dict) -> tuple[dict, int]:
+               world_params: dict, agent_ids: tuple[str, ...] = ()) -> tuple[dict, int]:
     """Run the world in one namespace, the leader and the agents in the other.
 
-    The world runs as ``world``, the agents in one ``agents`` process, as ``ros2 run`` would
-    start them. Fast DDS keeps to UDP (no shared memory, which namespaces do not separate),
-    so every message crosses the veth link or nothing does.
+    The world runs as ``world``, the agents in one ``agents`` process, or with ``agent_ids``
+    one ``agents_<k>`` process per id range, as ``ros2 run`` would start them. Fast DDS keeps
+    to UDP (no shared memory, which namespaces do not separate), so every message crosses
+    the veth link or nothing does.
 
     :return: the world's summary and the bytes its end of the link received.
     """
@@ -344,16 +345,18 @@ def run_across(hosts: dict, scenario: Path, out: Path, domain: int, discovery: s
     (world_ns, world_if), swarm_ns = hosts['world'], hosts['swarm'][0]
     before = received_bytes(world_ns, world_if)
 
-    def start(ns: str, name: str, params: dict) -> subprocess.Popen:
+    def start(ns: str, name: str, params: dict, node: str = '') -> subprocess.Popen:
         args = [arg for k, v in dict(scenario=str(scenario), **params).items()
-                for arg in ('-p', f'{k}:={v}')]
-        log = open(out.parent / f'{out.name}_{name}.log', 'w')
+                for arg in ('-p', f'{k}:={v}')] + (['-r', f'__node:={node}'] if node else [])
+        log = open(out.parent / f'{out.name}_{node or name}.log', 'w')
         with log:
             return subprocess.Popen(['ip', 'netns', 'exec', ns, *executable(name),
                                      '--ros-args', *args], env=env, stdout=log, stderr=log)
 
     out.parent.mkdir(parents=True, exist_ok=True)
-    others = [start(swarm_ns, 'leader', {}), start(swarm_ns, 'agents', {})]
+    others = [start(swarm_ns, 'leader', {})]
+    others += ([start(swarm_ns, 'agents', {'agent_ids': ids}, f'agents_{k}')
+                for k, ids in enumerate(agent_ids)] or [start(swarm_ns, 'agents', {})])
     world = start(world_ns, 'world', dict(out_dir=str(out), **world_params))
     try:
         assert world.wait(timeout=RUN_TIMEOUT) == 0, (out.parent / f'{out.name}_world.log') \
@@ -393,3 +396,45 @@ def test_world_and_agents_in_separate_network_namespaces(tmp_path, ros_domain, t
                                            'record': False})
     assert alone['missed_commands'] == sc.n_agents * (sc.steps + 1)
     assert link < LINK_BYTES / 10, f'{link} bytes crossed the link with LOCALHOST discovery'
+
+
+def test_batched_hosts_by_id_ranges_across_namespaces_equal_sim(tmp_path, ros_domain,
+                                                                two_hosts):
+    """The batched transport across the veth link (issue 41, many hosts): the world alone in
+    one namespace, the leader and three ``agents`` hosts by id ranges in the other, each
+    taking the one state cloud and answering with one command cloud. The lockstep run equals
+    ``sim`` bit for bit, and its traffic crossed the link."""
+    from flock_swarm.analysis.compare import compare_runs
+    from flock_swarm.bag import BagReader
+    from flock_swarm.nodes.cloud import decode_cloud
+    from flock_swarm.core.run import simulate
+    from flock_swarm.nodes.harness import id_ranges
+    from flock_swarm.outputs import json_text
+    from flock_swarm.testing import SIM_ONLY
+
+    scenario = resolve_scenario('demo', ['n_agents=6', 'informed.count=3', 'duration=0.2',
+                                         'record_every=1', 'transport=batched',
+                                         'initial.position_box=[[0, 6], [0, 6]]'],
+                                None, tmp_path / 'scenario')
+    sc = parse_scenario(parse_yaml(scenario.read_text()))
+    ranges = tuple(id_ranges(sc.n_agents, 3))
+    assert ranges == ('0-1', '2-3', '4-5')
+    out = tmp_path / 'run'
+    summary, link = run_across(two_hosts, scenario, out, ros_domain, 'SUBNET',
+                               {'start_timeout': 20.0}, agent_ids=ranges)
+    assert summary['status'] == 'completed'
+    assert summary['missed_commands'] == 0 and summary['leader_missed'] == 0
+    assert link > LINK_BYTES, f'only {link} bytes crossed the link'
+    # The batched transport: a state cloud a step, and each step the command cloud of each
+    # host, its id range (a step still open is offered again: its clouds may come twice).
+    bag = BagReader(out / 'bag')
+    assert not [topic for topic in bag.topics() if topic.startswith('/agent_')]
+    assert bag.message_counts()['/swarm/states'] == sc.steps + 1
+    clouds = {(m.log_time_ns, tuple(decode_cloud(bytes(m.data)).ids().tolist()))
+              for m in bag.messages('/swarm/commands')}
+    assert clouds == {(round(k * sc.dt * 1e9), ids) for k in range(sc.steps + 1)
+                      for ids in ((0, 1), (2, 3), (4, 5))}
+    ref = simulate(sc)
+    want = {k: v for k, v in json.loads(json_text(ref.summary)).items() if k not in SIM_ONLY}
+    problems = compare_runs(want, ref.series, summary, series(out), 0.0).problems
+    assert not problems, '\n'.join(problems)
