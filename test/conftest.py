@@ -283,6 +283,8 @@ QUICK = (
     'test/test_obstacles_ros.py::test_a_run_with_obstacles_matches_sim_in_every_layout[one '
     'process]',
     'test/test_engine_world.py::test_six_engine_robots_follow_a_circling_leader_in_lockstep',
+    # The batched transport across processes (its one-process runs are fast tests already).
+    'test/test_transport_ros.py::test_batched_in_processes_equals_sim[container]',
 )
 
 

@@ -91,7 +91,8 @@ def test_this_sessions_markers_follow_the_fixtures_and_the_durations(request):
             assert item.get_closest_marker('ros'), item.nodeid
         if durations.get(item.nodeid, (0.0, 0.0))[0] >= SLOW:
             assert item.get_closest_marker('slow'), item.nodeid
-    assert len(QUICK) == 4 and all('match' in q or 'lockstep' in q for q in QUICK)
+    assert len(QUICK) == 5 and all(any(word in q for word in ('match', 'lockstep', 'equals_sim'))
+                                   for q in QUICK)
     # Not measured yet: slow, as this module is not core's (it starts processes).
     measured = durations.get(request.node.nodeid)
     slow = measured is None or measured[0] >= SLOW
