@@ -355,6 +355,38 @@ def _check_number(option: str, value: float, low: float, strict: bool) -> float:
     return value
 
 
+def _message_classes(recorded: dict[str, str], selected: Iterable[str], bag: str,
+                     say: Callable[[str], None]) -> dict[str, type]:
+    """Return the message class of each selected topic whose type is installed (the others
+    skipped with one warning).
+
+    :raises ReplayError: if none is.
+    """
+    classes: dict[str, type] = {}
+    unknown = []
+    for name in selected:
+        try:
+            classes[name] = message_class(recorded[name])
+        except (DefinitionNotFoundError, ValueError):
+            unknown.append(f'{name} ({recorded[name] or "no schema"})')
+    if unknown:
+        say(f'replay: warning: skipping topics whose message types are not '
+            f"installed: {', '.join(unknown)}")
+    if not classes:
+        raise ReplayError(bag, 'none of the selected topics has an installed message type')
+    return classes
+
+
+def _offered_qos(name: str, offers: str, say: Callable[[str], None]) -> QoSProfile:
+    """Return the QoS to offer on topic ``name`` from its recorded offers (the default QoS,
+    with a warning, if they cannot be read)."""
+    try:
+        return replay_qos(parse_qos_profiles(offers))
+    except BagError as exc:
+        say(f'replay: warning: {name}: {exc}; offering the default QoS')
+        return replay_qos([])
+
+
 class Player(Node):
     """A node that republishes a bag's messages with their recorded timing.
 
@@ -434,19 +466,7 @@ class Player(Node):
         if clock and CLOCK_TOPIC in recorded:
             self._say(f'[replay] --clock: the recorded {CLOCK_TOPIC} is not replayed; '
                       f'{CLOCK_TOPIC} follows bag time at {1.0 / self._clock_period:g} Hz')
-        classes: dict[str, type] = {}
-        unknown = []
-        for name in selected:
-            try:
-                classes[name] = message_class(recorded[name])
-            except (DefinitionNotFoundError, ValueError):
-                unknown.append(f'{name} ({recorded[name] or "no schema"})')
-        if unknown:
-            self._say(f'replay: warning: skipping topics whose message types are not '
-                      f"installed: {', '.join(unknown)}")
-        if not classes:
-            raise ReplayError(str(self._reader.path), 'none of the selected topics has an '
-                              'installed message type')
+        classes = _message_classes(recorded, selected, str(self._reader.path), self._say)
         timeline = bag_timeline(self._reader)
         self._bag_start, self._bag_end = timeline if timeline is not None else (0, 0)
         self._offset_ns = round(offset * _NS)
@@ -456,13 +476,8 @@ class Player(Node):
         source = self._view.source if self._view is not None else {n: n for n in classes}
         self._sources = sorted({source[name] for name in classes})
         offers = recorded_offers(self._reader, self._sources)
-        qos = {}
-        for name in classes:
-            try:
-                qos[name] = replay_qos(parse_qos_profiles(offers.get(source[name], '')))
-            except BagError as exc:
-                self._say(f'replay: warning: {name}: {exc}; offering the default QoS')
-                qos[name] = replay_qos([])
+        qos = {name: _offered_qos(name, offers.get(source[name], ''), self._say)
+               for name in classes}
         super().__init__(node_name, **kwargs)
         self._topic_pubs: dict[str, Publisher] = {
             name: self.create_publisher(cls, name, qos[name]) for name, cls in classes.items()}
