@@ -7,6 +7,7 @@ rclpy, YAML, plotting, bag or file and process modules. Imports are read from th
 (every ``import``, also inside functions), so a lazy import counts like any other.
 """
 
+import ast
 from pathlib import Path
 import re
 
@@ -145,3 +146,52 @@ def test_an_agent_name_is_built_only_by_the_contract():
     spelled = [p.relative_to(PACKAGE).as_posix() for p in MODULES.values()
                if "f'agent_{" in p.read_text()]
     assert spelled == ['engine/mujoco_world.py']
+
+
+# -- sizes (issue 40) -----------------------------------------------------------------------
+
+#: Issue 40's limits for the ROS layer: lines of the world's plumbing and of its stepper...
+FILE_LINES = {'nodes/world.py': 300, 'nodes/stepper.py': 500}
+#: ... lines of any function (from its ``def`` to its last line, docstring included) ...
+FUNCTION_LINES = 80
+#: ... and methods of any class (the functions defined in its body).
+CLASS_METHODS = 25
+
+
+def oversized(path: Path) -> list[str]:
+    """Return the functions of ``path`` over :data:`FUNCTION_LINES` lines and its classes
+    with over :data:`CLASS_METHODS` methods, one line each."""
+    found = []
+    functions = (ast.FunctionDef, ast.AsyncFunctionDef)
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, functions):
+            lines = node.end_lineno - node.lineno + 1
+            if lines > FUNCTION_LINES:
+                found.append(f'{path.name}:{node.lineno} {node.name}: {lines} lines')
+        elif isinstance(node, ast.ClassDef):
+            methods = sum(isinstance(item, functions) for item in node.body)
+            if methods > CLASS_METHODS:
+                found.append(f'{path.name}:{node.lineno} {node.name}: {methods} methods')
+    return found
+
+
+def test_the_nodes_keep_issue_40s_sizes():
+    """world.py <= 300 lines, stepper.py <= 500, no function in nodes/ over 80 lines and no
+    class there with over 25 methods (the world and its stepper had grown to 711 and 878
+    lines, WorldStepper to 30 methods, WorldNode.__init__ to 129 lines)."""
+    lines = {rel: len((PACKAGE / rel).read_text().splitlines()) for rel in FILE_LINES}
+    assert {rel: n for rel, n in lines.items() if n > FILE_LINES[rel]} == {}
+    found = [line for path in sorted((PACKAGE / 'nodes').rglob('*.py'))
+             for line in oversized(path)]
+    assert found == []
+
+
+def test_the_size_check_sees_a_long_function_and_a_large_class(tmp_path):
+    # The check itself: 81 lines and 26 methods are caught, 80 and 25 are not.
+    body = ''.join(f'    x{k} = {k}\n' for k in range(79))
+    large = ''.join(f'    def m{k}(self):\n        pass\n' for k in range(26))
+    fits = ''.join(f'    def m{k}(self):\n        pass\n' for k in range(25))
+    source = tmp_path / 'big.py'
+    source.write_text(f'def long():\n{body}    return 0\n\n\ndef fits():\n{body}\n\n'
+                      f'class Large:\n{large}\n\nclass Fits:\n{fits}')
+    assert oversized(source) == ['big.py:1 long: 81 lines', 'big.py:166 Large: 26 methods']
