@@ -13,8 +13,10 @@ from sensor_msgs.msg import PointCloud2, PointField
 
 from flock_swarm.bag import BagWriter
 from flock_swarm.contract import state_labels
-from flock_swarm.nodes.cloud import (CloudEncoder, command_fields, decode_cloud, state_fields)
-from flock_swarm.nodes.wire import MalformedMessage
+from flock_swarm.nodes.cloud import (CloudEncoder, PerAgentMessages, command_fields, decode_cloud,
+                                     state_fields)
+from flock_swarm.nodes.wire import (AccelEncoder, MalformedMessage, OdometryEncoder, StateEncoder,
+                                    encode_twist)
 
 #: rosbags' PointField datatypes to NumPy types (its messages carry the constants).
 NUMPY = {7: 'f4', 8: 'f8', 6: 'u4'}
@@ -123,3 +125,34 @@ def test_what_is_not_a_cloud_is_malformed():
                          fields=[PointField(name='x', offset=0, datatype=8, count=1)])
     with pytest.raises(MalformedMessage, match="no integer 'id'"):
         decode_cloud(serialize_message(no_ids)).ids()
+
+
+def test_clouds_become_the_per_agent_messages_byte_for_byte():
+    """``replay --republish per_agent``'s codec: an oriented plant's state cloud (ids
+    shuffled) and two hosts' command clouds with an adaptive state and a velocity command give
+    each agent's messages as the per-agent world and agents encode them."""
+    n, ns, labels = 5, 1_230_000_000, ('e[0]', 'e[1]')
+    ids, state = swarm(n, len(state_fields(2, True)))
+    cloud = decode_cloud(CloudEncoder(state_fields(2, True)).encode(ns, ids, state))
+    names = command_fields(2, labels, velocity=True)
+    split = PerAgentMessages(n, cloud.names(), (*names, 'id'))
+    assert (split.oriented, split.labels, split.velocity) == (True, labels, True)
+    assert list(split.topics)[:5] == ['agent_0/odom', 'agent_0/cmd_accel', 'agent_0/state',
+                                      'agent_0/cmd_vel', 'agent_1/odom']
+    by_id = state[np.argsort(ids)]
+    assert split.states(cloud) == [
+        (f'agent_{i}/odom', OdometryEncoder(f'agent_{i}', oriented=True).encode(
+            ns, row[0:2], row[2:4], row[4:6], (row[6], 0.0))) for i, row in enumerate(by_id)]
+    _, commands = swarm(n, len(names), seed=1)
+    for host in ([3, 1], [0, 2, 4]):
+        got = split.commands(decode_cloud(CloudEncoder(names).encode(ns, np.array(host),
+                                                                     commands[host])))
+        want = []
+        for i, row in zip(host, commands[host]):
+            want += [(f'agent_{i}/cmd_accel', AccelEncoder().encode(ns, row[:2])),
+                     (f'agent_{i}/state', StateEncoder(labels).encode(ns, row[2:4])),
+                     (f'agent_{i}/cmd_vel', encode_twist(row[4:7], row[7:]))]
+        assert got == want
+    with pytest.raises(MalformedMessage, match='ids not agents of'):
+        split.commands(decode_cloud(CloudEncoder(names).encode(ns, np.array([n]),
+                                                               commands[:1])))
