@@ -91,7 +91,7 @@ def run_role(variant: str, n: int, steps: int) -> dict:
     """Fly one run of ``variant`` in this process; return its numbers."""
     from flock_swarm.foxglove_ws import start_live
     from flock_swarm.nodes.foxglove_server import LiveBridge
-    from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+    from flock_swarm.nodes.swarm_runner import InProcessSwarm, resolve_scenario
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
         scenario = resolve_scenario('demo', scenario_overrides(n, steps), None, out)

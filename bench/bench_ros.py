@@ -85,7 +85,7 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.console import accept_sigint
-from flock_swarm.nodes.harness import process_environment
+from flock_swarm.nodes.swarm_runner import process_environment
 from flock_swarm.nodes.supervisor import stop
 
 #: The demo scenario's density (30 agents in 20 m x 20 m), kept at every N.

@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_ros import scenario_overrides
 
-    from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+    from flock_swarm.nodes.swarm_runner import InProcessSwarm, resolve_scenario
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run'
         path = resolve_scenario('demo', scenario_overrides(args.n, args.steps), None, out)

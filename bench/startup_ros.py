@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     from bench_ros import scenario_overrides
 
     from flock_swarm.nodes import agent, leader, world
-    from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+    from flock_swarm.nodes.swarm_runner import InProcessSwarm, resolve_scenario
     built: dict[str, float] = {}
     for module, cls in ((world, 'WorldNode'), (leader, 'LeaderNode'), (agent, 'AgentNode')):
         original = getattr(module, cls).__init__

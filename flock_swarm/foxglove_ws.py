@@ -15,7 +15,7 @@ Three ways in, one :class:`LiveServer` under each:
   docs/performance.md);
 - ``replay BAG --foxglove [PORT]``: the player hands it the bag's bytes on schedule;
 - ``foxglove_server`` for runs started node by node and ``swarm --processes --foxglove`` (in
-  the harness's process, :func:`flock_swarm.nodes.harness.run_processes`): a bridge node
+  the swarm runner's process, :func:`flock_swarm.nodes.swarm_runner.run_processes`): a bridge node
   subscribing to the contract topics with ``raw=True`` and forwarding the bytes
   (:mod:`flock_swarm.nodes.foxglove_server`).
 

@@ -34,11 +34,11 @@ from typing import Any, Callable, Iterable, Iterator
 import pytest
 
 from flock_swarm.core.summary import sim_only_keys
-# The harness imports no rclpy, NumPy or YAML until a run starts (this plugin is loaded by
+# The swarm runner imports no rclpy, NumPy or YAML until a run starts (this plugin is loaded by
 # every pytest run of the environment).
-from flock_swarm.nodes.harness import (DOMAIN_SPAN, DOMAINS_VARIABLE,  # noqa: F401
-                                       InProcessSwarm, RUN_TIMEOUT, SwarmRun, domain_ranges,
-                                       release_domain, unique_domain)
+from flock_swarm.nodes.swarm_runner import (DOMAIN_SPAN, DOMAINS_VARIABLE,  # noqa: F401
+                                            InProcessSwarm, RUN_TIMEOUT, SwarmRun, domain_ranges,
+                                            release_domain, unique_domain)
 
 #: The environment variable that limits DDS discovery, and the value the fixtures default to:
 #: a test never talks to, or hears from, another host.
@@ -87,7 +87,7 @@ def spin_until(executor, condition: Callable[[], Any], timeout: float,
 
 
 #: World, leader and agents spinning in this process: a context manager for tests. The
-#: harness's :class:`~flock_swarm.nodes.harness.InProcessSwarm` itself (``swarm`` without
+#: swarm runner's :class:`~flock_swarm.nodes.swarm_runner.InProcessSwarm` itself (``swarm`` without
 #: ``--processes`` runs the same class): ``Swarm(scenario, out, overrides=(), seed=None,
 #: domain_id=None, **args)`` resolves the scenario as ``swarm`` resolves it into
 #: ``out/scenario.yaml`` (the domain id defaults to :func:`unique_domain`); ``world``,
@@ -148,7 +148,7 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
 
     :param atol: the absolute tolerance.
     :param processes: run every node as its own process, as ``swarm --processes`` does
-        (:func:`~flock_swarm.nodes.harness.run_processes`; ``swarm_args`` are then its
+        (:func:`~flock_swarm.nodes.swarm_runner.run_processes`; ``swarm_args`` are then its
         keyword arguments), instead of in this process.
     :param container: with ``processes``, host every agent in one process (``swarm
         --processes --container``) instead of one process per agent.
@@ -161,7 +161,7 @@ def assert_matches_sim(scenario: str | Path, out: Path, overrides: Iterable[str]
     from flock_swarm.outputs import json_text
 
     if processes:
-        from flock_swarm.nodes.harness import resolve_scenario, run_processes
+        from flock_swarm.nodes.swarm_runner import resolve_scenario, run_processes
 
         path = resolve_scenario(str(scenario), list(overrides), seed, Path(out))
         run_processes(path, Path(out), mode='lockstep',

@@ -37,7 +37,7 @@ def start_nodes(scenario, domain: int, out, agents: int, world_args=(),
 
     :return: ``(others, world)``: the leader's and agents' processes, and the world's.
     """
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     ros_args = ['--ros-args', '-p', f'scenario:={scenario}']
     quiet = {'env': env, 'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL}

@@ -22,7 +22,7 @@ from flock_swarm.cli.analyze import main
 from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.plots import plot_analysis
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
+from flock_swarm.nodes.swarm_runner import resolve_scenario, run_in_process, unique_domain
 from flock_swarm.presets import load
 from flock_swarm.core.run import simulate
 
@@ -396,7 +396,7 @@ def test_an_interrupted_run_is_analysed_as_the_world_summarised_it(tmp_path, ros
     the world never closed (no command of it came). analyze's summary (t_final, the COM
     errors...) and series equal the world's, as for a completed run; they differed by that
     step (t_final 335 s against the world's 334.5 s)."""
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     from flock_swarm.testing import wait_for
     out = tmp_path / 'run'
     sets = ['n_agents=2', 'informed.count=1', 'dt=0.05', 'duration=1000', 'record_every=7']

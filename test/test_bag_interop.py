@@ -36,7 +36,7 @@ from flock_swarm.cli.analyze import main as analyze_main
 from flock_swarm.bag import BagReader
 from flock_swarm.core.metrics import STEP_METRICS
 from flock_swarm.nodes.player import Player
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
+from flock_swarm.nodes.swarm_runner import resolve_scenario, run_in_process, unique_domain
 
 pytestmark = pytest.mark.ros
 

@@ -67,10 +67,10 @@ def test_every_command_is_a_module_of_the_cli_package():
 
 
 def test_the_package_reads_its_commands_from_setup_py():
-    """The harness and the docs' examples take the commands from setup.py's console scripts
+    """The swarm runner and the docs' examples take the commands from setup.py's console scripts
     (as installed): one list, no copy to keep in step."""
     from flock_swarm.console import commands, executables
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     assert executables() == console_scripts()
     assert commands() == {name: target.split(':')[0] for name, target in COMMANDS.items()}
     assert executable('no_such_command')[-1] == 'flock_swarm.nodes.no_such_command'

@@ -135,7 +135,7 @@ def test_a_backend_the_world_cannot_run_is_one_line(params, line, tmp_path, ros_
     import os
     import subprocess
 
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     args = ['--ros-args', '-p', 'scenario:=demo', '-p', f'out_dir:={tmp_path}']
     for p in params:
         args += ['-p', p]

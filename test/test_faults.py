@@ -1,8 +1,8 @@
 """Faults: lost agents, a lost leader, killed processes, full disks and faulty messages.
 
 Every case runs the real nodes on real DDS (each test its own domain id): in one process
-(:class:`flock_swarm.nodes.harness.InProcessSwarm`, where a test can remove and restart nodes) or
-as the ``ros2 run`` executables in their own processes.
+(:class:`flock_swarm.nodes.swarm_runner.InProcessSwarm`, where a test can remove and restart
+nodes) or as the ``ros2 run`` executables in their own processes.
 """
 
 import json
@@ -34,7 +34,7 @@ from flock_swarm.contract import LOCKSTEP_QOS, qos_profile
 from flock_swarm.nodes.clock import StepClock
 from flock_swarm.nodes.stepper import LatencyHistogram
 from flock_swarm.nodes.wire import decode_odometry
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.swarm_runner import InProcessSwarm, executable, resolve_scenario
 from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import interaction_graph, simulate, static_graph
 from flock_swarm.testing import wait_for

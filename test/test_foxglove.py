@@ -28,7 +28,8 @@ from flock_swarm.contract import contract_topics
 from flock_swarm.foxglove_ws import (CLOSE_GOING_AWAY, CLOSE_REASONS, CLOSE_TIMEOUT,
                                      CloseRewriter, LiveServer, close_frame, message_stamp_ns,
                                      start_live)
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, unique_domain
+from flock_swarm.nodes.swarm_runner import (InProcessSwarm, executable, resolve_scenario,
+                                            unique_domain)
 
 pytestmark = pytest.mark.ros
 

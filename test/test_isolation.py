@@ -25,7 +25,8 @@ from numpy.testing import assert_array_equal
 
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.scenario_yaml import parse_yaml
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario, run_in_process
+from flock_swarm.nodes.swarm_runner import (InProcessSwarm, executable, resolve_scenario,
+                                            run_in_process)
 
 pytestmark = pytest.mark.ros
 
@@ -408,7 +409,7 @@ def test_batched_hosts_by_id_ranges_across_namespaces_equal_sim(tmp_path, ros_do
     from flock_swarm.bag import BagReader
     from flock_swarm.nodes.cloud import decode_cloud
     from flock_swarm.core.run import simulate
-    from flock_swarm.nodes.harness import id_ranges
+    from flock_swarm.nodes.swarm_runner import id_ranges
     from flock_swarm.outputs import json_text
     from flock_swarm.testing import SIM_ONLY
 

@@ -13,7 +13,7 @@ import pytest
 
 from flock_swarm.core.latency import CommandHistory, extrapolate, hold
 from flock_swarm.core.plants.models import DoubleIntegrator, Unicycle, VelocityLag
-from flock_swarm.nodes.harness import executable
+from flock_swarm.nodes.swarm_runner import executable
 from flock_swarm.nodes.controller import AgentController
 from flock_swarm.presets import prepare
 from test_robots_ros import FLEET, FLEET_FILE

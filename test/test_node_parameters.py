@@ -16,7 +16,7 @@ import yaml
 from numpy.testing import assert_array_equal
 
 from flock_swarm.console import EXIT_INTERRUPTED
-from flock_swarm.nodes.harness import executable
+from flock_swarm.nodes.swarm_runner import executable
 
 RUN_TIMEOUT = 240.0
 SERVICE_TIMEOUT = 30.0

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from flock_swarm.console import EXIT_SIGNAL
-from flock_swarm.nodes.harness import executable, resolve_scenario
+from flock_swarm.nodes.swarm_runner import executable, resolve_scenario
 from flock_swarm.testing import wait_for
 
 RUN_TIMEOUT = 240.0

@@ -2,7 +2,7 @@
 
 Each run starts the world, the leader and the agents in one process on one executor with
 its own ``rclpy.Context`` and a unique domain id
-(:func:`flock_swarm.nodes.harness.run_in_process`).
+(:func:`flock_swarm.nodes.swarm_runner.run_in_process`).
 """
 
 import json
@@ -24,9 +24,9 @@ from flock_swarm.bag import BagReader
 from flock_swarm.console import EXIT_INTERRUPTED, EXIT_SIGNAL
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.clock import StepClock
-from flock_swarm.nodes.harness import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
-                                       process_environment, resolve_scenario, run_in_process,
-                                       run_processes)
+from flock_swarm.nodes.swarm_runner import (LARGE_SWARM_AGENTS, PROFILE_VARIABLES, executable,
+                                            process_environment, resolve_scenario, run_in_process,
+                                            run_processes)
 from flock_swarm.nodes.supervisor import stop
 from flock_swarm.core.run import simulate
 from flock_swarm.testing import Swarm, spin_until, wait_for

@@ -290,7 +290,7 @@ if __name__ == '__main__':
 
 def test_a_command_is_two_files(tmp_path):
     """``flock_swarm/cli/hello.py`` and its console script (the installed entry points of
-    setup.py): listed by console.commands(), found by the harness, and it runs."""
+    setup.py): listed by console.commands(), found by the swarm runner, and it runs."""
     assert recipe_files('command') == '2'
     copy = package_copy(tmp_path)
     (copy / 'flock_swarm' / 'cli' / 'hello.py').write_text(COMMAND)
@@ -303,7 +303,7 @@ def test_a_command_is_two_files(tmp_path):
         dist.read_text('entry_points.txt').replace(
             '[console_scripts]\n', '[console_scripts]\nhello = flock_swarm.cli.hello:main\n'))
     listed = run(['-c', 'from flock_swarm.console import commands; '
-                  'from flock_swarm.nodes.harness import executable; '
+                  'from flock_swarm.nodes.swarm_runner import executable; '
                   'print(commands()["hello"], executable("hello")[-1])'], copy, copy).stdout
     assert listed == 'flock_swarm.cli.hello flock_swarm.cli.hello\n'
     said = run(['-m', 'flock_swarm.cli.hello', 'demo'], copy, copy).stdout

@@ -32,7 +32,7 @@ from flock_swarm.bag import BagReader, BagWriter
 from flock_swarm.console import EXIT_INTERRUPTED
 from flock_swarm.nodes.player import (
     CLOCK_TOPIC, format_ns, Player, REPLAY_DEPTH, replay_qos, ReplayError, select_topics)
-from flock_swarm.nodes.harness import resolve_scenario, run_in_process, unique_domain
+from flock_swarm.nodes.swarm_runner import resolve_scenario, run_in_process, unique_domain
 
 pytestmark = pytest.mark.ros
 

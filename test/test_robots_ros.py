@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from flock_swarm.nodes.harness import executable
+from flock_swarm.nodes.swarm_runner import executable
 from flock_swarm.nodes.robot_profiles import ARGUMENTS, PROFILES, robot_agent_parameters
 from flock_swarm.testing import spin_until
 

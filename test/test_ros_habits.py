@@ -149,7 +149,7 @@ def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_dom
     """A world that finds another world (or a replay) on its domain before its start refuses
     (a by-hand run mixed silently with another before). The first world may refuse too if it
     sees the second before the second has gone; a world that has started does not look."""
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     from flock_swarm.nodes.supervisor import stop
     from flock_swarm.nodes.world import main
     from conftest import subprocess_env
@@ -172,11 +172,11 @@ def test_a_second_world_on_the_domain_is_refused_with_one_line(tmp_path, ros_dom
 
 
 def test_an_in_process_swarm_beside_another_world_is_refused(tmp_path, ros_domain):
-    """The harness (``swarm``) raises the world's refusal (``swarm`` prints it as one line);
+    """The swarm runner (``swarm``) raises the world's refusal (``swarm`` prints it as one line);
     here the swarm waits for an absent agent, so it meets the other world before its
     start."""
     from flock_swarm.core.errors import ScenarioError
-    from flock_swarm.nodes.harness import executable, run_in_process
+    from flock_swarm.nodes.swarm_runner import executable, run_in_process
     from flock_swarm.nodes.supervisor import stop
     from conftest import subprocess_env
     env = subprocess_env(ROS_DOMAIN_ID=str(ros_domain))
@@ -236,7 +236,7 @@ def test_the_world_logs_its_end_once_under_ros2_run(tmp_path, ros_domain, stop):
     import re
 
     from test_node_stops import SMALL, reap, start_all
-    from flock_swarm.nodes.harness import resolve_scenario
+    from flock_swarm.nodes.swarm_runner import resolve_scenario
     from flock_swarm.testing import wait_for
     out = tmp_path / 'run'
     duration = 'duration=2' if stop is None else 'duration=1000'

@@ -24,7 +24,7 @@ from flock_swarm.cli.sim import main as sim_main
 from flock_swarm.core.faults import RunFault
 from flock_swarm.core.scenario import parse_scenario
 from flock_swarm.nodes.controller import AgentController
-from flock_swarm.nodes.harness import InProcessSwarm, executable, resolve_scenario
+from flock_swarm.nodes.swarm_runner import InProcessSwarm, executable, resolve_scenario
 from flock_swarm.nodes.supervisor import stop
 from flock_swarm.presets import load
 from flock_swarm.testing import wait_for

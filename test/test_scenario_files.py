@@ -15,7 +15,7 @@ import sys
 
 import pytest
 
-from flock_swarm.nodes.harness import executable
+from flock_swarm.nodes.swarm_runner import executable
 
 #: Wall-clock bound of one process [s].
 TIMEOUT = 120.0

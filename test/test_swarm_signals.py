@@ -20,7 +20,7 @@ import pytest
 
 from flock_swarm.bag import BagReader
 from flock_swarm.console import EXIT_SIGNAL
-from flock_swarm.nodes.harness import executable, resolve_scenario, run_in_process
+from flock_swarm.nodes.swarm_runner import executable, resolve_scenario, run_in_process
 from flock_swarm.nodes.supervisor import catches
 from flock_swarm.testing import wait_for
 
@@ -296,7 +296,7 @@ def test_world_stopped_before_its_first_step(tmp_path, ros_domain, sig, moment):
 @pytest.fixture(scope='module')
 def small_bag(tmp_path_factory) -> Path:
     """A bag of a few hundred steps (an analysis of it takes seconds)."""
-    from flock_swarm.nodes.harness import unique_domain
+    from flock_swarm.nodes.swarm_runner import unique_domain
     out = tmp_path_factory.mktemp('bag') / 'run'
     scenario = resolve_scenario('demo', LONG[:-2] + ['duration=30'], None, out)
     summary = run_in_process(scenario, out, domain_id=unique_domain(), timeout=TIMEOUT)

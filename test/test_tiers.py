@@ -11,8 +11,8 @@ import pytest
 
 from conftest import (DURATIONS, QUICK, REPO, ROS_FIXTURES, SLOW, dds_functions,
                       load_durations, names_command, write_durations)
-from flock_swarm.nodes.harness import (DOMAIN_RANGES, DOMAINS_VARIABLE, domain_ranges,
-                                       release_domain, unique_domain)
+from flock_swarm.nodes.swarm_runner import (DOMAIN_RANGES, DOMAINS_VARIABLE, domain_ranges,
+                                            release_domain, unique_domain)
 
 #: A test module that starts DDS in several ways, and in none.
 MODULE = '''

@@ -17,7 +17,7 @@ from numpy.testing import assert_array_equal
 
 from flock_swarm.core.run import simulate
 from flock_swarm.nodes.cloud import command_fields, decode_cloud, state_fields
-from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+from flock_swarm.nodes.swarm_runner import InProcessSwarm, resolve_scenario
 from flock_swarm.testing import assert_matches_sim
 
 #: A small demo swarm packed within each other's radius, a record every other step.
@@ -291,7 +291,7 @@ def test_the_launch_files_processes_run_the_batched_transport(tmp_path, ros_doma
     import os
 
     from flock_swarm.launch_plan import swarm_processes
-    from flock_swarm.nodes.harness import executable
+    from flock_swarm.nodes.swarm_runner import executable
     out = tmp_path / 'run'
     specs = swarm_processes(overrides='transport=batched; n_agents=4; informed.count=2; '
                             'duration=0.5', out_dir=str(out))

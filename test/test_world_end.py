@@ -13,7 +13,7 @@ import pytest
 
 from flock_swarm.bag import BagReader
 from flock_swarm.cli.analyze import main as analyze_main
-from flock_swarm.nodes.harness import InProcessSwarm, resolve_scenario
+from flock_swarm.nodes.swarm_runner import InProcessSwarm, resolve_scenario
 from flock_swarm.nodes.recording import END_RECORD
 from broken_law import nan_command_for
 

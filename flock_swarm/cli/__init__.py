@@ -5,7 +5,7 @@ command        module                                      library underneath
 =============  ==========================================  =================================
 ``sim``        :mod:`flock_swarm.cli.sim`                  :mod:`flock_swarm.core.run`,
                                                            :mod:`flock_swarm.outputs`
-``swarm``      :mod:`flock_swarm.cli.swarm`                :mod:`flock_swarm.nodes.harness`
+``swarm``      :mod:`flock_swarm.cli.swarm`                :mod:`flock_swarm.nodes.swarm_runner`
 ``sweep``      :mod:`flock_swarm.cli.sweep`                :mod:`flock_swarm.study`
 ``analyze``    :mod:`flock_swarm.cli.analyze`              :mod:`flock_swarm.analysis`
 ``replay``     :mod:`flock_swarm.cli.replay`               :mod:`flock_swarm.nodes.player`

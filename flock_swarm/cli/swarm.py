@@ -6,7 +6,7 @@
 world has recorded its last step. Outputs: ``DIR/bag/`` (rosbag2 MCAP),
 ``DIR/summary.json``, ``DIR/timeseries.npz`` and figures. With ``--foxglove`` the run is
 served live over the Foxglove WebSocket protocol (:mod:`flock_swarm.foxglove_ws`). A thin
-command over :mod:`flock_swarm.nodes.harness`.
+command over :mod:`flock_swarm.nodes.swarm_runner`.
 """
 
 import argparse
@@ -21,8 +21,8 @@ from flock_swarm.core.errors import ScenarioError
 from flock_swarm.core.headline import result_line
 from flock_swarm.engine import BACKENDS
 from flock_swarm.foxglove_ws import DEFAULT_HOST, DEFAULT_PORT, ServeError, start_live
-from flock_swarm.nodes.harness import (read_scenario, resolve_scenario, run_in_process,
-                                       run_processes)
+from flock_swarm.nodes.swarm_runner import (read_scenario, resolve_scenario, run_in_process,
+                                            run_processes)
 
 
 def build_parser() -> argparse.ArgumentParser:

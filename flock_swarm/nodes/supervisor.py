@@ -1,6 +1,6 @@
 """Supervision of a run's processes, as ``ros2 launch`` supervises its own.
 
-:func:`flock_swarm.nodes.harness.run_processes` (``swarm --processes``) starts the leader,
+:func:`flock_swarm.nodes.swarm_runner.run_processes` (``swarm --processes``) starts the leader,
 the agents and the world through a :class:`Supervisor`, which
 
 - writes each child's stdout and stderr to ``OUT/logs/<name>.log`` (``world.log``,

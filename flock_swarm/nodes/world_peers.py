@@ -60,7 +60,7 @@ class WorldPeers:
     def ready_to_start(self) -> bool:
         """Return whether every agent and the leader are discovered and subscribed; say who
         is missing every :data:`WAIT_LOG_EVERY` seconds. Another world (or a replay) on the
-        domain sets :attr:`refusal` and stops the timer: ``main`` and the harness end the run
+        domain sets :attr:`refusal` and stops the timer: ``main`` and the swarm runner end the run
         with that line, and ``expect_subscribers`` given as -1 reads back the count found.
         """
         self.refusal = self.refusal or self.other_worlds()

@@ -154,7 +154,7 @@ def run_ros(exp: Experiment, index: int, out: Path, quick: bool, fresh: bool,
     :return: the comparison (flat mapping; ``error`` set when the run failed).
     """
     from flock_swarm.analysis.compare import compare_runs
-    from flock_swarm.nodes.harness import resolve_scenario, run_in_process
+    from flock_swarm.nodes.swarm_runner import resolve_scenario, run_in_process
 
     overrides = list(exp.ros_quick if quick else exp.ros)
     run_dir = out / 'ros' / exp.key

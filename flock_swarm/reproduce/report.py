@@ -66,8 +66,8 @@ def ros_section(res: dict) -> list[str]:
     if res is None:
         return []
     lines = ['', f'**Through the ROS 2 nodes.** `{res["command"]}` (world, leader and every '
-             'agent in one process, lockstep, `flock_swarm.nodes.harness.run_in_process`), and '
-             '`sim` on the same resolved scenario:', '']
+             'agent in one process, lockstep, `flock_swarm.nodes.swarm_runner.run_in_process`), '
+             'and `sim` on the same resolved scenario:', '']
     if 'error' in res:
         return lines + [f'The node run failed: `{res["error"]}`; no comparison.']
     lines += ['| metric | sim | ROS nodes |', '|---|---|---|']
