@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from flock_swarm.core.obstacles import beta_pairs
-from flock_swarm.core.run import SimResult, simulate
+from flock_swarm.core.run import RunResult, simulate
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.presets import load
 from flock_swarm.reproduce.report import machine
@@ -82,7 +82,7 @@ def scenarios(n: int, steps: int) -> tuple[Scenario, Scenario]:
                       extra=start)
 
 
-def fingerprint(result: SimResult) -> str:
+def fingerprint(result: RunResult) -> str:
     """Return a SHA-256 of a run's final state (the last recorded ``q``, ``p``, ``u``), its
     recorded clearances and its obstacle metrics: equal only if bit for bit equal."""
     digest = hashlib.sha256()
@@ -95,7 +95,7 @@ def fingerprint(result: SimResult) -> str:
     return digest.hexdigest()
 
 
-def step_time(sc: Scenario) -> tuple[float, float, SimResult]:
+def step_time(sc: Scenario) -> tuple[float, float, RunResult]:
     """Return the CPU and wall seconds per step of one run of ``sc``, and its result."""
     stamps: list[tuple[float, float]] = []
     result = simulate(sc, progress=lambda line: stamps.append((time.process_time(),

@@ -14,7 +14,7 @@ from typing import BinaryIO, Callable
 
 import numpy as np
 
-from flock_swarm.core.run import Recorder, SimResult
+from flock_swarm.core.run import Recorder, RunResult
 from flock_swarm.core.scenario import Scenario
 
 
@@ -162,7 +162,7 @@ class SpooledRecorder(Recorder):
             self._spool = None
 
 
-def write_outputs(result: SimResult, out: Path, sc: Scenario) -> list[Path]:
+def write_outputs(result: RunResult, out: Path, sc: Scenario) -> list[Path]:
     """Write ``timeseries.npz``, the scenario used and ``summary.json`` into ``out``.
 
     Each file is written whole under a temporary name and renamed into place

@@ -45,7 +45,7 @@ _HEAP_MMAP_THRESHOLD, _HEAP_TRIM_THRESHOLD = 32 << 20, 64 << 20
 
 
 @dataclass
-class SimResult:
+class RunResult:
     """What a run produced: the summary (``summary.json``) and the recorded time series."""
 
     summary: dict
@@ -322,7 +322,7 @@ def check_step(sc: Scenario, real: Realization) -> list[StepViolation]:
 def simulate(sc: Scenario, progress: Callable[[str], None] | None = None,
              progress_every: float = 2.0, integrator: Callable | None = None,
              on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None
-             ) -> SimResult:
+             ) -> RunResult:
     """Run a scenario to its end and return the summary and the recorded time series.
 
     :param sc: the validated scenario.
@@ -348,7 +348,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
                    progress_every: float = 2.0,
                    integrator: Callable | None = None,
                    on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None
-                   ) -> list[SimResult]:
+                   ) -> list[RunResult]:
     """Run independent realisations side by side in one vectorised state; return each result.
 
     A Monte Carlo sweep pays the per-step cost of Python once for the whole stack instead of
@@ -404,7 +404,7 @@ def simulate_stack(scenarios: list[Scenario], progress: Callable[[str], None] | 
             s, real, series, log.metrics, step, status,
             pseudo_leader_reselections=0 if stack.reselector is None else stack.reselector.count,
             wall_time_s=round(wall, 3), **failure, **(told() if told else {}))
-        results.append(SimResult(summary, series))
+        results.append(RunResult(summary, series))
     return results
 
 

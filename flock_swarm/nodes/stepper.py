@@ -31,7 +31,7 @@ from flock_swarm.core.headline import progress_text
 from flock_swarm.core.metrics import step_metrics
 from flock_swarm.core.network import ReportedUse, Tally
 from flock_swarm.core.plants.spec import command_interface
-from flock_swarm.core.run import (LinkObserver, Recorder, RunLog, SimResult, build_summary,
+from flock_swarm.core.run import (LinkObserver, Recorder, RunLog, RunResult, build_summary,
                                   observed_pairs, static_graph)
 from flock_swarm.core.scenario import Scenario, realize
 from flock_swarm.engine.backends import make_backend
@@ -374,7 +374,7 @@ class WorldStepper:
         return True
 
     def result(self, now: float, rejected: dict, duplicates: list[int],
-               bag_error: str | None, bag: str | None) -> SimResult:
+               bag_error: str | None, bag: str | None) -> RunResult:
         """Return the run so far (no time series, and no measures in the summary, when it
         ended before anything was recorded: stopped before its first step).
 
@@ -409,7 +409,7 @@ class WorldStepper:
         # Every key through the checked table (core/summary.py), in its order.
         summary = build_summary(self.scenario, self.real, series, log.metrics, self.k,
                                 self.status, **given)
-        return SimResult(summary, series)
+        return RunResult(summary, series)
 
 
 class CommandInbox(StepInbox):

@@ -19,7 +19,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.run import SimResult
+from flock_swarm.core.run import RunResult
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.outputs import plain_json
 from flock_swarm.reproduce.common import FIG_SIZE, cell, fmt, pyplot, save_figure
@@ -70,7 +70,7 @@ class SeedRecorder:
 
     experiment: Any
 
-    def __call__(self, run: Run, sc: Scenario, result: SimResult) -> dict:
+    def __call__(self, run: Run, sc: Scenario, result: RunResult) -> dict:
         """Return the record (non-finite values as ``None``)."""
         s, series = result.summary, result.series
         metrics: dict[str, Any] = self.experiment.analyse(sc, s, series)

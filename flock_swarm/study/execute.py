@@ -24,7 +24,7 @@ import numpy as np
 
 from flock_swarm import __version__
 from flock_swarm.core import summary
-from flock_swarm.core.run import SimResult, simulate_stack
+from flock_swarm.core.run import RunResult, simulate_stack
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.outputs import plain_json
 from flock_swarm.study.cache import CacheWriter, read_cache
@@ -41,7 +41,7 @@ DASK_POLL = 1.0
 
 #: A record maker: ``(run, scenario, result) -> record`` (a module-level function or a
 #: picklable object, so that worker processes and Dask workers can receive it).
-Recorder = Callable[[Run, Scenario, SimResult], dict]
+Recorder = Callable[[Run, Scenario, RunResult], dict]
 
 
 class SweepError(RuntimeError):
@@ -114,7 +114,7 @@ class MetricRecorder:
     metrics: tuple[str, ...]
     times: tuple[float, ...] = ()
 
-    def __call__(self, run: Run, sc: Scenario, result: SimResult) -> dict:
+    def __call__(self, run: Run, sc: Scenario, result: RunResult) -> dict:
         """Return the record (non-finite values as ``None``)."""
         s, series = result.summary, result.series
         record: dict[str, Any] = {'point': plain_json(run.point), 'seed': run.seed}

@@ -8,7 +8,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from flock_swarm import __version__
-from flock_swarm.core.run import SimResult
+from flock_swarm.core.run import RunResult
 from flock_swarm.core.scenario import Scenario
 from flock_swarm.reproduce import stats
 from flock_swarm.reproduce.common import fmt, linked_to_informed, pyplot, save_figure
@@ -83,7 +83,7 @@ def figure_fig3(rows: list[dict], loose: list[dict], tolerance: float | None,
     return save_figure(fig, path)
 
 
-def fig3_record(run: Run, sc: Scenario, result: SimResult) -> dict:
+def fig3_record(run: Run, sc: Scenario, result: RunResult) -> dict:
     """Return the cache record of one run of the Fig. 3 sweep from its result.
 
     The recorder of the sweep machinery (:func:`flock_swarm.study.execute.run_job`, which
