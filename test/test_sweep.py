@@ -407,10 +407,24 @@ def hit_mid_sweep(spec: Path, out: Path, finished: int, hit, *backend: str
     return proc.returncode, err
 
 
+def running(pid: int) -> bool:
+    """Return whether process ``pid`` is running (``R`` in ``/proc/PID/stat``): a worker
+    busy with a run, not one waiting on its pipe for the next task."""
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text()
+    except OSError:
+        return False
+    return stat.rpartition(')')[2].split()[0] == 'R'
+
+
 def kill_a_worker(proc: subprocess.Popen) -> None:
-    """SIGKILL one of the sweep's two worker processes."""
+    """SIGKILL one of the sweep's two worker processes while it runs a task (one killed
+    between a result and its next task held no job: nothing to redo)."""
     wait_for(lambda: len(children(proc.pid)) == 2, 30.0, 'two worker processes')
-    os.kill(children(proc.pid)[0], signal.SIGKILL)
+    busy: list[int] = []
+    wait_for(lambda: busy.extend(p for p in children(proc.pid) if running(p)) or busy, 30.0,
+             'a worker process running a task')
+    os.kill(busy[0], signal.SIGKILL)
 
 
 def test_a_killed_worker_process_has_its_runs_redone(long_serial):
